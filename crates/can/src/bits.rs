@@ -1,0 +1,337 @@
+//! The exact bit stream of a classic CAN frame (ISO 11898-1 §10.4.2) and its length on the
+//! wire.
+//!
+//! A base-format data frame is sent as
+//! `SOF(1) ID(11) RTR(1) IDE(1) r0(1) DLC(4) DATA(8n) CRC(15) | CRCdel(1) ACK(1) ACKdel(1) EOF(7)`,
+//! an extended one as
+//! `SOF(1) ID-A(11) SRR(1) IDE(1) ID-B(18) RTR(1) r1(1) r0(1) DLC(4) DATA(8n) CRC(15) | …`.
+//! From SOF to the end of the CRC sequence the transmitter inserts a complementary stuff bit
+//! after every five equal bits (§10.5); stuff bits count towards the next run. The fixed-form
+//! tail (CRC delimiter, ACK, EOF) is not stuffed, and 3 bits of intermission (§10.4.6.2)
+//! separate two frames. Dominant is 0, recessive is 1.
+
+use crate::frame::Frame;
+
+/// The CRC-15 generator polynomial x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1 (§10.4.2.6).
+pub const CRC15_POLY: u16 = 0x4599;
+
+/// Bits after the CRC sequence: CRC delimiter, ACK slot, ACK delimiter and 7 EOF bits.
+pub const TAIL_BITS: u32 = 10;
+
+/// Bits of intermission between two frames.
+pub const INTERMISSION_BITS: u32 = 3;
+
+/// The unstuffed bits from SOF to the end of the CRC, left-aligned in transmission order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StuffedRegion {
+    /// Bits in transmission order, the first bit in bit 127.
+    pub bits: u128,
+    /// How many bits of `bits` are used.
+    pub len: u32,
+    /// The CRC-15 computed over SOF … DATA.
+    pub crc: u16,
+}
+
+/// Feed the `n` lowest bits of `value` (most significant first) into the CRC-15 register.
+fn crc15_bits(mut crc: u16, value: u64, n: u32) -> u16 {
+    for i in (0..n).rev() {
+        let bit = ((value >> i) & 1) as u16;
+        let crc_next = bit ^ ((crc >> 14) & 1);
+        crc = (crc << 1) & 0x7FFF;
+        if crc_next != 0 {
+            crc ^= CRC15_POLY;
+        }
+    }
+    crc
+}
+
+/// The CRC-15 of a bit sequence given as the `n` lowest bits of `value`, most significant
+/// first (n ≤ 64; call repeatedly through [`crc15_continue`] for longer sequences).
+pub fn crc15(value: u64, n: u32) -> u16 {
+    crc15_bits(0, value, n)
+}
+
+/// Continue a CRC-15 computation with `n` more bits.
+pub fn crc15_continue(crc: u16, value: u64, n: u32) -> u16 {
+    crc15_bits(crc, value, n)
+}
+
+/// Build the unstuffed region SOF … CRC of a frame.
+pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
+    let rtr = u64::from(frame.is_remote());
+    let dlc = u64::from(frame.dlc());
+    // Header: everything from SOF to the end of DLC, as (value, bit count).
+    let (header, header_len) = match frame.id() {
+        crate::Id::Standard(id) => {
+            // SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4)
+            let v = (u64::from(id.as_raw()) << 7) | (rtr << 6) | dlc;
+            (v, 19)
+        }
+        crate::Id::Extended(id) => {
+            // SOF(0) ID-A(11) SRR(1) IDE(1) ID-B(18) RTR r1(0) r0(0) DLC(4)
+            let raw = u64::from(id.as_raw());
+            let v = ((raw >> 18) << 27)
+                | (1 << 26)
+                | (1 << 25)
+                | ((raw & 0x3_FFFF) << 7)
+                | (rtr << 6)
+                | dlc;
+            (v, 39)
+        }
+    };
+    let data = frame.data_bytes();
+    let mut crc = crc15(header, header_len);
+    let mut bits: u128 = u128::from(header) << (128 - header_len);
+    let mut len = header_len;
+    for &b in data {
+        crc = crc15_continue(crc, u64::from(b), 8);
+        bits |= u128::from(b) << (128 - len - 8);
+        len += 8;
+    }
+    bits |= u128::from(crc) << (128 - len - 15);
+    len += 15;
+    StuffedRegion { bits, len, crc }
+}
+
+/// The number of stuff bits a transmitter inserts into a left-aligned bit sequence of `len`
+/// bits (§10.5: after five consecutive equal bits, a complementary bit; the stuff bit starts
+/// the next run).
+pub fn count_stuff_bits(bits: u128, len: u32) -> u32 {
+    let mut stuffed = 0;
+    let mut run = 0u32;
+    let mut last = 2u8; // neither 0 nor 1
+    let mut i = 0;
+    while i < len {
+        let bit = ((bits >> (127 - i)) & 1) as u8;
+        if bit == last {
+            run += 1;
+        } else {
+            last = bit;
+            run = 1;
+        }
+        if run == 5 {
+            stuffed += 1;
+            // The stuff bit is the complement and starts a new run of length 1.
+            last ^= 1;
+            run = 1;
+        }
+        i += 1;
+    }
+    stuffed
+}
+
+/// The stuffed bit stream of the region SOF … CRC as a vector of bits (0 = dominant), for
+/// tests and for tools that draw the frame.
+pub fn stuffed_bit_stream(frame: &Frame) -> Vec<u8> {
+    let region = stuffed_region(frame);
+    let mut out = Vec::with_capacity(region.len as usize + 24);
+    let mut run = 0u32;
+    let mut last = 2u8;
+    for i in 0..region.len {
+        let bit = ((region.bits >> (127 - i)) & 1) as u8;
+        out.push(bit);
+        if bit == last {
+            run += 1;
+        } else {
+            last = bit;
+            run = 1;
+        }
+        if run == 5 {
+            last ^= 1;
+            out.push(last);
+            run = 1;
+        }
+    }
+    out
+}
+
+/// Bits of a frame without stuff bits and without intermission.
+pub fn unstuffed_bits(frame: &Frame) -> u32 {
+    let header = if frame.is_extended() { 39 } else { 19 };
+    header + 8 * frame.len() as u32 + 15 + TAIL_BITS
+}
+
+/// The largest number of bits the frame could take with the worst-case stuffing for its
+/// format and length, intermission included: `(region - 1) / 4` stuff bits at most, since the
+/// first stuff bit needs five bits and every further one four more.
+pub fn worst_case_bits(frame: &Frame) -> u32 {
+    let region = unstuffed_bits(frame) - TAIL_BITS;
+    unstuffed_bits(frame) + (region - 1) / 4 + INTERMISSION_BITS
+}
+
+/// The bits a frame occupies on the bus: stuffed SOF … EOF plus 3 bits of intermission.
+pub fn frame_bits(frame: &Frame) -> u32 {
+    let region = stuffed_region(frame);
+    region.len + count_stuff_bits(region.bits, region.len) + TAIL_BITS + INTERMISSION_BITS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Id;
+
+    fn bits_of(s: &str) -> Vec<u8> {
+        s.chars()
+            .filter(|c| *c == '0' || *c == '1')
+            .map(|c| c as u8 - b'0')
+            .collect()
+    }
+
+    /// Independent reference: the straightforward textbook CRC over a bit vector.
+    fn crc_reference(bits: &[u8]) -> u16 {
+        let mut crc: u16 = 0;
+        for &b in bits {
+            let next = u16::from(b) ^ (crc >> 14);
+            crc = (crc << 1) & 0x7FFF;
+            if next & 1 == 1 {
+                crc ^= 0x4599;
+            }
+        }
+        crc
+    }
+
+    #[test]
+    fn standard_data_frame_with_no_data_hand_worked() {
+        // ID 0x000, DLC 0: SOF 0, ID 00000000000, RTR 0, IDE 0, r0 0, DLC 0000 → 19 zeros.
+        // CRC of 19 zero bits from a zero register is 0: 15 more zeros. In 34 zeros in a row
+        // a recessive stuff bit follows every fifth zero: 00000[1]00000[1]… and the stuff bit
+        // starts no run of zeros, so 34 / 5 = 6 stuff bits.
+        let f = Frame::std(0x000, &[]).unwrap();
+        let r = stuffed_region(&f);
+        assert_eq!(r.crc, 0);
+        assert_eq!(r.len, 34);
+        assert_eq!(count_stuff_bits(r.bits, r.len), 6);
+        let stream = stuffed_bit_stream(&f);
+        assert_eq!(
+            stream,
+            bits_of("00000 1 00000 1 00000 1 00000 1 00000 1 00000 1 0000")
+        );
+        assert_eq!(f.bit_length(), 34 + 6 + 10 + 3);
+    }
+
+    #[test]
+    fn standard_frame_0x7ff_hand_worked() {
+        // ID 0x7FF data frame, DLC 0: 0 11111111111 0 0 0 0000
+        let f = Frame::std(0x7FF, &[]).unwrap();
+        let header = bits_of("0 11111111111 0 0 0 0000");
+        let crc = crc_reference(&header);
+        assert_eq!(stuffed_region(&f).crc, crc);
+        let mut stream = header.clone();
+        for i in (0..15).rev() {
+            stream.push(((crc >> i) & 1) as u8);
+        }
+        // Hand count on the header: 0 11111 [0] 11111 [0] 1 0 0 0 0 [1]... — compare with an
+        // explicit stuffing pass over the full region.
+        let expected_stream = {
+            let mut out = Vec::new();
+            let (mut run, mut last) = (0, 2u8);
+            for &b in &stream {
+                out.push(b);
+                if b == last {
+                    run += 1
+                } else {
+                    last = b;
+                    run = 1
+                }
+                if run == 5 {
+                    last ^= 1;
+                    out.push(last);
+                    run = 1;
+                }
+            }
+            out
+        };
+        assert_eq!(stuffed_bit_stream(&f), expected_stream);
+        assert_eq!(&expected_stream[..14], &bits_of("0 11111 0 11111 0 1")[..]);
+    }
+
+    #[test]
+    fn standard_data_frame_8_bytes_of_0x55_needs_few_stuff_bits() {
+        // Alternating data bits never stuff; only header/CRC runs may.
+        let f = Frame::std(0x555, &[0x55; 8]).unwrap();
+        let r = stuffed_region(&f);
+        assert_eq!(r.len, 19 + 64 + 15);
+        assert_eq!(
+            r.crc,
+            crc_reference(&stuffed_bit_stream_unstuffed(&f)[..83])
+        );
+        let stuff = count_stuff_bits(r.bits, r.len);
+        assert_eq!(f.bit_length(), 98 + stuff + 13);
+        assert!(f.bit_length() >= 111 && f.bit_length() <= 135);
+    }
+
+    fn stuffed_bit_stream_unstuffed(f: &Frame) -> Vec<u8> {
+        let r = stuffed_region(f);
+        (0..r.len)
+            .map(|i| ((r.bits >> (127 - i)) & 1) as u8)
+            .collect()
+    }
+
+    #[test]
+    fn payload_forcing_stuff_bits() {
+        // 8 bytes of 0x00 after ID 0x000: the data phase is 64 zeros: a stuff bit every 4.
+        let zeros = Frame::std(0x000, &[0; 8]).unwrap();
+        let r = stuffed_region(&zeros);
+        // header is 19 zeros (DLC = 1000 breaks the run): 0*15 then 1000 → compute exactly:
+        // SOF+ID+RTR+IDE+r0 = 15 zeros → stuff bits after 5, 9, 13 (3), run continues at length 3
+        // (bits 14, 15 + stuffed 1? no) — rely on the reference pass instead of prose:
+        let reference = {
+            let bits = stuffed_bit_stream_unstuffed(&zeros);
+            let (mut n, mut run, mut last) = (0, 0, 2u8);
+            for b in bits {
+                if b == last {
+                    run += 1
+                } else {
+                    last = b;
+                    run = 1
+                }
+                if run == 5 {
+                    n += 1;
+                    last ^= 1;
+                    run = 1;
+                }
+            }
+            n
+        };
+        assert_eq!(count_stuff_bits(r.bits, r.len), reference);
+        assert!(
+            reference >= 16,
+            "64 zero data bits alone force 16 stuff bits"
+        );
+        assert_eq!(zeros.bit_length(), 98 + reference + 13);
+    }
+
+    #[test]
+    fn extended_frame_lengths() {
+        let f = Frame::data(Id::extended(0x1ABC_DEF0).unwrap(), &[0xAA; 4]).unwrap();
+        let r = stuffed_region(&f);
+        assert_eq!(r.len, 39 + 32 + 15);
+        assert_eq!(unstuffed_bits(&f), 39 + 32 + 15 + 10);
+        let len = f.bit_length();
+        assert!(len >= unstuffed_bits(&f) + 3 && len <= worst_case_bits(&f));
+    }
+
+    #[test]
+    fn remote_frame_has_no_data_field_but_keeps_dlc() {
+        let id = Id::standard(0x70C).unwrap();
+        let rtr = Frame::remote(id, 8).unwrap();
+        let r = stuffed_region(&rtr);
+        assert_eq!(r.len, 19 + 15);
+        // RTR bit (bit 12) is recessive and DLC = 1000.
+        let bits = stuffed_bit_stream_unstuffed(&rtr);
+        assert_eq!(&bits[..19], &bits_of("0 11100001100 1 0 0 1000")[..]);
+        assert_eq!(r.crc, crc_reference(&bits[..19]));
+    }
+
+    #[test]
+    fn known_worst_case_bounds() {
+        // The textbook figures: 8-byte base frame 111..=135 bits, extended 131..=160 bits
+        // (both with 3 bits of intermission).
+        let f = Frame::std(0x123, &[0; 8]).unwrap();
+        assert_eq!(unstuffed_bits(&f) + 3, 111);
+        assert_eq!(worst_case_bits(&f), 135);
+        let e = Frame::data(Id::extended(1).unwrap(), &[0; 8]).unwrap();
+        assert_eq!(unstuffed_bits(&e) + 3, 131);
+        assert_eq!(worst_case_bits(&e), 160);
+    }
+}
