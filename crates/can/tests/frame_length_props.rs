@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used)]
 //! Property tests (ISO 11898-1 §10.5): every frame's length lies between its unstuffed
 //! length and its worst-case stuffed length, and the computed stream round-trips.
 
