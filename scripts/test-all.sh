@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# The whole cantwin test suite: formatting, lints, every Rust test, and the interop suite
+# against third-party tools. Installs what it needs by itself (tshark from Debian's packages,
+# a Python virtualenv with pinned python-can/canopen for the interop suite) and exits non-zero
+# on any failure.
+set -euo pipefail
+
+cd "$(dirname "$0")/.."
+export CARGO_TERM_COLOR="${CARGO_TERM_COLOR:-never}"
+# Property tests: bounded case counts keep the suite short on small machines. Tests that set
+# their own count keep it.
+export PROPTEST_CASES="${PROPTEST_CASES:-64}"
+
+step() { printf '\n==> %s\n' "$*"; }
+
+install_tshark() {
+    if command -v tshark >/dev/null 2>&1; then
+        return 0
+    fi
+    local sudo=""
+    if [ "$(id -u)" -ne 0 ]; then
+        if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
+            sudo="sudo -n"
+        else
+            echo "tshark is not installed and packages cannot be installed here (not root, no sudo): tests that need it will say so"
+            return 0
+        fi
+    fi
+    if ! command -v apt-get >/dev/null 2>&1; then
+        echo "tshark is not installed and there is no apt-get here: tests that need it will say so"
+        return 0
+    fi
+    step "installing tshark (Debian package, no recommended packages)"
+    echo "wireshark-common wireshark-common/install-setuid boolean false" | $sudo debconf-set-selections || true
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get update -qq || true
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends tshark \
+        || echo "tshark could not be installed: tests that need it will say so"
+}
+
+install_tshark
+
+step "cargo fmt --check"
+cargo fmt --all -- --check
+
+step "cargo clippy (all targets, all features, warnings are errors)"
+cargo clippy --workspace --all-targets --all-features -- -D warnings
+
+step "cargo test"
+cargo test --workspace
+
+if [ -x tests/interop/run.sh ]; then
+    step "interop suite (python-can, python-canopen, tshark)"
+    tests/interop/run.sh
+fi
+
+step "all checks passed"
