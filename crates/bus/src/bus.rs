@@ -1,0 +1,1125 @@
+//! One CAN bus: arbitration, bit timing, acknowledgement, fault confinement, fault injection.
+//!
+//! # Timing model
+//!
+//! With `b` the bit time and `n = Frame::bit_length()` (stuffed SOF … EOF plus 3 bits of
+//! intermission), a frame that starts (SOF) at `s`:
+//!
+//! * completes at the end of its EOF, `s + (n - 3)·b`: receivers get `on_frame`, the sender
+//!   gets `on_sent` (the [`cantwin_can::Node`] contract), taps see [`BusEvent::Frame`];
+//! * leaves the bus idle at the end of intermission, `s + n·b`. Frames queued before or at that
+//!   instant arbitrate together then; so do frames queued at the same instant on an idle bus.
+//!   A frame queued while the bus is busy waits for it to become idle.
+//!
+//! An error frame after `e` bits of the frame occupies `e + 17` bits (error flag 6, error
+//! delimiter 8, intermission 3). Counters change, controller events are delivered and taps
+//! see [`BusEvent::Error`] at `s + e·b`, when the flag starts; the bus is idle at
+//! `s + (e + 17)·b` and the transmitter retransmits automatically, arbitrating again. `e` per
+//! cause is given by [`ErrorKind`].
+//!
+//! Within one instant the bus works in this order: the end of the frame in flight (with all
+//! its callbacks, receivers in port order, then the sender's echo and `on_sent`), bus-off
+//! recoveries, timers (`on_tick`, earliest deadline first, ties by port), and last, if the
+//! bus is idle, arbitration among every frame then pending.
+//!
+//! # Fault confinement (ISO 11898-1 §12.1.4)
+//!
+//! The transmitter's TEC moves by [`ErrorCounters`] rules (+8 per error, an error-passive
+//! transmitter does not count ACK errors, −1 per success); every receiving node's REC +1 per
+//! error frame and −1 per good frame. An error-passive node that has just transmitted waits 8
+//! more bit times after intermission before it may start again ("suspend transmission",
+//! §10.4.6.4), so error-active nodes go first. A bus-off node takes no part in the bus: it
+//! neither sends, receives nor acknowledges, and its transmit queue is cleared (one
+//! [`ControllerEvent::TxDropped`] per frame). It recovers after 128 × 11 recessive bits, which
+//! cantwin counts as 1408 bit times from the moment it went bus-off.
+//!
+//! A frame is acknowledged when at least one other node is powered, connected, not bus-off
+//! and at the bus's bit rate (external ports count: they are nodes). A lone node sees ACK
+//! errors and keeps retransmitting, error-passive with TEC = 128.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use cantwin_can::{
+    BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Instant, Outbox,
+};
+
+use crate::error::BusError;
+use crate::fault::{FaultAction, FaultRule, FrameSelector};
+use crate::ids::{BusId, PortId};
+use crate::paced::TimeMap;
+use crate::port::{AnyNode, PortConfig, PortStatus};
+use crate::queue::TxQueue;
+use crate::rng::SplitMix64;
+use crate::stats::{BusStats, PortStats};
+use crate::tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord};
+
+/// How a bus is set up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BusConfig {
+    /// A name for captures and traces (`can0`, `field`, …).
+    pub name: String,
+    /// The bit rate.
+    pub bit_rate: BitRate,
+    /// The seed of the fault injection generator.
+    pub seed: u64,
+    /// The sliding window of [`BusStats::window_load_percent`].
+    pub load_window: Duration,
+}
+
+impl BusConfig {
+    /// A bus with this name and bit rate, seed 0, a 1 s load window.
+    pub fn new(name: impl Into<String>, bit_rate: BitRate) -> Self {
+        BusConfig {
+            name: name.into(),
+            bit_rate,
+            seed: 0,
+            load_window: Duration::from_secs(1),
+        }
+    }
+
+    /// With this fault injection seed.
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// With this sliding load window.
+    pub fn with_load_window(mut self, window: Duration) -> Self {
+        self.load_window = window;
+        self
+    }
+}
+
+/// A tap on a bus, for typed access back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TapId(usize);
+
+/// Where the frame a port offers to arbitration comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    Queue { seq: u64 },
+    Babble,
+}
+
+struct Port {
+    node: Option<Box<dyn AnyNode>>,
+    config: PortConfig,
+    queue: TxQueue,
+    counters: ErrorCounters,
+    powered: bool,
+    connected: bool,
+    mismatch: Option<BitRate>,
+    babble: Option<(Frame, u32)>,
+    deadline: Option<Instant>,
+    last_tick: Option<Instant>,
+    suspend_until: Option<Instant>,
+    recover_at: Option<Instant>,
+    source: Option<Source>,
+    last_bits: Option<(Frame, u32)>,
+    stats: PortStats,
+}
+
+impl Port {
+    fn attached(&self) -> bool {
+        self.node.is_some()
+    }
+
+    /// Takes part in the bus as a receiver: receives, acknowledges, counts errors it sees.
+    fn on_the_bus(&self) -> bool {
+        self.attached() && self.powered && self.connected && !self.bus_off()
+    }
+
+    fn bus_off(&self) -> bool {
+        self.counters.state() == ErrorState::BusOff
+    }
+
+    fn bits_of(&mut self, frame: Frame) -> u32 {
+        // Nodes tend to send the same frame again and again; computing the CRC and stuffing
+        // once per distinct frame keeps the hot path cheap.
+        match self.last_bits {
+            Some((f, bits)) if f == frame => bits,
+            _ => {
+                let bits = frame.bit_length();
+                self.last_bits = Some((frame, bits));
+                bits
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Outcome {
+    Ok {
+        dropped: bool,
+    },
+    Error {
+        kind: ErrorKind,
+        bits_before_flag: u32,
+    },
+}
+
+#[derive(Debug, Clone, Copy)]
+struct InFlight {
+    port: usize,
+    frame: Frame,
+    bits: u32,
+    source: Source,
+    start: Instant,
+    end: Instant,
+    idle_at: Instant,
+    outcome: Outcome,
+}
+
+/// One virtual CAN bus with its nodes.
+///
+/// A bus runs on its own ([`Bus::run_until`]) or inside a [`crate::Simulation`] with others.
+pub struct Bus {
+    id: BusId,
+    name: String,
+    bit_rate: BitRate,
+    bit_ns: u64,
+    now: Instant,
+    ports: Vec<Port>,
+    /// Per port: `arbitration_key << 32 | port`, or `u64::MAX` when it offers nothing.
+    arb_keys: Vec<u64>,
+    offering: usize,
+    listeners: usize,
+    deadlines: BinaryHeap<Reverse<(Instant, u32)>>,
+    dirty: Vec<u32>,
+    in_flight: Option<InFlight>,
+    idle_at: Instant,
+    suspended: Vec<u32>,
+    recovering: Vec<u32>,
+    rules: Vec<FaultRule>,
+    rng: SplitMix64,
+    attempts: u64,
+    stats: BusStats,
+    taps: Vec<Box<dyn AnyTap>>,
+    time_map: Option<TimeMap>,
+    outbox: Outbox,
+}
+
+impl core::fmt::Debug for Bus {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Bus")
+            .field("id", &self.id)
+            .field("name", &self.name)
+            .field("bit_rate", &self.bit_rate)
+            .field("now", &self.now)
+            .field("ports", &self.ports.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Bus {
+    /// An empty bus at time zero.
+    pub fn new(config: BusConfig) -> Self {
+        Bus::with_id(BusId(0), config, Instant::ZERO)
+    }
+
+    pub(crate) fn with_id(id: BusId, config: BusConfig, now: Instant) -> Self {
+        Bus {
+            id,
+            name: config.name,
+            bit_rate: config.bit_rate,
+            bit_ns: config.bit_rate.bit_time().as_nanos(),
+            now,
+            ports: Vec::new(),
+            arb_keys: Vec::new(),
+            offering: 0,
+            listeners: 0,
+            deadlines: BinaryHeap::new(),
+            dirty: Vec::new(),
+            in_flight: None,
+            idle_at: now,
+            suspended: Vec::new(),
+            recovering: Vec::new(),
+            rules: Vec::new(),
+            rng: SplitMix64::new(config.seed),
+            attempts: 0,
+            stats: BusStats::new(now, config.load_window),
+            taps: Vec::new(),
+            time_map: None,
+            outbox: Outbox::new(),
+        }
+    }
+
+    /// The bus's identifier.
+    pub fn id(&self) -> BusId {
+        self.id
+    }
+
+    /// The bus's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The bit rate.
+    pub fn bit_rate(&self) -> BitRate {
+        self.bit_rate
+    }
+
+    /// The current bus time: everything up to and including it has been processed, except
+    /// what API calls made at this instant have just started.
+    pub fn now(&self) -> Instant {
+        self.now
+    }
+
+    /// The statistics.
+    pub fn stats(&self) -> &BusStats {
+        &self.stats
+    }
+
+    /// The statistics, to reset them.
+    pub fn stats_mut(&mut self) -> &mut BusStats {
+        &mut self.stats
+    }
+
+    /// How many transmission attempts (starts of frame) the bus has seen.
+    pub fn attempts(&self) -> u64 {
+        self.attempts
+    }
+
+    /// The frame on the bus now and its sender, if any.
+    pub fn transmitting(&self) -> Option<(PortId, Frame)> {
+        self.in_flight.map(|f| (self.port_id(f.port), f.frame))
+    }
+
+    pub(crate) fn set_time_map(&mut self, map: Option<TimeMap>) {
+        self.time_map = map;
+    }
+
+    fn port_id(&self, index: usize) -> PortId {
+        PortId {
+            bus: self.id,
+            index: index as u32,
+        }
+    }
+
+    fn index_of(&self, port: PortId) -> Result<usize, BusError> {
+        let i = port.index as usize;
+        if port.bus == self.id && self.ports.get(i).is_some_and(Port::attached) {
+            Ok(i)
+        } else {
+            Err(BusError::NoSuchPort(port))
+        }
+    }
+
+    fn bits(&self, n: u32) -> Duration {
+        Duration::from_nanos(u64::from(n) * self.bit_ns)
+    }
+
+    // ----------------------------------------------------------------------------------
+    // Nodes
+
+    /// Attach a node. If the port is configured powered (the default), the node is powered
+    /// now: `on_power_up` runs at [`Bus::now`] and what it queues arbitrates at once.
+    pub fn attach<N: AnyNode>(&mut self, node: N, config: PortConfig) -> PortId {
+        self.attach_boxed(Box::new(node), config)
+    }
+
+    /// Attach an already boxed node.
+    pub fn attach_boxed(&mut self, node: Box<dyn AnyNode>, config: PortConfig) -> PortId {
+        let index = self.ports.len();
+        let config = PortConfig {
+            queue_depth: config.queue_depth.max(1),
+            ..config
+        };
+        self.ports.push(Port {
+            node: Some(node),
+            config,
+            queue: TxQueue::new(config.queue_depth, config.order),
+            counters: ErrorCounters::new(),
+            powered: false,
+            connected: true,
+            mismatch: None,
+            babble: None,
+            deadline: None,
+            last_tick: None,
+            suspend_until: None,
+            recover_at: None,
+            source: None,
+            last_bits: None,
+            stats: PortStats::default(),
+        });
+        self.arb_keys.push(u64::MAX);
+        if config.powered {
+            self.power_up(index);
+        }
+        self.port_id(index)
+    }
+
+    /// Detach a node and hand it back. A frame it is sending is cut off (receivers see an
+    /// error frame). The port number is never reused.
+    pub fn detach(&mut self, port: PortId) -> Result<Box<dyn AnyNode>, BusError> {
+        let i = self.index_of(port)?;
+        self.abort_if_sending(i);
+        let p = &mut self.ports[i];
+        p.queue.clear();
+        p.deadline = None;
+        p.babble = None;
+        let node = p.node.take().ok_or(BusError::NoSuchPort(port))?;
+        self.refresh(i);
+        self.count_listeners();
+        Ok(node)
+    }
+
+    /// The node on `port`, if it is a `T`.
+    pub fn node<T: 'static>(&self, port: PortId) -> Option<&T> {
+        let i = self.index_of(port).ok()?;
+        self.ports[i].node.as_ref()?.as_any().downcast_ref::<T>()
+    }
+
+    /// The node on `port`, mutably, if it is a `T`. The bus asks the node for its next
+    /// deadline again before it next advances, so changes made here take effect. Frames the
+    /// node should send go through [`Bus::transmit`] (or [`Bus::with_node`]).
+    pub fn node_mut<T: 'static>(&mut self, port: PortId) -> Option<&mut T> {
+        let i = self.index_of(port).ok()?;
+        self.dirty.push(i as u32);
+        self.ports[i]
+            .node
+            .as_mut()?
+            .as_any_mut()
+            .downcast_mut::<T>()
+    }
+
+    /// Run `f` on the node on `port` (if it is a `T`) at [`Bus::now`] with an outbox whose
+    /// frames are queued for transmission afterwards, as if the node had been called by the
+    /// bus.
+    pub fn with_node<T: 'static, R>(
+        &mut self,
+        port: PortId,
+        f: impl FnOnce(&mut T, Instant, &mut Outbox) -> R,
+    ) -> Option<R> {
+        let i = self.index_of(port).ok()?;
+        let now = self.now;
+        let node = self.ports[i]
+            .node
+            .as_mut()?
+            .as_any_mut()
+            .downcast_mut::<T>()?;
+        let r = f(node, now, &mut self.outbox);
+        self.after_call(i);
+        Some(r)
+    }
+
+    /// The ports with a node attached.
+    pub fn ports(&self) -> impl Iterator<Item = PortId> + '_ {
+        (0..self.ports.len())
+            .filter(|&i| self.ports[i].attached())
+            .map(|i| self.port_id(i))
+    }
+
+    /// A snapshot of a port's state.
+    pub fn port_status(&self, port: PortId) -> Result<PortStatus, BusError> {
+        let p = &self.ports[self.index_of(port)?];
+        Ok(PortStatus {
+            counters: p.counters,
+            powered: p.powered,
+            connected: p.connected,
+            bit_rate_mismatch: p.mismatch,
+            babbling: p.babble.is_some(),
+            queued: p.queue.len(),
+            stats: p.stats,
+        })
+    }
+
+    /// Queue a frame on `port` at [`Bus::now`], as if its node had sent it (external ports,
+    /// tests, scripted stimuli). A full queue drops the frame, counts it, reports
+    /// [`ControllerEvent::TxDropped`] to the node and taps, and returns
+    /// [`BusError::QueueFull`].
+    pub fn transmit(&mut self, port: PortId, frame: Frame) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        if !self.ports[i].powered {
+            return Err(BusError::PoweredOff(port));
+        }
+        self.outbox.clear();
+        self.outbox.push(frame);
+        let dropped = self.absorb(i);
+        if dropped > 0 {
+            self.tx_dropped(i, dropped);
+            self.after_call(i);
+            return Err(BusError::QueueFull(port));
+        }
+        self.refresh(i);
+        Ok(())
+    }
+
+    // ----------------------------------------------------------------------------------
+    // Faults
+
+    /// Add a fault injection rule. Rules are checked in the order added; the first that
+    /// selects a frame decides.
+    pub fn inject(&mut self, rule: FaultRule) {
+        self.rules.push(rule);
+    }
+
+    /// The fault injection rules still in force (spent rules are removed).
+    pub fn fault_rules(&self) -> &[FaultRule] {
+        &self.rules
+    }
+
+    /// Remove every fault injection rule.
+    pub fn clear_faults(&mut self) {
+        self.rules.clear();
+    }
+
+    /// Power a node off or on. Off: a frame it is sending is cut off, its queue and timers are
+    /// lost, it receives nothing. On: fresh error counters and `on_power_up` at [`Bus::now`].
+    pub fn set_powered(&mut self, port: PortId, powered: bool) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        if self.ports[i].powered == powered {
+            return Ok(());
+        }
+        if powered {
+            self.power_up(i);
+        } else {
+            self.abort_if_sending(i);
+            let p = &mut self.ports[i];
+            p.powered = false;
+            p.queue.clear();
+            p.deadline = None;
+            p.last_tick = None;
+            p.suspend_until = None;
+            p.recover_at = None;
+            self.refresh(i);
+            self.count_listeners();
+        }
+        Ok(())
+    }
+
+    /// Cut or restore a node's connection to the bus wires. A disconnected node keeps
+    /// running (its timers fire, it queues frames) but sends, receives and acknowledges
+    /// nothing; its queued frames wait for the reconnection. A frame it is sending when cut
+    /// off ends in an error frame for the others.
+    pub fn set_connected(&mut self, port: PortId, connected: bool) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        if !connected {
+            self.abort_if_sending(i);
+        }
+        self.ports[i].connected = connected;
+        self.refresh(i);
+        self.count_listeners();
+        Ok(())
+    }
+
+    /// Force a node's controller bus-off now (as 32 transmit errors would).
+    pub fn force_bus_off(&mut self, port: PortId) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        if !self.ports[i].powered {
+            return Err(BusError::PoweredOff(port));
+        }
+        self.abort_if_sending(i);
+        self.update_counters(i, ErrorCounters::force_bus_off);
+        Ok(())
+    }
+
+    /// Start bus-off recovery on a node whose port does not recover by itself: it is
+    /// error-active again after 128 × 11 recessive bits from now. Does nothing if the node is
+    /// not bus-off or is already recovering.
+    pub fn recover_bus_off(&mut self, port: PortId) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        if self.ports[i].bus_off() && self.ports[i].recover_at.is_none() {
+            self.schedule_recovery(i);
+        }
+        Ok(())
+    }
+
+    /// Make a node's controller babble: it offers `frame` to every arbitration, besides its
+    /// node's own frames, and sends it again as soon as it is out. `None` stops it. Babbled
+    /// frames are real frames on the bus (receivers get them) but are not the node's: no
+    /// `on_sent`.
+    pub fn set_babble(&mut self, port: PortId, frame: Option<Frame>) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        let p = &mut self.ports[i];
+        p.babble = frame.map(|f| (f, p.bits_of(f)));
+        self.refresh(i);
+        Ok(())
+    }
+
+    /// Misconfigure a node's bit rate (`Some(rate)` other than the bus's), or fix it (`None`).
+    /// Every frame it sends becomes an error frame after 6 bits ([`ErrorKind::BitRateMismatch`]);
+    /// it receives and acknowledges nothing and counts a receive error for every frame it
+    /// sees. Its own error flags on others' frames are not modelled.
+    pub fn set_bit_rate_mismatch(
+        &mut self,
+        port: PortId,
+        rate: Option<BitRate>,
+    ) -> Result<(), BusError> {
+        let i = self.index_of(port)?;
+        self.ports[i].mismatch = rate.filter(|r| *r != self.bit_rate);
+        self.count_listeners();
+        Ok(())
+    }
+
+    // ----------------------------------------------------------------------------------
+    // Taps
+
+    /// Add an observer of every bus event.
+    pub fn add_tap<T: AnyTap>(&mut self, tap: T) -> TapId {
+        self.taps.push(Box::new(tap));
+        TapId(self.taps.len() - 1)
+    }
+
+    /// A tap, if it is a `T`.
+    pub fn tap<T: 'static>(&self, id: TapId) -> Option<&T> {
+        self.taps.get(id.0)?.as_any().downcast_ref::<T>()
+    }
+
+    /// A tap, mutably, if it is a `T`.
+    pub fn tap_mut<T: 'static>(&mut self, id: TapId) -> Option<&mut T> {
+        self.taps.get_mut(id.0)?.as_any_mut().downcast_mut::<T>()
+    }
+
+    fn emit(&mut self, event: BusEvent) {
+        if self.taps.is_empty() {
+            return;
+        }
+        let info = BusInfo {
+            id: self.id,
+            name: &self.name,
+            bit_rate: self.bit_rate,
+            time_map: self.time_map,
+        };
+        for tap in &mut self.taps {
+            tap.on_event(&info, &event);
+        }
+    }
+
+    // ----------------------------------------------------------------------------------
+    // Running
+
+    /// Advance bus time to `t`, processing every event at or before it.
+    pub fn run_until(&mut self, t: Instant) {
+        while let Some(next) = self.next_event_time() {
+            if next > t {
+                break;
+            }
+            self.step(next);
+        }
+        if t > self.now {
+            self.now = t;
+        }
+    }
+
+    /// Advance bus time by `d`.
+    pub fn run_for(&mut self, d: Duration) {
+        self.run_until(self.now + d);
+    }
+
+    /// When the bus next has something to do, if ever.
+    pub fn next_event_time(&mut self) -> Option<Instant> {
+        self.flush_dirty();
+        // Drop stale timer entries from the top of the heap.
+        while let Some(&Reverse((t, i))) = self.deadlines.peek() {
+            let p = &self.ports[i as usize];
+            if p.deadline == Some(t) && p.powered && p.attached() {
+                break;
+            }
+            self.deadlines.pop();
+        }
+        let mut next = self.deadlines.peek().map(|Reverse((t, _))| *t);
+        let mut consider = |t: Instant| {
+            next = Some(next.map_or(t, |n| n.min(t)));
+        };
+        match self.in_flight {
+            Some(f) => consider(f.end),
+            None if self.offering > 0 => consider(self.idle_at.max(self.now)),
+            None => {}
+        }
+        for &i in &self.suspended {
+            if let Some(t) = self.ports[i as usize].suspend_until {
+                consider(t);
+            }
+        }
+        for &i in &self.recovering {
+            if let Some(t) = self.ports[i as usize].recover_at {
+                consider(t);
+            }
+        }
+        next
+    }
+
+    /// Process the next instant with something to do; returns it, or `None` if nothing will
+    /// ever happen again.
+    pub fn step_next(&mut self) -> Option<Instant> {
+        let t = self.next_event_time()?;
+        self.step(t);
+        Some(t)
+    }
+
+    pub(crate) fn step(&mut self, t: Instant) {
+        if t > self.now {
+            self.now = t;
+        }
+        let t = self.now;
+        if let Some(f) = self.in_flight
+            && f.end <= t
+        {
+            self.in_flight = None;
+            self.complete(f);
+        }
+        if !self.recovering.is_empty() {
+            let mut k = 0;
+            while k < self.recovering.len() {
+                let i = self.recovering[k] as usize;
+                if self.ports[i].recover_at.is_none_or(|r| r <= t) {
+                    self.recovering.swap_remove(k);
+                    if self.ports[i].recover_at.take().is_some() {
+                        self.update_counters(i, ErrorCounters::recover);
+                    }
+                } else {
+                    k += 1;
+                }
+            }
+        }
+        if !self.suspended.is_empty() {
+            let mut k = 0;
+            while k < self.suspended.len() {
+                let i = self.suspended[k] as usize;
+                if self.ports[i].suspend_until.is_none_or(|s| s <= t) {
+                    self.suspended.swap_remove(k);
+                    self.ports[i].suspend_until = None;
+                    self.refresh(i);
+                } else {
+                    k += 1;
+                }
+            }
+        }
+        self.flush_dirty();
+        while let Some(&Reverse((d, i))) = self.deadlines.peek() {
+            if d > t {
+                break;
+            }
+            self.deadlines.pop();
+            let i = i as usize;
+            let p = &mut self.ports[i];
+            if p.deadline != Some(d) || !p.powered {
+                continue;
+            }
+            p.deadline = None;
+            p.last_tick = Some(t);
+            if let Some(node) = p.node.as_mut() {
+                node.on_tick(t, &mut self.outbox);
+                self.after_call(i);
+            }
+        }
+        if self.in_flight.is_none() && self.idle_at <= t && self.offering > 0 {
+            self.start_transmission(t);
+        }
+    }
+
+    fn flush_dirty(&mut self) {
+        while let Some(i) = self.dirty.pop() {
+            self.update_deadline(i as usize);
+        }
+    }
+
+    // ----------------------------------------------------------------------------------
+    // Node calls
+
+    fn power_up(&mut self, i: usize) {
+        let now = self.now;
+        let p = &mut self.ports[i];
+        p.powered = true;
+        p.counters = ErrorCounters::new();
+        p.last_tick = None;
+        if let Some(node) = p.node.as_mut() {
+            node.on_power_up(now, &mut self.outbox);
+        }
+        self.count_listeners();
+        self.after_call(i);
+    }
+
+    /// Queue what the node put in the outbox; returns how many frames did not fit.
+    fn absorb(&mut self, i: usize) -> u32 {
+        let p = &mut self.ports[i];
+        let mut dropped = 0;
+        for frame in self.outbox.drain() {
+            let bits = match p.last_bits {
+                Some((f, bits)) if f == frame => bits,
+                _ => {
+                    let bits = frame.bit_length();
+                    p.last_bits = Some((frame, bits));
+                    bits
+                }
+            };
+            if !p.queue.push(frame, bits) {
+                dropped += 1;
+            }
+        }
+        dropped
+    }
+
+    /// After a node was called: queue its frames, report overflow, refresh its arbitration
+    /// entry and its deadline.
+    fn after_call(&mut self, i: usize) {
+        if !self.outbox.is_empty() {
+            let dropped = self.absorb(i);
+            if dropped > 0 {
+                self.tx_dropped(i, dropped);
+                // Frames queued in reaction to TxDropped that do not fit either are counted
+                // but not reported again, so a node cannot loop on its own overflow.
+                let again = self.absorb(i);
+                self.ports[i].stats.tx_dropped += u64::from(again);
+            }
+        }
+        self.refresh(i);
+        self.update_deadline(i);
+    }
+
+    /// Count and report `n` frames dropped from port `i`'s queue.
+    fn tx_dropped(&mut self, i: usize, n: u32) {
+        let now = self.now;
+        self.ports[i].stats.tx_dropped += u64::from(n);
+        for _ in 0..n {
+            self.emit(BusEvent::Controller {
+                port: self.port_id(i),
+                event: ControllerEvent::TxDropped,
+                at: now,
+            });
+            if let Some(node) = self.ports[i].node.as_mut() {
+                node.on_controller_event(ControllerEvent::TxDropped, now, &mut self.outbox);
+            }
+        }
+    }
+
+    fn update_deadline(&mut self, i: usize) {
+        let p = &mut self.ports[i];
+        let d = match (&p.node, p.powered) {
+            (Some(node), true) => node.next_deadline(),
+            _ => None,
+        };
+        // A node that asks again for an instant it was already ticked at is ticked 1 ns
+        // later: time must move on even if a node misbehaves.
+        let d = match (d, p.last_tick) {
+            (Some(d), Some(last)) if d <= last => Some(last + Duration::from_nanos(1)),
+            (Some(d), _) => Some(d.max(self.now)),
+            (None, _) => None,
+        };
+        if d != p.deadline {
+            p.deadline = d;
+            if let Some(d) = d {
+                self.deadlines.push(Reverse((d, i as u32)));
+            }
+        }
+    }
+
+    /// Recompute port `i`'s arbitration entry.
+    fn refresh(&mut self, i: usize) {
+        let now = self.now;
+        let p = &mut self.ports[i];
+        let mut key = u64::MAX;
+        p.source = None;
+        let can_send = p.attached()
+            && p.powered
+            && p.connected
+            && !p.bus_off()
+            && p.suspend_until.is_none_or(|s| s <= now);
+        if can_send {
+            let queued = p
+                .queue
+                .head()
+                .map(|e| (e.frame.arbitration_key(), Source::Queue { seq: e.seq }));
+            let babble = p.babble.map(|(f, _)| (f.arbitration_key(), Source::Babble));
+            let best = match (queued, babble) {
+                (Some(q), Some(b)) => Some(if b.0 < q.0 { b } else { q }),
+                (q, b) => q.or(b),
+            };
+            if let Some((k, source)) = best {
+                p.source = Some(source);
+                key = (u64::from(k) << 32) | i as u64;
+            }
+        }
+        let old = self.arb_keys[i];
+        self.arb_keys[i] = key;
+        match (old == u64::MAX, key == u64::MAX) {
+            (true, false) => self.offering += 1,
+            (false, true) => self.offering -= 1,
+            _ => {}
+        }
+    }
+
+    fn count_listeners(&mut self) {
+        self.listeners = self
+            .ports
+            .iter()
+            .filter(|p| p.on_the_bus() && p.mismatch.is_none())
+            .count();
+    }
+
+    fn update_counters(
+        &mut self,
+        i: usize,
+        f: impl FnOnce(&mut ErrorCounters) -> Option<ErrorState>,
+    ) {
+        let before = self.ports[i].counters.state();
+        let Some(after) = f(&mut self.ports[i].counters) else {
+            return;
+        };
+        let event = match after {
+            ErrorState::Passive => ControllerEvent::ErrorPassive,
+            ErrorState::BusOff => ControllerEvent::BusOff,
+            ErrorState::Active if before == ErrorState::BusOff => ControllerEvent::BusOffRecovered,
+            ErrorState::Active => ControllerEvent::ErrorActive,
+        };
+        let now = self.now;
+        self.emit(BusEvent::Controller {
+            port: self.port_id(i),
+            event,
+            at: now,
+        });
+        if let Some(node) = self.ports[i].node.as_mut() {
+            node.on_controller_event(event, now, &mut self.outbox);
+        }
+        if after == ErrorState::BusOff {
+            // A bus-off controller sends nothing: its pending frames are lost.
+            let n = self.ports[i].queue.clear() as u32;
+            if n > 0 {
+                self.tx_dropped(i, n);
+            }
+            if self.ports[i].config.auto_bus_off_recovery {
+                self.schedule_recovery(i);
+            }
+        } else if before == ErrorState::BusOff {
+            self.ports[i].recover_at = None;
+        }
+        self.count_listeners();
+        self.after_call(i);
+    }
+
+    fn schedule_recovery(&mut self, i: usize) {
+        let bits = ErrorCounters::RECOVERY_SEQUENCES * ErrorCounters::RECOVERY_SEQUENCE_BITS;
+        self.ports[i].recover_at = Some(self.now + self.bits(bits));
+        self.recovering.push(i as u32);
+    }
+
+    // ----------------------------------------------------------------------------------
+    // The wire
+
+    fn start_transmission(&mut self, t: Instant) {
+        let Some(key) = self.arb_keys.iter().copied().min() else {
+            return;
+        };
+        if key == u64::MAX {
+            return;
+        }
+        let i = (key & 0xFFFF_FFFF) as usize;
+        let p = &self.ports[i];
+        let (frame, bits, source) = match p.source {
+            Some(Source::Babble) => match p.babble {
+                Some((f, b)) => (f, b, Source::Babble),
+                None => return,
+            },
+            Some(Source::Queue { seq }) => match p.queue.head() {
+                Some(e) if e.seq == seq => (e.frame, e.bits, Source::Queue { seq }),
+                _ => return,
+            },
+            None => return,
+        };
+        let sender_listens = usize::from(p.on_the_bus() && p.mismatch.is_none());
+        let mismatch = p.mismatch.is_some();
+        let attempt = self.attempts;
+        self.attempts += 1;
+        let port_id = self.port_id(i);
+        let action = self.fault_for(attempt, port_id, &frame);
+        let outcome = if mismatch {
+            Outcome::Error {
+                kind: ErrorKind::BitRateMismatch,
+                bits_before_flag: 6,
+            }
+        } else if action == Some(FaultAction::Corrupt) {
+            Outcome::Error {
+                kind: ErrorKind::Corrupted,
+                bits_before_flag: bits - 13,
+            }
+        } else if self.listeners <= sender_listens {
+            Outcome::Error {
+                kind: ErrorKind::Ack,
+                bits_before_flag: bits - 11,
+            }
+        } else {
+            Outcome::Ok {
+                dropped: action == Some(FaultAction::Drop),
+            }
+        };
+        let (end, idle_at) = match outcome {
+            Outcome::Ok { .. } => (
+                t + self.bits(bits - cantwin_can::bits::INTERMISSION_BITS),
+                t + self.bits(bits),
+            ),
+            Outcome::Error {
+                bits_before_flag, ..
+            } => (
+                t + self.bits(bits_before_flag),
+                t + self.bits(bits_before_flag + ErrorKind::OVERHEAD_BITS),
+            ),
+        };
+        self.in_flight = Some(InFlight {
+            port: i,
+            frame,
+            bits,
+            source,
+            start: t,
+            end,
+            idle_at,
+            outcome,
+        });
+        self.idle_at = idle_at;
+    }
+
+    fn fault_for(&mut self, attempt: u64, sender: PortId, frame: &Frame) -> Option<FaultAction> {
+        let mut hit = None;
+        for rule in &mut self.rules {
+            if rule.sender.is_some_and(|s| s != sender) || rule.remaining == Some(0) {
+                continue;
+            }
+            let selected = match rule.selector {
+                FrameSelector::Attempt(n) => n == attempt,
+                FrameSelector::Fraction(p) => self.rng.next_f64() < p,
+                FrameSelector::Id(id) => frame.id() == id,
+                FrameSelector::All => true,
+            };
+            if selected {
+                if let Some(r) = rule.remaining.as_mut() {
+                    *r -= 1;
+                }
+                hit = Some(rule.action);
+                break;
+            }
+        }
+        self.rules.retain(|r| r.remaining != Some(0));
+        hit
+    }
+
+    /// Cut off the frame port `i` is sending now: receivers see an error at the current bit.
+    fn abort_if_sending(&mut self, i: usize) {
+        let Some(mut f) = self.in_flight else {
+            return;
+        };
+        if f.port != i {
+            return;
+        }
+        let elapsed = (self.now - f.start).as_nanos() / self.bit_ns;
+        let e = u32::try_from(elapsed).unwrap_or(u32::MAX).min(f.bits);
+        f.outcome = Outcome::Error {
+            kind: ErrorKind::Aborted,
+            bits_before_flag: e,
+        };
+        f.end = self.now;
+        f.idle_at = f.start + self.bits(e + ErrorKind::OVERHEAD_BITS);
+        self.idle_at = f.idle_at;
+        self.in_flight = Some(f);
+    }
+
+    fn complete(&mut self, f: InFlight) {
+        let now = self.now;
+        let sender_id = self.port_id(f.port);
+        match f.outcome {
+            Outcome::Ok { dropped } => {
+                let babble = f.source == Source::Babble;
+                self.stats
+                    .frame(f.frame.id(), f.bits, f.start, f.idle_at, dropped);
+                self.emit(BusEvent::Frame(FrameRecord {
+                    frame: f.frame,
+                    sender: sender_id,
+                    start: f.start,
+                    end: f.end,
+                    idle_at: f.idle_at,
+                    bits: f.bits,
+                    dropped,
+                    babble,
+                }));
+                if let Source::Queue { seq } = f.source {
+                    self.ports[f.port].queue.remove(seq);
+                    self.ports[f.port].stats.tx_frames += 1;
+                }
+                self.refresh(f.port);
+                self.update_counters(f.port, ErrorCounters::on_transmit_success);
+                self.suspend_if_passive(f.port, f.idle_at);
+                let id = f.frame.id();
+                for i in 0..self.ports.len() {
+                    if i == f.port {
+                        continue;
+                    }
+                    let p = &mut self.ports[i];
+                    if !p.on_the_bus() {
+                        continue;
+                    }
+                    if p.mismatch.is_some() {
+                        self.update_counters(i, ErrorCounters::on_receive_error);
+                        continue;
+                    }
+                    if p.counters.rec() > 0 {
+                        self.update_counters(i, ErrorCounters::on_receive_success);
+                    }
+                    let p = &mut self.ports[i];
+                    if dropped {
+                        continue;
+                    }
+                    if let Some(node) = p.node.as_mut()
+                        && node.accepts(id)
+                    {
+                        p.stats.rx_frames += 1;
+                        node.on_frame(&f.frame, now, &mut self.outbox);
+                        self.after_call(i);
+                    }
+                }
+                if babble {
+                    return;
+                }
+                let p = &mut self.ports[f.port];
+                if !p.powered {
+                    return;
+                }
+                if let Some(node) = p.node.as_mut() {
+                    if p.config.echo && !dropped {
+                        p.stats.rx_frames += 1;
+                        node.on_frame(&f.frame, now, &mut self.outbox);
+                    }
+                    node.on_sent(&f.frame, now, &mut self.outbox);
+                    self.after_call(f.port);
+                }
+            }
+            Outcome::Error {
+                kind,
+                bits_before_flag,
+            } => {
+                let bits = bits_before_flag + ErrorKind::OVERHEAD_BITS;
+                self.stats.error(f.frame.id(), bits, f.start, f.idle_at);
+                self.emit(BusEvent::Error(ErrorRecord {
+                    frame: f.frame,
+                    sender: sender_id,
+                    start: f.start,
+                    detected: f.end,
+                    idle_at: f.idle_at,
+                    bits,
+                    kind,
+                }));
+                if kind != ErrorKind::Aborted {
+                    self.ports[f.port].stats.tx_errors += 1;
+                    self.update_counters(f.port, |c| c.on_transmit_error(kind == ErrorKind::Ack));
+                    self.suspend_if_passive(f.port, f.idle_at);
+                }
+                for i in 0..self.ports.len() {
+                    if i != f.port && self.ports[i].on_the_bus() {
+                        self.update_counters(i, ErrorCounters::on_receive_error);
+                    }
+                }
+            }
+        }
+    }
+
+    /// §10.4.6.4: an error-passive node that was the transmitter waits 8 bits after
+    /// intermission before it starts again.
+    fn suspend_if_passive(&mut self, i: usize, idle_at: Instant) {
+        let until = idle_at + self.bits(8);
+        let p = &mut self.ports[i];
+        if p.counters.state() == ErrorState::Passive {
+            p.suspend_until = Some(until);
+            self.suspended.push(i as u32);
+            self.refresh(i);
+        }
+    }
+}

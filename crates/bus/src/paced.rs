@@ -1,0 +1,512 @@
+//! Running a simulation paced to the wall clock, on its own thread, for external tools.
+//!
+//! [`PacedSimulation::start`] moves a [`Simulation`] onto a thread that keeps bus time in step
+//! with the wall clock: it processes every event due, then sleeps on a condition variable
+//! until the next event is due or another thread changes something (no busy waiting). Other
+//! threads reach the simulation through a [`SimHandle`] (`Clone + Send + Sync`): run closures
+//! against it, attach [`ExternalPort`]s that send and receive frames like any node, read the
+//! time mapping, stop it.
+//!
+//! # Catch-up policy
+//!
+//! If the host cannot keep up (the simulation falls more than [`PacedConfig::max_lag`] of bus
+//! time behind the wall clock), the backlog beyond `max_lag` is given up: bus time does not
+//! jump, the mapping to wall time slips by the excess instead (counted in
+//! [`SimHandle::slips`]) and pacing goes on from there. Bus time therefore never runs ahead of
+//! the wall clock, never skips events, and at worst runs slower than it. [`TimeMap`] always
+//! gives the current mapping, which captures use to stamp frames.
+
+use std::collections::VecDeque;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread::JoinHandle;
+use std::time::SystemTime;
+
+use cantwin_can::{Duration, Frame, Instant, Node, Outbox};
+
+use crate::error::BusError;
+use crate::ids::{BusId, PortId};
+use crate::port::PortConfig;
+use crate::sim::Simulation;
+
+/// The mapping between bus time and wall time in a paced simulation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TimeMap {
+    /// A bus instant …
+    pub bus_origin: Instant,
+    /// … and the wall time it corresponds to.
+    pub wall_origin: SystemTime,
+}
+
+impl TimeMap {
+    /// The wall time of a bus instant.
+    pub fn wall_time(&self, t: Instant) -> SystemTime {
+        if t >= self.bus_origin {
+            self.wall_origin + std::time::Duration::from(t - self.bus_origin)
+        } else {
+            self.wall_origin - std::time::Duration::from(self.bus_origin - t)
+        }
+    }
+
+    /// The bus instant of a wall time (saturating at the bus's start and end of time).
+    pub fn bus_time(&self, wall: SystemTime) -> Instant {
+        match wall.duration_since(self.wall_origin) {
+            Ok(after) => self.bus_origin + Duration::from(after),
+            Err(e) => self.bus_origin - Duration::from(e.duration()),
+        }
+    }
+
+    /// The wall time of a bus instant in nanoseconds since the UNIX epoch (0 before it).
+    pub fn unix_nanos(&self, t: Instant) -> u128 {
+        self.wall_time(t)
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos())
+    }
+}
+
+/// How a paced simulation runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PacedConfig {
+    /// The most bus time the simulation may lag behind the wall clock before the backlog is
+    /// given up (see the module documentation).
+    pub max_lag: Duration,
+    /// The longest the thread sleeps when nothing is scheduled.
+    pub idle_wait: std::time::Duration,
+}
+
+impl Default for PacedConfig {
+    /// 50 ms of lag, wake at least every second.
+    fn default() -> Self {
+        PacedConfig {
+            max_lag: Duration::from_millis(50),
+            idle_wait: std::time::Duration::from_secs(1),
+        }
+    }
+}
+
+struct State {
+    sim: Option<Simulation>,
+    stop: bool,
+    config: PacedConfig,
+    mono_origin: std::time::Instant,
+    wall_origin: SystemTime,
+    bus_origin: Instant,
+    slipped: Duration,
+    slips: u64,
+    externals: Vec<Arc<RxShared>>,
+}
+
+impl State {
+    /// Bus time now by the wall clock, with the slip applied.
+    fn target(&self) -> Instant {
+        self.bus_origin + Duration::from(self.mono_origin.elapsed()) - self.slipped
+    }
+
+    fn time_map(&self) -> TimeMap {
+        TimeMap {
+            bus_origin: self.bus_origin,
+            wall_origin: self.wall_origin + std::time::Duration::from(self.slipped),
+        }
+    }
+
+    /// Run the simulation up to the wall clock, applying the catch-up policy.
+    fn advance(&mut self) {
+        let mut target = self.target();
+        let Some(sim) = self.sim.as_ref() else { return };
+        let limit = sim.now() + self.config.max_lag;
+        if target > limit {
+            self.slipped += target - limit;
+            self.slips += 1;
+            target = limit;
+        }
+        let map = self.time_map();
+        if let Some(sim) = self.sim.as_mut() {
+            if sim.time_map() != Some(map) {
+                sim.set_time_map(Some(map));
+            }
+            sim.run_until(target);
+        }
+    }
+
+    /// How long to sleep until the next event is due.
+    fn wait(&mut self) -> std::time::Duration {
+        let next = self.sim.as_mut().and_then(Simulation::next_event_time);
+        match next {
+            None => self.config.idle_wait,
+            Some(t) => {
+                let due = self.mono_origin
+                    + std::time::Duration::from((t - self.bus_origin) + self.slipped);
+                due.saturating_duration_since(std::time::Instant::now())
+                    .min(self.config.idle_wait)
+            }
+        }
+    }
+}
+
+struct Shared {
+    state: Mutex<State>,
+    wake: Condvar,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// A simulation running paced to the wall clock on its own thread. Dropping it stops the
+/// thread.
+pub struct PacedSimulation {
+    handle: SimHandle,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl core::fmt::Debug for PacedSimulation {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("PacedSimulation").finish_non_exhaustive()
+    }
+}
+
+impl PacedSimulation {
+    /// Start pacing `sim` from its current time, which is mapped to the wall clock now.
+    pub fn start(sim: Simulation, config: PacedConfig) -> Self {
+        let state = State {
+            bus_origin: sim.now(),
+            sim: Some(sim),
+            stop: false,
+            config,
+            mono_origin: std::time::Instant::now(),
+            wall_origin: SystemTime::now(),
+            slipped: Duration::ZERO,
+            slips: 0,
+            externals: Vec::new(),
+        };
+        let shared = Arc::new(Shared {
+            state: Mutex::new(state),
+            wake: Condvar::new(),
+        });
+        let thread_shared = Arc::clone(&shared);
+        let thread = std::thread::Builder::new()
+            .name("cantwin-bus".into())
+            .spawn(move || run(&thread_shared))
+            .ok();
+        let handle = SimHandle { shared };
+        if thread.is_none() {
+            // No thread could be started: behave as a stopped simulation.
+            handle.stop();
+        }
+        PacedSimulation { handle, thread }
+    }
+
+    /// A handle for other threads.
+    pub fn handle(&self) -> SimHandle {
+        self.handle.clone()
+    }
+
+    /// Stop the thread and take the simulation back (with its nodes, for inspection).
+    pub fn stop(mut self) -> Option<Simulation> {
+        self.join();
+        self.handle.shared.lock().sim.take()
+    }
+
+    fn join(&mut self) {
+        self.handle.stop();
+        if let Some(t) = self.thread.take() {
+            // A panic on the simulation thread has already been reported by the runtime.
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for PacedSimulation {
+    fn drop(&mut self) {
+        self.join();
+    }
+}
+
+fn run(shared: &Shared) {
+    let mut g = shared.lock();
+    while !g.stop {
+        g.advance();
+        let wait = g.wait();
+        g = shared
+            .wake
+            .wait_timeout(g, wait)
+            .unwrap_or_else(PoisonError::into_inner)
+            .0;
+    }
+    for rx in g.externals.drain(..) {
+        rx.close();
+    }
+}
+
+/// A thread-safe handle to a [`PacedSimulation`].
+#[derive(Clone)]
+pub struct SimHandle {
+    shared: Arc<Shared>,
+}
+
+impl core::fmt::Debug for SimHandle {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("SimHandle").finish_non_exhaustive()
+    }
+}
+
+impl SimHandle {
+    /// Run `f` against the simulation, brought up to the wall clock first, so what `f` does
+    /// happens now. The simulation thread then re-plans its sleep.
+    pub fn with<R>(&self, f: impl FnOnce(&mut Simulation) -> R) -> Result<R, BusError> {
+        let mut g = self.shared.lock();
+        if g.stop {
+            return Err(BusError::Stopped);
+        }
+        g.advance();
+        let sim = g.sim.as_mut().ok_or(BusError::Stopped)?;
+        let r = f(sim);
+        drop(g);
+        self.shared.wake.notify_all();
+        Ok(r)
+    }
+
+    /// Bus time now.
+    pub fn now(&self) -> Result<Instant, BusError> {
+        self.with(|sim| sim.now())
+    }
+
+    /// The current mapping of bus time to wall time.
+    pub fn time_map(&self) -> TimeMap {
+        self.shared.lock().time_map()
+    }
+
+    /// How many times the simulation fell more than `max_lag` behind and gave up the backlog.
+    pub fn slips(&self) -> u64 {
+        self.shared.lock().slips
+    }
+
+    /// Stop the simulation thread; external ports then return [`BusError::Stopped`].
+    pub fn stop(&self) {
+        let mut g = self.shared.lock();
+        g.stop = true;
+        for rx in g.externals.drain(..) {
+            rx.close();
+        }
+        drop(g);
+        self.shared.wake.notify_all();
+    }
+
+    /// Whether the simulation was stopped.
+    pub fn is_stopped(&self) -> bool {
+        self.shared.lock().stop
+    }
+
+    /// Attach an external port to a bus: a node driven from another thread.
+    pub fn attach_external(
+        &self,
+        bus: BusId,
+        config: ExternalConfig,
+    ) -> Result<ExternalPort, BusError> {
+        let rx = Arc::new(RxShared {
+            state: Mutex::new(RxState {
+                frames: VecDeque::with_capacity(config.rx_capacity.min(4096)),
+                capacity: config.rx_capacity.max(1),
+                overruns: 0,
+                closed: false,
+            }),
+            ready: Condvar::new(),
+        });
+        let node = ExternalNode {
+            rx: Arc::clone(&rx),
+        };
+        let port = self.with(|sim| sim.attach(bus, node, config.port))??;
+        {
+            let mut g = self.shared.lock();
+            if g.stop {
+                rx.close();
+            } else {
+                g.externals.push(Arc::clone(&rx));
+            }
+        }
+        Ok(ExternalPort {
+            port,
+            rx,
+            handle: self.clone(),
+        })
+    }
+}
+
+/// How an external port is attached.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ExternalConfig {
+    /// The port (transmit queue depth and order, echo). Default: [`PortConfig::DEFAULT`],
+    /// no echo, so the port receives every frame on the bus except its own.
+    pub port: PortConfig,
+    /// Frames the receive buffer holds; when it is full, further frames are lost and counted
+    /// ([`ExternalPort::overruns`]) — the bus never waits for a slow reader.
+    pub rx_capacity: usize,
+}
+
+impl Default for ExternalConfig {
+    /// A 32-frame transmit queue, a 1024-frame receive buffer.
+    fn default() -> Self {
+        ExternalConfig {
+            port: PortConfig::DEFAULT,
+            rx_capacity: 1024,
+        }
+    }
+}
+
+/// A frame an external port received, with the bus time it completed (end of EOF).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Received {
+    /// The frame.
+    pub frame: Frame,
+    /// When it completed.
+    pub at: Instant,
+}
+
+struct RxState {
+    frames: VecDeque<Received>,
+    capacity: usize,
+    overruns: u64,
+    closed: bool,
+}
+
+struct RxShared {
+    state: Mutex<RxState>,
+    ready: Condvar,
+}
+
+impl RxShared {
+    fn lock(&self) -> MutexGuard<'_, RxState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    fn close(&self) {
+        self.lock().closed = true;
+        self.ready.notify_all();
+    }
+}
+
+/// The node behind an external port: it hands every frame to the receive buffer.
+struct ExternalNode {
+    rx: Arc<RxShared>,
+}
+
+impl Node for ExternalNode {
+    fn on_frame(&mut self, frame: &Frame, now: Instant, _out: &mut Outbox) {
+        let mut s = self.rx.lock();
+        if s.frames.len() >= s.capacity {
+            s.overruns += 1;
+            return;
+        }
+        s.frames.push_back(Received {
+            frame: *frame,
+            at: now,
+        });
+        drop(s);
+        self.rx.ready.notify_one();
+    }
+
+    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// A port on a paced bus driven from another thread (a socketcand or slcan client, the CLI).
+/// Its frames arbitrate and take bus time like any node's; it acknowledges frames. Dropping
+/// it detaches it.
+pub struct ExternalPort {
+    port: PortId,
+    rx: Arc<RxShared>,
+    handle: SimHandle,
+}
+
+impl core::fmt::Debug for ExternalPort {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ExternalPort")
+            .field("port", &self.port)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ExternalPort {
+    /// The port.
+    pub fn port(&self) -> PortId {
+        self.port
+    }
+
+    /// Queue a frame for transmission now.
+    pub fn send(&self, frame: Frame) -> Result<(), BusError> {
+        self.handle.with(|sim| sim.transmit(self.port, frame))?
+    }
+
+    /// The next received frame, waiting at most `timeout`; `Ok(None)` on timeout,
+    /// [`BusError::Stopped`] once the simulation stopped or the port was detached and every
+    /// buffered frame was taken.
+    pub fn recv_timeout(&self, timeout: std::time::Duration) -> Result<Option<Received>, BusError> {
+        let deadline = std::time::Instant::now() + timeout;
+        let mut s = self.rx.lock();
+        loop {
+            if let Some(r) = s.frames.pop_front() {
+                return Ok(Some(r));
+            }
+            if s.closed {
+                return Err(BusError::Stopped);
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            s = self
+                .rx
+                .ready
+                .wait_timeout(s, left)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// The next received frame if one is buffered.
+    pub fn try_recv(&self) -> Result<Option<Received>, BusError> {
+        let mut s = self.rx.lock();
+        match s.frames.pop_front() {
+            Some(r) => Ok(Some(r)),
+            None if s.closed => Err(BusError::Stopped),
+            None => Ok(None),
+        }
+    }
+
+    /// Frames lost because the receive buffer was full.
+    pub fn overruns(&self) -> u64 {
+        self.rx.lock().overruns
+    }
+
+    /// Detach the port from the bus.
+    pub fn detach(self) -> Result<(), BusError> {
+        self.detach_inner()
+    }
+
+    fn detach_inner(&self) -> Result<(), BusError> {
+        if self.rx.lock().closed {
+            return Ok(());
+        }
+        self.rx.close();
+        let port = self.port;
+        let r = self.handle.with(|sim| match sim.bus_mut(port.bus) {
+            Some(bus) => bus.detach(port).map(drop),
+            None => Err(BusError::NoSuchBus(port.bus)),
+        });
+        let mut g = self.handle.shared.lock();
+        g.externals.retain(|rx| !Arc::ptr_eq(rx, &self.rx));
+        drop(g);
+        r?
+    }
+}
+
+impl Drop for ExternalPort {
+    fn drop(&mut self) {
+        // Detaching a port of a stopped simulation has nothing left to do.
+        let _ = self.detach_inner();
+    }
+}

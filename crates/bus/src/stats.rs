@@ -1,0 +1,205 @@
+//! Bus statistics: load, per-identifier counts, error frames.
+
+use std::collections::{HashMap, VecDeque};
+
+use cantwin_can::{Duration, Id, Instant};
+
+/// Frames and bits seen for one identifier.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct IdStats {
+    /// Frames that completed (dropped ones included: they took bus time).
+    pub frames: u64,
+    /// Bits those frames occupied, intermission included.
+    pub bits: u64,
+    /// Transmissions of this identifier that ended in an error frame.
+    pub errors: u64,
+}
+
+/// What a bus has counted since it was created (or [`BusStats::reset`]).
+#[derive(Debug, Clone)]
+pub struct BusStats {
+    since: Instant,
+    frames: u64,
+    dropped_frames: u64,
+    error_frames: u64,
+    busy: Duration,
+    bits: u64,
+    per_id: HashMap<Id, IdStats>,
+    window: Duration,
+    recent: VecDeque<(Instant, Instant)>,
+}
+
+impl BusStats {
+    pub(crate) fn new(since: Instant, window: Duration) -> Self {
+        BusStats {
+            since,
+            frames: 0,
+            dropped_frames: 0,
+            error_frames: 0,
+            busy: Duration::ZERO,
+            bits: 0,
+            per_id: HashMap::new(),
+            window,
+            recent: VecDeque::new(),
+        }
+    }
+
+    /// Forget everything counted so far; counting restarts at `now`.
+    pub fn reset(&mut self, now: Instant) {
+        *self = BusStats::new(now, self.window);
+    }
+
+    fn busy_interval(&mut self, start: Instant, end: Instant) {
+        self.busy += end - start;
+        self.recent.push_back((start, end));
+        let horizon = end - self.window;
+        while let Some(&(_, e)) = self.recent.front() {
+            if e <= horizon {
+                self.recent.pop_front();
+            } else {
+                break;
+            }
+        }
+    }
+
+    pub(crate) fn frame(
+        &mut self,
+        id: Id,
+        bits: u32,
+        start: Instant,
+        idle_at: Instant,
+        dropped: bool,
+    ) {
+        self.frames += 1;
+        self.dropped_frames += u64::from(dropped);
+        self.bits += u64::from(bits);
+        let s = self.per_id.entry(id).or_default();
+        s.frames += 1;
+        s.bits += u64::from(bits);
+        self.busy_interval(start, idle_at);
+    }
+
+    pub(crate) fn error(&mut self, id: Id, bits: u32, start: Instant, idle_at: Instant) {
+        self.error_frames += 1;
+        self.bits += u64::from(bits);
+        self.per_id.entry(id).or_default().errors += 1;
+        self.busy_interval(start, idle_at);
+    }
+
+    /// When counting started.
+    pub fn since(&self) -> Instant {
+        self.since
+    }
+
+    /// Frames that completed successfully (dropped ones included).
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Completed frames that fault injection dropped.
+    pub fn dropped_frames(&self) -> u64 {
+        self.dropped_frames
+    }
+
+    /// Transmissions that ended in an error frame.
+    pub fn error_frames(&self) -> u64 {
+        self.error_frames
+    }
+
+    /// Bits the bus was busy: frames and error frames, intermission included.
+    pub fn bits(&self) -> u64 {
+        self.bits
+    }
+
+    /// Time the bus was busy.
+    pub fn busy_time(&self) -> Duration {
+        self.busy
+    }
+
+    /// Bus load in percent from [`BusStats::since`] to `now`: busy time over elapsed time.
+    /// Transmissions still in progress at `now` are not counted.
+    pub fn load_percent(&self, now: Instant) -> f64 {
+        let elapsed = now - self.since;
+        if elapsed.is_zero() {
+            return 0.0;
+        }
+        100.0 * self.busy.as_nanos() as f64 / elapsed.as_nanos() as f64
+    }
+
+    /// The sliding window [`BusStats::window_load_percent`] uses.
+    pub fn window(&self) -> Duration {
+        self.window
+    }
+
+    /// Bus load in percent over the last [`BusStats::window`] before `now` (or since counting
+    /// started, if that is shorter). Busy time that lies partly in the window counts with its
+    /// part in it.
+    pub fn window_load_percent(&self, now: Instant) -> f64 {
+        let from = (now - self.window).max(self.since);
+        let span = now - from;
+        if span.is_zero() {
+            return 0.0;
+        }
+        let busy: u64 = self
+            .recent
+            .iter()
+            .map(|&(s, e)| (e.min(now) - s.max(from)).as_nanos())
+            .sum();
+        100.0 * busy as f64 / span.as_nanos() as f64
+    }
+
+    /// The counts for one identifier.
+    pub fn id(&self, id: Id) -> IdStats {
+        self.per_id.get(&id).copied().unwrap_or_default()
+    }
+
+    /// Per-identifier counts, in arbitration order (highest priority first).
+    pub fn per_id(&self) -> Vec<(Id, IdStats)> {
+        let mut v: Vec<(Id, IdStats)> = self.per_id.iter().map(|(k, v)| (*k, *v)).collect();
+        v.sort_by_key(|(id, _)| id.arbitration_key(false));
+        v
+    }
+}
+
+/// What a port has counted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PortStats {
+    /// Frames the port sent successfully (its own, babble not included).
+    pub tx_frames: u64,
+    /// Frames passed up to the node (`on_frame`), echo included.
+    pub rx_frames: u64,
+    /// Transmissions of this port that ended in an error frame.
+    pub tx_errors: u64,
+    /// Frames dropped before transmission: queue full, or cleared by bus-off.
+    pub tx_dropped: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn load_over_run_and_window() {
+        let mut s = BusStats::new(Instant::ZERO, Duration::from_millis(1));
+        let id = Id::standard(1).unwrap();
+        let t = |us: u64| Instant::from_nanos(us * 1000);
+        s.frame(id, 100, t(0), t(100), false);
+        s.frame(id, 100, t(1500), t(1600), true);
+        assert_eq!(s.load_percent(t(2000)), 10.0);
+        // Window (1000, 2000]: only the second frame.
+        assert_eq!(s.window_load_percent(t(2000)), 10.0);
+        // Window (600, 1600]: the second frame fully.
+        assert_eq!(s.window_load_percent(t(1600)), 10.0);
+        // Window (550, 1550]: half of the second.
+        assert_eq!(s.window_load_percent(t(1550)), 5.0);
+        assert_eq!(
+            s.id(id),
+            IdStats {
+                frames: 2,
+                bits: 200,
+                errors: 0
+            }
+        );
+        assert_eq!((s.frames(), s.dropped_frames()), (2, 1));
+    }
+}
