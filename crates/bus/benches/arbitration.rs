@@ -1,6 +1,9 @@
 //! Hot paths of the bus: arbitration among many pending frames, and dispatch of completed
 //! frames to many nodes.
 
+// criterion's macros generate undocumented functions.
+#![allow(missing_docs)]
+
 use cantwin_bus::bench::{BenchConfig, run};
 use cantwin_can::{BitRate, Duration};
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -22,5 +25,9 @@ fn saturated(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, saturated);
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(10);
+    targets = saturated
+}
 criterion_main!(benches);

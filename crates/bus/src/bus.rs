@@ -38,10 +38,10 @@
 //! errors and keeps retransmitting, error-passive with TEC = 128.
 
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 
 use cantwin_can::{
-    BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Instant, Outbox,
+    BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Id, Instant, Outbox,
 };
 
 use crate::error::BusError;
@@ -51,7 +51,7 @@ use crate::paced::TimeMap;
 use crate::port::{AnyNode, PortConfig, PortStatus};
 use crate::queue::TxQueue;
 use crate::rng::SplitMix64;
-use crate::stats::{BusStats, PortStats};
+use crate::stats::{BuildIdHasher, BusStats, PortStats};
 use crate::tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord};
 
 /// How a bus is set up.
@@ -148,6 +148,14 @@ impl Port {
     }
 }
 
+/// Cached acceptance verdicts for one identifier: bit `i` of `accept` is port `i`'s answer,
+/// valid for ports not called since `epoch`.
+#[derive(Debug, Default)]
+struct AcceptEntry {
+    epoch: u64,
+    accept: Vec<u64>,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Outcome {
     Ok {
@@ -185,6 +193,15 @@ pub struct Bus {
     arb_keys: Vec<u64>,
     offering: usize,
     listeners: usize,
+    /// Completions so far; stamps the acceptance cache.
+    epoch: u64,
+    /// Per port: the epoch its node was last called in (its `accepts` may have changed).
+    last_called: Vec<u64>,
+    accept_cache: HashMap<Id, AcceptEntry, BuildIdHasher>,
+    /// Some receiver needs its counters touched on every frame (REC above 0, or a
+    /// bit-rate mismatch): deliver the slow way.
+    rx_slow: bool,
+    scratch: Vec<u64>,
     deadlines: BinaryHeap<Reverse<(Instant, u32)>>,
     dirty: Vec<u32>,
     in_flight: Option<InFlight>,
@@ -229,6 +246,11 @@ impl Bus {
             arb_keys: Vec::new(),
             offering: 0,
             listeners: 0,
+            epoch: 1,
+            last_called: Vec::new(),
+            accept_cache: HashMap::default(),
+            rx_slow: false,
+            scratch: Vec::new(),
             deadlines: BinaryHeap::new(),
             dirty: Vec::new(),
             in_flight: None,
@@ -344,6 +366,7 @@ impl Bus {
             stats: PortStats::default(),
         });
         self.arb_keys.push(u64::MAX);
+        self.last_called.push(self.epoch);
         if config.powered {
             self.power_up(index);
         }
@@ -368,7 +391,7 @@ impl Bus {
     /// The node on `port`, if it is a `T`.
     pub fn node<T: 'static>(&self, port: PortId) -> Option<&T> {
         let i = self.index_of(port).ok()?;
-        self.ports[i].node.as_ref()?.as_any().downcast_ref::<T>()
+        self.ports[i].node.as_deref()?.as_any().downcast_ref::<T>()
     }
 
     /// The node on `port`, mutably, if it is a `T`. The bus asks the node for its next
@@ -377,9 +400,10 @@ impl Bus {
     pub fn node_mut<T: 'static>(&mut self, port: PortId) -> Option<&mut T> {
         let i = self.index_of(port).ok()?;
         self.dirty.push(i as u32);
+        self.last_called[i] = self.epoch;
         self.ports[i]
             .node
-            .as_mut()?
+            .as_deref_mut()?
             .as_any_mut()
             .downcast_mut::<T>()
     }
@@ -396,7 +420,7 @@ impl Bus {
         let now = self.now;
         let node = self.ports[i]
             .node
-            .as_mut()?
+            .as_deref_mut()?
             .as_any_mut()
             .downcast_mut::<T>()?;
         let r = f(node, now, &mut self.outbox);
@@ -550,6 +574,7 @@ impl Bus {
         let i = self.index_of(port)?;
         self.ports[i].mismatch = rate.filter(|r| *r != self.bit_rate);
         self.count_listeners();
+        self.update_rx_slow();
         Ok(())
     }
 
@@ -564,12 +589,16 @@ impl Bus {
 
     /// A tap, if it is a `T`.
     pub fn tap<T: 'static>(&self, id: TapId) -> Option<&T> {
-        self.taps.get(id.0)?.as_any().downcast_ref::<T>()
+        self.taps.get(id.0)?.as_ref().as_any().downcast_ref::<T>()
     }
 
     /// A tap, mutably, if it is a `T`.
     pub fn tap_mut<T: 'static>(&mut self, id: TapId) -> Option<&mut T> {
-        self.taps.get_mut(id.0)?.as_any_mut().downcast_mut::<T>()
+        self.taps
+            .get_mut(id.0)?
+            .as_mut()
+            .as_any_mut()
+            .downcast_mut::<T>()
     }
 
     fn emit(&mut self, event: BusEvent) {
@@ -755,6 +784,7 @@ impl Bus {
     /// After a node was called: queue its frames, report overflow, refresh its arbitration
     /// entry and its deadline.
     fn after_call(&mut self, i: usize) {
+        self.last_called[i] = self.epoch;
         if !self.outbox.is_empty() {
             let dropped = self.absorb(i);
             if dropped > 0 {
@@ -1014,6 +1044,7 @@ impl Bus {
     }
 
     fn complete(&mut self, f: InFlight) {
+        self.epoch += 1;
         let now = self.now;
         let sender_id = self.port_id(f.port);
         match f.outcome {
@@ -1038,33 +1069,11 @@ impl Bus {
                 self.refresh(f.port);
                 self.update_counters(f.port, ErrorCounters::on_transmit_success);
                 self.suspend_if_passive(f.port, f.idle_at);
-                let id = f.frame.id();
-                for i in 0..self.ports.len() {
-                    if i == f.port {
-                        continue;
-                    }
-                    let p = &mut self.ports[i];
-                    if !p.on_the_bus() {
-                        continue;
-                    }
-                    if p.mismatch.is_some() {
-                        self.update_counters(i, ErrorCounters::on_receive_error);
-                        continue;
-                    }
-                    if p.counters.rec() > 0 {
-                        self.update_counters(i, ErrorCounters::on_receive_success);
-                    }
-                    let p = &mut self.ports[i];
-                    if dropped {
-                        continue;
-                    }
-                    if let Some(node) = p.node.as_mut()
-                        && node.accepts(id)
-                    {
-                        p.stats.rx_frames += 1;
-                        node.on_frame(&f.frame, now, &mut self.outbox);
-                        self.after_call(i);
-                    }
+                if self.rx_slow {
+                    self.receive_slow(&f, dropped);
+                    self.update_rx_slow();
+                } else if !dropped {
+                    self.receive_fast(&f);
                 }
                 if babble {
                     return;
@@ -1107,6 +1116,101 @@ impl Bus {
                         self.update_counters(i, ErrorCounters::on_receive_error);
                     }
                 }
+                self.update_rx_slow();
+            }
+        }
+    }
+
+    fn update_rx_slow(&mut self) {
+        self.rx_slow = self
+            .ports
+            .iter()
+            .any(|p| p.counters.rec() > 0 || p.mismatch.is_some());
+    }
+
+    /// Hand a good frame to every receiver whose filter accepts it, when no receiver's
+    /// counters need touching. A node's `accepts` can only change when the node was called
+    /// (it takes `&self`), so verdicts are cached per identifier and asked again only of the
+    /// nodes called since.
+    fn receive_fast(&mut self, f: &InFlight) {
+        let id = f.frame.id();
+        let n = self.ports.len();
+        let words = n.div_ceil(64);
+        let entry = self.accept_cache.entry(id).or_default();
+        entry.accept.resize(words, 0);
+        let since = entry.epoch;
+        for (w, chunk) in self.last_called.chunks(64).enumerate() {
+            // Branch-free first pass: which ports were called since the verdicts were taken.
+            let mut stale = 0u64;
+            for (j, &c) in chunk.iter().enumerate() {
+                stale |= u64::from(c >= since) << j;
+            }
+            while stale != 0 {
+                let j = stale.trailing_zeros() as usize;
+                stale &= stale - 1;
+                let i = w * 64 + j;
+                let yes = self.ports[i]
+                    .node
+                    .as_ref()
+                    .is_some_and(|node| node.accepts(id));
+                if yes {
+                    entry.accept[w] |= 1 << j;
+                } else {
+                    entry.accept[w] &= !(1 << j);
+                }
+            }
+        }
+        entry.epoch = self.epoch;
+        self.scratch.clear();
+        self.scratch.extend_from_slice(&entry.accept);
+        let now = self.now;
+        for w in 0..words {
+            let mut bits = self.scratch[w];
+            while bits != 0 {
+                let i = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let p = &mut self.ports[i];
+                if i == f.port || !p.on_the_bus() {
+                    continue;
+                }
+                if let Some(node) = p.node.as_mut() {
+                    p.stats.rx_frames += 1;
+                    node.on_frame(&f.frame, now, &mut self.outbox);
+                    self.after_call(i);
+                }
+            }
+        }
+    }
+
+    /// Hand a good frame to its receivers, moving every receiver's REC.
+    fn receive_slow(&mut self, f: &InFlight, dropped: bool) {
+        let now = self.now;
+        let id = f.frame.id();
+        for i in 0..self.ports.len() {
+            if i == f.port {
+                continue;
+            }
+            let p = &mut self.ports[i];
+            if !p.on_the_bus() {
+                continue;
+            }
+            if p.mismatch.is_some() {
+                self.update_counters(i, ErrorCounters::on_receive_error);
+                continue;
+            }
+            if p.counters.rec() > 0 {
+                self.update_counters(i, ErrorCounters::on_receive_success);
+            }
+            let p = &mut self.ports[i];
+            if dropped {
+                continue;
+            }
+            if let Some(node) = p.node.as_mut()
+                && node.accepts(id)
+            {
+                p.stats.rx_frames += 1;
+                node.on_frame(&f.frame, now, &mut self.outbox);
+                self.after_call(i);
             }
         }
     }

@@ -62,6 +62,7 @@ impl TxQueue {
     pub fn head(&self) -> Option<&Entry> {
         match self.order {
             TxOrder::Fifo => self.entries.front(),
+            TxOrder::Priority if self.entries.len() <= 1 => self.entries.front(),
             // Entries are in sequence order, so the first minimum is the oldest among equals.
             TxOrder::Priority => self.entries.iter().reduce(|best, e| {
                 if e.frame.arbitration_key() < best.frame.arbitration_key() {

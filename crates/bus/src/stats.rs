@@ -1,8 +1,52 @@
 //! Bus statistics: load, per-identifier counts, error frames.
 
 use std::collections::{HashMap, VecDeque};
+use std::hash::{BuildHasherDefault, Hasher};
 
 use cantwin_can::{Duration, Id, Instant};
+
+/// A fast hasher for identifiers (multiply-rotate, as in rustc's FxHash): the per-frame
+/// maps are keyed by [`Id`], which needs no protection against crafted collisions.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct IdHasher(u64);
+
+impl IdHasher {
+    #[inline]
+    fn mix(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7C_C1_B7_27_22_0A_95);
+    }
+}
+
+impl Hasher for IdHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.mix(u64::from(b));
+        }
+    }
+    fn write_u8(&mut self, v: u8) {
+        self.mix(u64::from(v));
+    }
+    fn write_u16(&mut self, v: u16) {
+        self.mix(u64::from(v));
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.mix(u64::from(v));
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.mix(v);
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.mix(v as u64);
+    }
+    fn write_isize(&mut self, v: isize) {
+        self.mix(v as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+pub(crate) type BuildIdHasher = BuildHasherDefault<IdHasher>;
 
 /// Frames and bits seen for one identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -24,7 +68,7 @@ pub struct BusStats {
     error_frames: u64,
     busy: Duration,
     bits: u64,
-    per_id: HashMap<Id, IdStats>,
+    per_id: HashMap<Id, IdStats, BuildIdHasher>,
     window: Duration,
     recent: VecDeque<(Instant, Instant)>,
 }
@@ -38,7 +82,7 @@ impl BusStats {
             error_frames: 0,
             busy: Duration::ZERO,
             bits: 0,
-            per_id: HashMap::new(),
+            per_id: HashMap::default(),
             window,
             recent: VecDeque::new(),
         }
