@@ -1,0 +1,117 @@
+//! Frame-exact checks against DeviceNet frames printed in public vendor manuals. Each test
+//! names its source; the identifiers and data bytes are the manual's, the slave on the
+//! other side is ours.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use cantwin_can::{Instant, Node, Outbox};
+use cantwin_devicenet::objects::CipError;
+use cantwin_devicenet::wire::{self, BodyFormat, DupMac, Request, status};
+use cantwin_devicenet::{Application, Reply, Slave, SlaveConfig};
+use common::*;
+
+/// ICP DAS "I-7242D DeviceNet/Modbus RTU Gateway User's Manual" v1.1 (July 2006), §7.2.8
+/// "Reset Service" step 1: master 0x0A allocates explicit messaging from slave 0x09.
+/// `ID=10 001001 110 Data= 0A 4B 03 01 01 0A` → `ID=10 001001 011 Data= 0A CB 00`.
+#[test]
+fn allocate_explicit_icpdas_i7242d_7_2_8() {
+    let mut s = slave(9);
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "44E#0A4B0301010A", t), ["44B#0ACB00"]);
+    assert_eq!(s.devicenet_object().master, Some(mac(10)));
+}
+
+/// Same manual, p. 83, step 2: `Set_Attribute_Single` of the expected packet rate,
+/// `0A 10 05 04 09 0A 0E` (class 5, instance 4, attribute 9, 0x0E0A = 3594 ms), answered
+/// `0A 90 10 0E`: the slave rounds the rate up to its timer tick and replies with the value
+/// it uses (0x0E10 = 3600 ms). The I-7242D's instance 4 is its COS/cyclic connection; this
+/// slave has polled I/O only (instance 2), so the same request goes to instance 2.
+#[test]
+fn set_expected_packet_rate_replies_actual_value_icpdas_i7242d_p83() {
+    let req = Request::decode(&[0x10, 0x05, 0x04, 0x09, 0x0A, 0x0E], BodyFormat::F8_8).unwrap();
+    assert_eq!(
+        (req.class, req.instance, req.data),
+        (5, 4, &[0x09, 0x0A, 0x0E][..])
+    );
+
+    let mut s = slave(9);
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "44E#0A4B0301030A", t), ["44B#0ACB00"]);
+    assert_eq!(deliver(&mut s, "44C#0A100502090A0E", t), ["44B#0A90100E"]);
+    assert_eq!(s.poll_connection().unwrap().epr_ms, 3600);
+}
+
+/// Rockwell Automation 1760-DNET Pico DeviceNet Communications Module user manual
+/// (1760-UM003A-EN-P, 2005), §4 "DeviceNet Functions": slave 3 answers master 0 with a
+/// 9-byte body in two acknowledged fragments:
+/// `41B: 80 00 B2 C2 05 00 05 09`, ack `41C: 80 C0 00`, `41B: 80 81 0D 05 04`,
+/// ack `41C: 80 C1 00`.
+#[test]
+fn fragmented_response_rockwell_1760_dnet() {
+    /// Answers service 0x32 of class 0x64 with the Pico-LINK reply bytes of the trace.
+    struct Pico;
+    impl Application for Pico {
+        fn poll_sizes(&self) -> (u16, u16) {
+            (0, 0)
+        }
+        fn produce(&mut self, _: Instant) -> Vec<u8> {
+            Vec::new()
+        }
+        fn consume(&mut self, _: &[u8], _: Instant) {}
+        fn request(&mut self, req: &Request<'_>, _: Instant) -> Option<Reply> {
+            (req.class == 0x64).then(|| match req.service {
+                0x32 => Reply::Data(vec![0xC2, 0x05, 0x00, 0x05, 0x09, 0x0D, 0x05, 0x04]),
+                _ => CipError::new(status::SERVICE_NOT_SUPPORTED).into(),
+            })
+        }
+    }
+    let mut s = Slave::new(
+        SlaveConfig::new(mac(3), cantwin_can::BitRate::R125K, identity()),
+        Pico,
+    );
+    let mut out = Outbox::new();
+    s.on_power_up(at(0), &mut out);
+    s.on_tick(at(SEC), &mut out);
+    s.on_tick(at(2 * SEC), &mut out);
+    let t = at(2 * SEC);
+    assert_eq!(deliver(&mut s, "41E#004B03010100", t), ["41B#00CB00"]);
+    assert_eq!(
+        deliver(&mut s, "41C#0032640100", t),
+        ["41B#8000B2C205000509"]
+    );
+    assert_eq!(deliver(&mut s, "41C#80C000", t), ["41B#80810D0504"]);
+    assert!(deliver(&mut s, "41C#80C100", t).is_empty());
+    assert!(s.explicit_connection().unwrap().tx.is_none());
+}
+
+/// MKS DeviceNet manual, explicit messaging examples (slave MAC 5, master MAC 1): an
+/// unsupported service is answered `42B: 01 94 08 FF`.
+#[test]
+fn service_not_supported_mks() {
+    let mut s = slave(5);
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "42E#014B03010101", t), ["42B#01CB00"]);
+    // Service 0x4E on the Identity instance: not supported.
+    assert_eq!(deliver(&mut s, "42C#014E0101", t), ["42B#019408FF"]);
+}
+
+/// Duplicate MAC ID check message layout (Lika SFA-5000/10000 DeviceNet manual §6.4.1,
+/// Datalogic AMT58x-DN manual §6.4.1): identifier `10 MMMMMM 111`, 7 bytes
+/// `[R/R | port][vendor ID LE][serial number LE]`.
+#[test]
+fn duplicate_mac_message_layout_lika_datalogic() {
+    let mut s = slave(9);
+    let mut out = Outbox::new();
+    s.on_power_up(at(0), &mut out);
+    let frames = sent(&mut out);
+    // vendor 0x0123, serial 0x0A0B0C0D.
+    assert_eq!(frames, ["44F#0023010D0C0B0A"]);
+    let m = DupMac::decode(&f(&frames[0]).data_bytes().to_vec()).unwrap();
+    assert!(!m.response);
+    assert_eq!((m.vendor, m.serial), (0x0123, 0x0A0B_0C0D));
+    assert_eq!(
+        wire::DnId::decode(id(0x44F)).unwrap(),
+        wire::DnId::g2(mac(9), wire::group2::DUP_MAC_CHECK)
+    );
+}
