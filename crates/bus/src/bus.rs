@@ -1019,7 +1019,11 @@ impl Bus {
                 break;
             }
         }
-        self.rules.retain(|r| r.remaining != Some(0));
+        // Spent rules go: those out of hits, and those for an attempt now past.
+        self.rules.retain(|r| {
+            r.remaining != Some(0)
+                && !matches!(r.selector, FrameSelector::Attempt(n) if n <= attempt)
+        });
         hit
     }
 

@@ -1,0 +1,162 @@
+//! The paced scheduler and external ports. These tests block on receive with generous
+//! timeouts but assert only bus-time facts, which pacing does not change.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::time::Duration as WallDuration;
+
+use cantwin_bus::{
+    BusConfig, BusError, ExternalConfig, PacedConfig, PacedSimulation, PortConfig, Simulation,
+    TimeMap,
+};
+use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
+use common::{Probe, bits, std_frame, us};
+
+const PATIENCE: WallDuration = WallDuration::from_secs(10);
+
+struct Heartbeat {
+    frame: Frame,
+    next: Instant,
+}
+
+impl Node for Heartbeat {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_tick(&mut self, _: Instant, out: &mut Outbox) {
+        out.push(self.frame);
+        self.next += Duration::from_millis(1);
+    }
+    fn next_deadline(&self) -> Option<Instant> {
+        Some(self.next)
+    }
+}
+
+#[test]
+fn external_ports_exchange_frames_with_nodes_on_a_paced_bus() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let probe = sim
+        .attach(bus, Probe::new(), PortConfig::default())
+        .unwrap();
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let handle = paced.handle();
+    let one = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let two = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let f = std_frame(0x601, &[0x40, 0x00, 0x10, 0x00]);
+    one.send(f).unwrap();
+    let got = two.recv_timeout(PATIENCE).unwrap().unwrap();
+    assert_eq!(got.frame, f);
+    // Delivered to everyone at the same bus instant; the sender does not hear itself.
+    assert_eq!(one.try_recv().unwrap(), None);
+    let rx = handle
+        .with(|sim| sim.node::<Probe>(probe).unwrap().rx.clone())
+        .unwrap();
+    assert_eq!(rx, [(got.at.as_nanos(), f)]);
+    // The wall clock of that instant is known to captures.
+    let map = handle.time_map();
+    assert!(map.wall_time(got.at) >= map.wall_origin);
+    two.detach().unwrap();
+    let sim = paced.stop().unwrap();
+    assert_eq!(sim.bus(bus).unwrap().ports().count(), 2);
+}
+
+#[test]
+fn paced_timers_keep_exact_bus_times() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+    let f = std_frame(0x701, &[0x05]);
+    sim.attach(
+        bus,
+        Heartbeat {
+            frame: f,
+            next: Instant::ZERO,
+        },
+        PortConfig::default(),
+    )
+    .unwrap();
+    // Someone to acknowledge the heartbeats before the external port comes.
+    sim.attach(bus, Probe::new(), PortConfig::default())
+        .unwrap();
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let ext = paced
+        .handle()
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let first = ext.recv_timeout(PATIENCE).unwrap().unwrap();
+    let second = ext.recv_timeout(PATIENCE).unwrap().unwrap();
+    let third = ext.recv_timeout(PATIENCE).unwrap().unwrap();
+    // At 500 kbit/s a bit is 2 µs; heartbeats every 1 ms, delivered at the end of EOF.
+    let eof = 2 * us(bits(&f) - 3);
+    let k = (first.at.as_nanos() - eof) / 1_000_000;
+    assert_eq!(first.at.as_nanos(), k * 1_000_000 + eof);
+    assert_eq!(second.at.as_nanos(), (k + 1) * 1_000_000 + eof);
+    assert_eq!(third.at.as_nanos(), (k + 2) * 1_000_000 + eof);
+    drop(ext);
+    drop(paced);
+}
+
+#[test]
+fn a_full_external_receive_buffer_counts_overruns_and_never_blocks_the_bus() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let h = paced.handle();
+    let small = h
+        .attach_external(
+            bus,
+            ExternalConfig {
+                rx_capacity: 2,
+                ..ExternalConfig::default()
+            },
+        )
+        .unwrap();
+    let witness = h.attach_external(bus, ExternalConfig::default()).unwrap();
+    let sender = h.attach_external(bus, ExternalConfig::default()).unwrap();
+    for i in 0..5u8 {
+        sender.send(std_frame(0x100 + u16::from(i), &[i])).unwrap();
+    }
+    for i in 0..5u8 {
+        let r = witness.recv_timeout(PATIENCE).unwrap().unwrap();
+        assert_eq!(r.frame.data_bytes(), [i]);
+    }
+    assert_eq!(small.overruns(), 3);
+    assert_eq!(small.try_recv().unwrap().unwrap().frame.data_bytes(), [0]);
+    assert_eq!(small.try_recv().unwrap().unwrap().frame.data_bytes(), [1]);
+    assert_eq!(small.try_recv().unwrap(), None);
+}
+
+#[test]
+fn a_stopped_simulation_closes_its_external_ports() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let h = paced.handle();
+    let ext = h.attach_external(bus, ExternalConfig::default()).unwrap();
+    h.stop();
+    assert!(h.is_stopped());
+    assert_eq!(ext.recv_timeout(PATIENCE), Err(BusError::Stopped));
+    assert_eq!(ext.send(std_frame(1, &[])), Err(BusError::Stopped));
+    assert_eq!(h.with(|s| s.now()), Err(BusError::Stopped));
+    assert!(paced.stop().is_some());
+}
+
+#[test]
+fn time_map_converts_both_ways() {
+    let origin = std::time::SystemTime::UNIX_EPOCH + WallDuration::from_secs(1_700_000_000);
+    let map = TimeMap {
+        bus_origin: Instant::from_nanos(5_000),
+        wall_origin: origin,
+    };
+    let t = Instant::from_nanos(1_005_000);
+    assert_eq!(map.wall_time(t), origin + WallDuration::from_millis(1));
+    assert_eq!(map.bus_time(origin + WallDuration::from_millis(1)), t);
+    assert_eq!(
+        map.wall_time(Instant::ZERO),
+        origin - WallDuration::from_micros(5)
+    );
+    assert_eq!(map.unix_nanos(t), 1_700_000_000_000_000_000 + 1_000_000);
+}
