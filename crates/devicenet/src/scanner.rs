@@ -628,7 +628,14 @@ impl Scanner {
                 return;
             }
             ExplicitFrame::Fragment { header, frag, data } => {
-                let ack = |count, st| ack_id.frame(&wire::encode_ack(header.xid, slave, count, st));
+                // The acknowledge travels like a request: on group 2 the header carries the
+                // source (us), on group 3 the destination (the slave).
+                let hdr_mac = match route {
+                    Route::Unconnected | Route::Predefined => own,
+                    Route::Ucmm | Route::UcmmConnection => slave,
+                };
+                let ack =
+                    |count, st| ack_id.frame(&wire::encode_ack(header.xid, hdr_mac, count, st));
                 match p.rx.on_fragment(frag, data) {
                     RxOutcome::Ack { count, status } => {
                         out.push(ack(count, status));

@@ -107,7 +107,7 @@ fn duplicate_mac_message_layout_lika_datalogic() {
     let frames = sent(&mut out);
     // vendor 0x0123, serial 0x0A0B0C0D.
     assert_eq!(frames, ["44F#0023010D0C0B0A"]);
-    let m = DupMac::decode(&f(&frames[0]).data_bytes().to_vec()).unwrap();
+    let m = DupMac::decode(f(&frames[0]).data_bytes()).unwrap();
     assert!(!m.response);
     assert_eq!((m.vendor, m.serial), (0x0123, 0x0A0B_0C0D));
     assert_eq!(

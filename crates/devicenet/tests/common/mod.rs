@@ -317,12 +317,15 @@ pub fn tick(n: &mut dyn Node, now: Instant) -> Vec<String> {
     sent(&mut out)
 }
 
+/// Decides whether a frame sent by node `usize` is lost.
+pub type DropRule = Box<dyn FnMut(usize, &Frame) -> bool>;
+
 /// A zero-latency broadcast wire in virtual time: every frame reaches every other node
 /// at the instant it was queued; `drop` can lose frames on the way.
 pub struct Wire {
     pub now: Instant,
     pub log: Vec<(u64, usize, String)>,
-    pub drop: Box<dyn FnMut(usize, &Frame) -> bool>,
+    pub drop: DropRule,
 }
 
 impl Wire {
@@ -363,6 +366,14 @@ impl Wire {
             n.on_power_up(self.now, &mut out);
             pending.extend(out.drain().map(|f| (i, f)));
         }
+        self.flush(nodes, pending);
+    }
+
+    /// Power one node.
+    pub fn power_up_one(&mut self, nodes: &mut [&mut dyn Node], i: usize) {
+        let mut out = Outbox::new();
+        nodes[i].on_power_up(self.now, &mut out);
+        let pending = out.drain().map(|f| (i, f)).collect();
         self.flush(nodes, pending);
     }
 
