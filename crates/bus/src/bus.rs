@@ -148,6 +148,9 @@ impl Port {
     }
 }
 
+/// How many epochs (frame completions) of node calls the acceptance cache remembers.
+const CALL_RING: usize = 64;
+
 /// Cached acceptance verdicts for one identifier: bit `i` of `accept` is port `i`'s answer,
 /// valid for ports not called since `epoch`.
 #[derive(Debug, Default)]
@@ -191,12 +194,16 @@ pub struct Bus {
     ports: Vec<Port>,
     /// Per port: `arbitration_key << 32 | port`, or `u64::MAX` when it offers nothing.
     arb_keys: Vec<u64>,
+    /// The offered keys as a lazy min-heap: an entry is current while `arb_keys` holds it.
+    arb_heap: BinaryHeap<Reverse<u64>>,
     offering: usize,
     listeners: usize,
     /// Completions so far; stamps the acceptance cache.
     epoch: u64,
-    /// Per port: the epoch its node was last called in (its `accepts` may have changed).
-    last_called: Vec<u64>,
+    /// A ring of [`CALL_RING`] bitsets of `words` words: the ports whose node was called
+    /// (so whose `accepts` may have changed) in each of the last epochs.
+    called: Vec<u64>,
+    words: usize,
     accept_cache: HashMap<Id, AcceptEntry, BuildIdHasher>,
     /// Some receiver needs its counters touched on every frame (REC above 0, or a
     /// bit-rate mismatch): deliver the slow way.
@@ -244,10 +251,12 @@ impl Bus {
             now,
             ports: Vec::new(),
             arb_keys: Vec::new(),
+            arb_heap: BinaryHeap::new(),
             offering: 0,
             listeners: 0,
             epoch: 1,
-            last_called: Vec::new(),
+            called: Vec::new(),
+            words: 0,
             accept_cache: HashMap::default(),
             rx_slow: false,
             scratch: Vec::new(),
@@ -366,7 +375,13 @@ impl Bus {
             stats: PortStats::default(),
         });
         self.arb_keys.push(u64::MAX);
-        self.last_called.push(self.epoch);
+        let words = self.ports.len().div_ceil(64);
+        if words > self.words {
+            self.words = words;
+            self.called = vec![0; CALL_RING * words];
+            self.accept_cache.clear();
+        }
+        self.mark_called(index);
         if config.powered {
             self.power_up(index);
         }
@@ -400,7 +415,7 @@ impl Bus {
     pub fn node_mut<T: 'static>(&mut self, port: PortId) -> Option<&mut T> {
         let i = self.index_of(port).ok()?;
         self.dirty.push(i as u32);
-        self.last_called[i] = self.epoch;
+        self.mark_called(i);
         self.ports[i]
             .node
             .as_deref_mut()?
@@ -758,6 +773,7 @@ impl Bus {
             node.on_power_up(now, &mut self.outbox);
         }
         self.count_listeners();
+        self.refresh(i);
         self.after_call(i);
     }
 
@@ -784,7 +800,7 @@ impl Bus {
     /// After a node was called: queue its frames, report overflow, refresh its arbitration
     /// entry and its deadline.
     fn after_call(&mut self, i: usize) {
-        self.last_called[i] = self.epoch;
+        self.mark_called(i);
         if !self.outbox.is_empty() {
             let dropped = self.absorb(i);
             if dropped > 0 {
@@ -794,8 +810,10 @@ impl Bus {
                 let again = self.absorb(i);
                 self.ports[i].stats.tx_dropped += u64::from(again);
             }
+            // Only new frames change what the port offers; every other change of state
+            // refreshes its entry where it happens.
+            self.refresh(i);
         }
-        self.refresh(i);
         self.update_deadline(i);
     }
 
@@ -813,6 +831,12 @@ impl Bus {
                 node.on_controller_event(ControllerEvent::TxDropped, now, &mut self.outbox);
             }
         }
+    }
+
+    /// Note that port `i`'s node was called in this epoch.
+    fn mark_called(&mut self, i: usize) {
+        let slot = (self.epoch % CALL_RING as u64) as usize * self.words;
+        self.called[slot + i / 64] |= 1 << (i % 64);
     }
 
     fn update_deadline(&mut self, i: usize) {
@@ -864,6 +888,18 @@ impl Bus {
         }
         let old = self.arb_keys[i];
         self.arb_keys[i] = key;
+        if key != old && key != u64::MAX {
+            self.arb_heap.push(Reverse(key));
+            if self.arb_heap.len() > 4 * self.ports.len() + 64 {
+                // Too many outdated entries: rebuild from the current keys.
+                self.arb_heap = self
+                    .arb_keys
+                    .iter()
+                    .filter(|&&k| k != u64::MAX)
+                    .map(|&k| Reverse(k))
+                    .collect();
+            }
+        }
         match (old == u64::MAX, key == u64::MAX) {
             (true, false) => self.offering += 1,
             (false, true) => self.offering -= 1,
@@ -916,6 +952,7 @@ impl Bus {
             self.ports[i].recover_at = None;
         }
         self.count_listeners();
+        self.refresh(i);
         self.after_call(i);
     }
 
@@ -929,12 +966,16 @@ impl Bus {
     // The wire
 
     fn start_transmission(&mut self, t: Instant) {
-        let Some(key) = self.arb_keys.iter().copied().min() else {
-            return;
+        // The lowest current key wins; outdated heap entries are dropped on the way.
+        let key = loop {
+            let Some(&Reverse(key)) = self.arb_heap.peek() else {
+                return;
+            };
+            if self.arb_keys[(key & 0xFFFF_FFFF) as usize] == key {
+                break key;
+            }
+            self.arb_heap.pop();
         };
-        if key == u64::MAX {
-            return;
-        }
         let i = (key & 0xFFFF_FFFF) as usize;
         let p = &self.ports[i];
         let (frame, bits, source) = match p.source {
@@ -1049,6 +1090,8 @@ impl Bus {
 
     fn complete(&mut self, f: InFlight) {
         self.epoch += 1;
+        let slot = (self.epoch % CALL_RING as u64) as usize * self.words;
+        self.called[slot..slot + self.words].fill(0);
         let now = self.now;
         let sender_id = self.port_id(f.port);
         match f.outcome {
@@ -1143,12 +1186,20 @@ impl Bus {
         let entry = self.accept_cache.entry(id).or_default();
         entry.accept.resize(words, 0);
         let since = entry.epoch;
-        for (w, chunk) in self.last_called.chunks(64).enumerate() {
-            // Branch-free first pass: which ports were called since the verdicts were taken.
-            let mut stale = 0u64;
-            for (j, &c) in chunk.iter().enumerate() {
-                stale |= u64::from(c >= since) << j;
-            }
+        let fresh = since != 0 && self.epoch - since < CALL_RING as u64;
+        for w in 0..words {
+            // The ports called since the verdicts were taken; all of them if that is too
+            // long ago (or never).
+            let mut stale = if fresh {
+                (since..=self.epoch).fold(0, |m, e| {
+                    m | self.called[(e % CALL_RING as u64) as usize * self.words + w]
+                })
+            } else {
+                match n - w * 64 {
+                    rem if rem >= 64 => u64::MAX,
+                    rem => (1u64 << rem) - 1,
+                }
+            };
             while stale != 0 {
                 let j = stale.trailing_zeros() as usize;
                 stale &= stale - 1;
