@@ -74,7 +74,7 @@ proptest! {
         let mut now = t0;
         let mut out = Outbox::new();
         for (f, dt) in frames {
-            now = now + Duration::from_millis(dt);
+            now += Duration::from_millis(dt);
             s.on_frame(&f, now, &mut out);
             if s.next_deadline().is_some_and(|d| d <= now) {
                 s.on_tick(now, &mut out);
@@ -121,7 +121,7 @@ proptest! {
         let mut now = at(2 * SEC);
         m.on_tick(now, &mut out);
         for (f, dt) in frames {
-            now = now + Duration::from_millis(dt);
+            now += Duration::from_millis(dt);
             m.on_frame(&f, now, &mut out);
             m.on_tick(now, &mut out);
             while m.poll_event().is_some() {}
