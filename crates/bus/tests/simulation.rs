@@ -95,25 +95,6 @@ fn statistics_count_frames_and_bits_per_identifier_and_bus_load() {
     assert_eq!(stats.error_frames(), 0);
 }
 
-/// The benchmark's node as naive firmware would write it: it offers every period and lets
-/// the controller refuse what does not fit.
-struct Naive {
-    frame: Frame,
-    period: Duration,
-    next: Instant,
-}
-
-impl Node for Naive {
-    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
-    fn on_tick(&mut self, _now: Instant, out: &mut Outbox) {
-        out.push(self.frame);
-        self.next += self.period;
-    }
-    fn next_deadline(&self) -> Option<Instant> {
-        Some(self.next)
-    }
-}
-
 #[test]
 fn benchmark_skips_offers_into_a_full_mailbox_but_counts_them_exactly() {
     let config = BenchConfig {
@@ -125,35 +106,11 @@ fn benchmark_skips_offers_into_a_full_mailbox_but_counts_them_exactly() {
     let report = run(config);
     // Every node offers at 0, 1, …, 50 ms.
     assert_eq!(report.offers, 40 * 51);
-
     // The same bus with naive nodes, the bus counting the refused offers.
-    let mut sim = Simulation::new();
-    let bus = sim.add_bus(BusConfig::new("naive", config.bit_rate));
-    let mut ports = Vec::new();
-    for i in 0..config.nodes {
-        let data = [i as u8, (i >> 8) as u8, 0x55, 0xAA, 0, 1, 2, 3];
-        let frame = Frame::data_array(cantwin_can::Id::standard(0x100 + i).unwrap(), data);
-        ports.push(
-            sim.attach(
-                bus,
-                Naive {
-                    frame,
-                    period: config.period,
-                    next: Instant::ZERO,
-                },
-                PortConfig::mailbox(),
-            )
-            .unwrap(),
-        );
-    }
-    sim.run_until(Instant::ZERO + config.duration);
-    let b = sim.bus(bus).unwrap();
-    let dropped: u64 = ports
-        .iter()
-        .map(|p| b.port_status(*p).unwrap().stats.tx_dropped)
-        .sum();
-    assert_eq!(report.delivered, b.stats().frames());
-    assert_eq!(report.dropped_offers, dropped);
+    let (delivered, refused, received) = common::naive_bench(config);
+    assert_eq!(report.delivered, delivered);
+    assert_eq!(report.dropped_offers, refused);
+    assert_eq!(report.received, received);
     assert!(report.dropped_offers > report.offers / 2, "saturated");
     assert!(report.bus_load_percent > 99.0);
 }

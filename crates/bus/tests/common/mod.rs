@@ -99,3 +99,60 @@ pub fn std_frame(id: u16, data: &[u8]) -> Frame {
 pub fn bits(f: &Frame) -> u64 {
     u64::from(f.bit_length())
 }
+
+/// The benchmark scenario with naive nodes that offer every period and let the bus refuse
+/// what does not fit: (frames delivered, offers refused, frames received).
+pub fn naive_bench(config: cantwin_bus::bench::BenchConfig) -> (u64, u64, u64) {
+    use cantwin_bus::{Bus, BusConfig, PortConfig};
+    use cantwin_can::Duration;
+
+    struct Naive {
+        frame: Frame,
+        accept: Vec<Id>,
+        period: Duration,
+        next: Instant,
+        received: u64,
+    }
+    impl Node for Naive {
+        fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {
+            self.received += 1;
+        }
+        fn on_tick(&mut self, _: Instant, out: &mut Outbox) {
+            out.push(self.frame);
+            self.next += self.period;
+        }
+        fn next_deadline(&self) -> Option<Instant> {
+            Some(self.next)
+        }
+        fn accepts(&self, id: Id) -> bool {
+            self.accept.contains(&id)
+        }
+    }
+
+    let n = config.nodes;
+    let id = |i: u16| Id::standard(0x100 + i % n).unwrap();
+    let mut bus = Bus::new(BusConfig::new("naive", config.bit_rate));
+    let ports: Vec<_> = (0..n)
+        .map(|i| {
+            let data = [i as u8, (i >> 8) as u8, 0x55, 0xAA, 0, 1, 2, 3];
+            let node = Naive {
+                frame: Frame::data_array(id(i), data),
+                accept: (1..=4).map(|k| id(i + k)).collect(),
+                period: config.period,
+                next: Instant::ZERO,
+                received: 0,
+            };
+            bus.attach(node, PortConfig::mailbox())
+        })
+        .collect();
+    bus.run_until(Instant::ZERO + config.duration);
+    let refused = ports
+        .iter()
+        .map(|p| bus.port_status(*p).unwrap().stats.tx_dropped)
+        .sum();
+    let received = ports
+        .iter()
+        .map(|p| bus.node::<Naive>(*p).unwrap().received)
+        .sum();
+    (bus.stats().frames(), refused, received)
+}
