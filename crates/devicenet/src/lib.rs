@@ -24,12 +24,12 @@
 //!     fn consume(&mut self, _data: &[u8], _now: Instant) {}
 //! }
 //!
-//! # fn main() -> Result<(), cantwin_devicenet::wire::MacIdError> {
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let identity = Identity {
 //!     vendor: 0x1234, device_type: 0x02, product_code: 1, revision: (1, 0),
 //!     serial: 42, product_name: "demo".into(),
 //! };
-//! let mut slave = Slave::new(SlaveConfig::new(MacId::new(12)?, BitRate::R500K, identity), Io);
+//! let mut slave = Slave::new(SlaveConfig::new(MacId::new(12)?, BitRate::R500K, identity), Io)?;
 //! let mut out = Outbox::new();
 //! slave.on_power_up(Instant::ZERO, &mut out);
 //! // The first duplicate MAC ID check request: 0x407 | 12 << 3.
@@ -50,5 +50,5 @@ pub mod wire;
 
 pub use objects::{Application, CipError, Identity, Reply, SlaveEvent};
 pub use scanner::{Scanner, ScannerConfig, ScannerEvent};
-pub use slave::{Led, NetworkStatus, Slave, SlaveConfig};
+pub use slave::{ConfigError, Led, NetworkStatus, Slave, SlaveConfig};
 pub use wire::MacId;

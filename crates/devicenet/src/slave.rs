@@ -65,6 +65,23 @@ impl SlaveConfig {
     }
 }
 
+/// A slave configuration DeviceNet cannot run.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    /// DeviceNet runs at 125, 250 or 500 kbit/s only.
+    #[error("DeviceNet runs at 125, 250 or 500 kbit/s, not {0} bit/s")]
+    BitRate(u32),
+    /// Group 3 offers 5 connection message IDs (0–4) per server.
+    #[error("at most 5 UCMM connections (group 3 message IDs 0-4), not {0}")]
+    TooManyUcmmConnections(usize),
+    /// The product name is a SHORT_STRING of at most 32 characters.
+    #[error("product name longer than 32 bytes")]
+    ProductName,
+    /// The timer resolution must be at least 1 ms.
+    #[error("expected packet rate resolution of 0 ms")]
+    Resolution,
+}
+
 /// The DeviceNet object's baud rate code for a bit rate (0 = 125, 1 = 250, 2 = 500
 /// kbit/s); `None` for a rate DeviceNet does not define.
 pub fn baud_code(rate: BitRate) -> Option<u8> {
@@ -141,17 +158,28 @@ pub struct Slave<A> {
 
 impl<A: Application> Slave<A> {
     /// A slave; it stays silent until [`Node::on_power_up`].
-    pub fn new(config: SlaveConfig, app: A) -> Self {
+    pub fn new(config: SlaveConfig, app: A) -> Result<Self, ConfigError> {
+        let baud = baud_code(config.bit_rate)
+            .ok_or(ConfigError::BitRate(config.bit_rate.bits_per_second()))?;
+        if config.ucmm_connections > 5 {
+            return Err(ConfigError::TooManyUcmmConnections(config.ucmm_connections));
+        }
+        if config.identity.product_name.len() > 32 {
+            return Err(ConfigError::ProductName);
+        }
+        if config.epr_resolution_ms == 0 {
+            return Err(ConfigError::Resolution);
+        }
         let link = DupMacCheck::new(config.mac, config.identity.vendor, config.identity.serial);
         let dn = DeviceNetObject {
             mac: config.mac,
-            baud: baud_code(config.bit_rate).unwrap_or(0),
+            baud,
             boi: false,
             bus_off_count: 0,
             choice: 0,
             master: None,
         };
-        Slave {
+        Ok(Slave {
             app,
             config,
             link,
@@ -162,7 +190,7 @@ impl<A: Application> Slave<A> {
             bus_off: false,
             powered: false,
             pending_reset: None,
-        }
+        })
     }
 
     /// The application.

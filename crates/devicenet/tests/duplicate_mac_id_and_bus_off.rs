@@ -191,3 +191,33 @@ fn identity_reset_answers_then_restarts_the_check() {
     deliver(&mut s, "466#0A4B0301010A", t);
     assert_eq!(deliver(&mut s, "464#0A05010102", t), ["463#0A9420FF"]);
 }
+
+/// Manual §3.6: DeviceNet runs at 125, 250 or 500 kbit/s ("Wrong baudrate" otherwise).
+#[test]
+fn bit_rates_125_250_500_only() {
+    use cantwin_can::BitRate;
+    use cantwin_devicenet::{ConfigError, SlaveConfig};
+    for (rate, code) in [
+        (BitRate::R125K, 0u8),
+        (BitRate::R250K, 1),
+        (BitRate::R500K, 2),
+    ] {
+        let mut s = cantwin_devicenet::Slave::new(
+            SlaveConfig::new(mac(12), rate, identity()),
+            Drive::new(1, 1),
+        )
+        .unwrap();
+        let t = online(&mut s);
+        deliver(&mut s, "466#0A4B0301010A", t);
+        assert_eq!(
+            deliver(&mut s, "464#0A0E030102", t),
+            [format!("463#0A8E{code:02X}")]
+        );
+    }
+    let err = cantwin_devicenet::Slave::new(
+        SlaveConfig::new(mac(12), BitRate::R1M, identity()),
+        Drive::new(1, 1),
+    )
+    .err();
+    assert_eq!(err, Some(ConfigError::BitRate(1_000_000)));
+}

@@ -69,7 +69,8 @@ fn fragmented_response_rockwell_1760_dnet() {
     let mut s = Slave::new(
         SlaveConfig::new(mac(3), cantwin_can::BitRate::R125K, identity()),
         Pico,
-    );
+    )
+    .unwrap();
     let mut out = Outbox::new();
     s.on_power_up(at(0), &mut out);
     s.on_tick(at(SEC), &mut out);

@@ -287,7 +287,7 @@ pub fn slave(m: u8) -> Slave<Drive> {
 }
 
 pub fn slave_with(m: u8, drive: Drive) -> Slave<Drive> {
-    Slave::new(SlaveConfig::new(mac(m), BitRate::R500K, identity()), drive)
+    Slave::new(SlaveConfig::new(mac(m), BitRate::R500K, identity()), drive).unwrap()
 }
 
 /// Power the slave at 0 and let the duplicate MAC ID check pass: on-line at 2 s.
