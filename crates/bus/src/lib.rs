@@ -76,4 +76,6 @@ pub use queue::TxOrder;
 pub use rng::SplitMix64;
 pub use sim::Simulation;
 pub use stats::{BusStats, IdStats, PortStats};
-pub use tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord, Recorder, Tap};
+pub use tap::{
+    AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FnTap, FrameRecord, Recorder, Tap,
+};

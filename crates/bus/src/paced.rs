@@ -477,6 +477,15 @@ impl ExternalPort {
         }
     }
 
+    /// The port's controller state and counters (error counters, queue, statistics).
+    pub fn status(&self) -> Result<crate::PortStatus, BusError> {
+        let port = self.port;
+        self.handle.with(|sim| match sim.bus(port.bus) {
+            Some(bus) => bus.port_status(port),
+            None => Err(BusError::NoSuchBus(port.bus)),
+        })?
+    }
+
     /// Frames lost because the receive buffer was full.
     pub fn overruns(&self) -> u64 {
         self.rx.lock().overruns

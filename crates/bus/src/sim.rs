@@ -130,6 +130,22 @@ impl Simulation {
         }
     }
 
+    /// Process the next instant with something to do on any bus; returns it, or `None` if
+    /// nothing will ever happen again.
+    pub fn step_next(&mut self) -> Option<Instant> {
+        let mut best: Option<(Instant, usize)> = None;
+        for (i, bus) in self.buses.iter_mut().enumerate() {
+            if let Some(n) = bus.next_event_time()
+                && best.is_none_or(|(b, _)| n < b)
+            {
+                best = Some((n, i));
+            }
+        }
+        let (t, _) = best?;
+        self.run_until(t);
+        Some(t)
+    }
+
     /// Advance by `d`.
     pub fn run_for(&mut self, d: Duration) {
         self.run_until(self.now + d);

@@ -128,6 +128,21 @@ impl<T: Tap> AnyTap for T {
     }
 }
 
+/// A tap made of a closure: `bus.add_tap(FnTap(|bus: &BusInfo<'_>, event: &BusEvent| …))`.
+pub struct FnTap<F>(pub F);
+
+impl<F> core::fmt::Debug for FnTap<F> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("FnTap")
+    }
+}
+
+impl<F: FnMut(&BusInfo<'_>, &BusEvent) + Send + 'static> Tap for FnTap<F> {
+    fn on_event(&mut self, bus: &BusInfo<'_>, event: &BusEvent) {
+        (self.0)(bus, event)
+    }
+}
+
 /// A tap that keeps every event in memory: for tests and short traces.
 #[derive(Debug, Clone, Default)]
 pub struct Recorder {

@@ -56,6 +56,7 @@ fn external_ports_exchange_frames_with_nodes_on_a_paced_bus() {
         .with(|sim| sim.node::<Probe>(probe).unwrap().rx.clone())
         .unwrap();
     assert_eq!(rx, [(got.at.as_nanos(), f)]);
+    assert_eq!(one.status().unwrap().stats.tx_frames, 1);
     // The wall clock of that instant is known to captures.
     let map = handle.time_map();
     assert!(map.wall_time(got.at) >= map.wall_origin);

@@ -4,7 +4,7 @@
 mod common;
 
 use cantwin_bus::bench::{BenchConfig, run};
-use cantwin_bus::{BusConfig, PortConfig, Simulation};
+use cantwin_bus::{BusConfig, BusEvent, FnTap, PortConfig, Simulation};
 use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
 use common::{Probe, bits, std_frame, us};
 
@@ -48,6 +48,37 @@ fn two_buses_run_in_one_time_line_at_their_own_bit_rates() {
     assert_eq!(sim.node::<Probe>(rs).unwrap().rx, [(8 * us(eof), f)]);
     assert_eq!(sim.bus(slow).unwrap().name(), "slow");
     assert_eq!(rs.bus(), slow);
+}
+
+#[test]
+fn step_next_jumps_event_to_event_and_closure_taps_see_them() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let f = std_frame(0x010, &[]);
+    sim.attach(bus, Probe::new().at(5_000, f), PortConfig::default())
+        .unwrap();
+    sim.attach(bus, Probe::new(), PortConfig::default())
+        .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    sim.bus_mut(bus).unwrap().add_tap(FnTap(
+        move |info: &cantwin_bus::BusInfo<'_>, e: &BusEvent| {
+            if let BusEvent::Frame(r) = e {
+                tx.send((info.name.to_string(), r.end.as_nanos())).unwrap();
+            }
+        },
+    ));
+    let n = bits(&f);
+    // The timer, then the end of EOF, then the end of intermission; then nothing.
+    assert_eq!(sim.step_next(), Some(Instant::from_nanos(5_000)));
+    assert_eq!(
+        sim.step_next(),
+        Some(Instant::from_nanos(5_000 + us(n - 3)))
+    );
+    assert_eq!(
+        rx.try_recv().unwrap(),
+        ("can0".to_string(), 5_000 + us(n - 3))
+    );
+    assert_eq!(sim.step_next(), None);
 }
 
 #[test]
