@@ -14,6 +14,7 @@ use crate::objects::connection::{
 };
 use crate::objects::devicenet::{self as dnobj, DeviceNetObject};
 use crate::objects::identity::{self, IdentityAction};
+use crate::objects::parameter::{self, ParameterObject};
 use crate::objects::{Application, CipError, Identity, Reply, SlaveEvent, message_router};
 use crate::ucmm;
 use crate::wire::{
@@ -154,6 +155,7 @@ pub struct Slave<A> {
     bus_off: bool,
     powered: bool,
     pending_reset: Option<u8>,
+    parameters: Option<ParameterObject>,
 }
 
 impl<A: Application> Slave<A> {
@@ -190,7 +192,20 @@ impl<A: Application> Slave<A> {
             bus_off: false,
             powered: false,
             pending_reset: None,
+            parameters: None,
         })
+    }
+
+    /// Serve class 0x0F from a table-driven Parameter object (unless the application
+    /// answers class 0x0F itself).
+    pub fn with_parameters(mut self, parameters: ParameterObject) -> Self {
+        self.parameters = Some(parameters);
+        self
+    }
+
+    /// The table-driven Parameter object, if any.
+    pub fn parameters(&self) -> Option<&ParameterObject> {
+        self.parameters.as_ref()
     }
 
     /// The application.
@@ -437,6 +452,10 @@ impl<A: Application> Slave<A> {
             }
             dnobj::CLASS => self.dn.serve(req),
             conn::CLASS => self.serve_connection(req, now),
+            parameter::CLASS if self.parameters.is_some() => match self.parameters.as_mut() {
+                Some(p) => p.serve(req),
+                None => CipError::new(status::OBJECT_DOES_NOT_EXIST).into(),
+            },
             _ => CipError::new(status::OBJECT_DOES_NOT_EXIST).into(),
         }
     }

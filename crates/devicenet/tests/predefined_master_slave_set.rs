@@ -288,3 +288,45 @@ fn connection_object_attributes() {
     // EPR with a short value.
     assert_eq!(deliver(&mut s, "44C#0A1005020964", t), ["44B#0A9413FF"]);
 }
+
+/// The stack's table-driven Parameter object, for devices without their own class 0x0F.
+#[test]
+fn table_driven_parameter_object_on_the_explicit_connection() {
+    use cantwin_devicenet::objects::parameter::{Param, ParameterObject, data_type};
+    use cantwin_devicenet::{Application, SlaveConfig};
+    struct NoParams;
+    impl Application for NoParams {
+        fn poll_sizes(&self) -> (u16, u16) {
+            (2, 2)
+        }
+        fn produce(&mut self, _: cantwin_can::Instant) -> Vec<u8> {
+            vec![0, 0]
+        }
+        fn consume(&mut self, _: &[u8], _: cantwin_can::Instant) {}
+    }
+    let params = ParameterObject::new(vec![Param {
+        instance: 3,
+        data_type: data_type::UINT,
+        read_only: false,
+        limits: Some((0, 1000)),
+        value: vec![0x10, 0x00],
+    }]);
+    let mut s = cantwin_devicenet::Slave::new(
+        SlaveConfig::new(mac(9), cantwin_can::BitRate::R250K, identity()),
+        NoParams,
+    )
+    .unwrap()
+    .with_parameters(params);
+    let mut out = cantwin_can::Outbox::new();
+    use cantwin_can::Node;
+    s.on_power_up(at(0), &mut out);
+    s.on_tick(at(SEC), &mut out);
+    s.on_tick(at(2 * SEC), &mut out);
+    let t = at(2 * SEC);
+    assert_eq!(deliver(&mut s, "44E#0A4B0301010A", t), ["44B#0ACB00"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E0F0301", t), ["44B#0A8E1000"]);
+    assert_eq!(deliver(&mut s, "44C#0A100F0301E803", t), ["44B#0A90"]);
+    assert_eq!(deliver(&mut s, "44C#0A100F0301E903", t), ["44B#0A9409FF"]);
+    assert_eq!(s.parameters().unwrap().value(3), Some(&[0xE8, 0x03][..]));
+    assert_eq!(deliver(&mut s, "44C#0A0E0F0401", t), ["44B#0A9416FF"]);
+}

@@ -8,6 +8,7 @@
 pub mod connection;
 pub mod devicenet;
 pub mod identity;
+pub mod parameter;
 
 use crate::wire::{Request, status};
 use cantwin_can::Instant;
