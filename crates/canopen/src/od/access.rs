@@ -1,0 +1,244 @@
+//! The SDO server's view of a device ([`ObjectAccess`]) and device hooks ([`OdHooks`]).
+
+use super::{EntryId, ObjectDictionary};
+use crate::abort::AbortCode;
+
+/// The result of a read: the value's whole size and how many bytes were copied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadInfo {
+    /// The size of the whole value in bytes.
+    pub size: usize,
+    /// Bytes copied into the buffer (from the requested offset).
+    pub copied: usize,
+}
+
+/// What an SDO server needs from a device: reads by offset (so that a large DOMAIN is
+/// uploaded segment by segment without a copy), whole writes for expedited downloads, and
+/// streamed writes for segmented and block downloads.
+///
+/// [`ObjectDictionary`] implements it with the CiA 301 checks; a device wraps its
+/// dictionary and adds its own rules (communication objects, NMT state, hooks).
+/// Every error is the abort code the SDO server sends.
+pub trait ObjectAccess {
+    /// Copies the value of `index`/`sub` from byte `offset` into `buf` (as much as fits)
+    /// and tells its whole size. An upload calls it with offset 0 first, then with
+    /// increasing offsets (and again from an earlier offset when a block is repeated);
+    /// a device computing values on the fly should take its snapshot at offset 0.
+    /// Errors: 0x06020000, 0x06090011, 0x06010001, or the device's own.
+    fn read(
+        &mut self,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Result<ReadInfo, AbortCode>;
+
+    /// Writes a whole value (expedited download).
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode>;
+
+    /// Starts a streamed write of `size` bytes (if the client indicated it). Existence,
+    /// writability and the indicated length are checked here.
+    fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode>;
+
+    /// The next bytes of a streamed write.
+    fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode>;
+
+    /// The streamed write is complete: validate and store it.
+    fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode>;
+
+    /// The streamed write was aborted: drop what was received.
+    fn write_cancel(&mut self, index: u16, sub: u8);
+}
+
+fn read_from(raw: &[u8], offset: usize, buf: &mut [u8]) -> ReadInfo {
+    let size = raw.len();
+    let start = offset.min(size);
+    let copied = (size - start).min(buf.len());
+    buf[..copied].copy_from_slice(&raw[start..start + copied]);
+    ReadInfo { size, copied }
+}
+
+impl ObjectDictionary {
+    fn readable(&self, index: u16, sub: u8) -> Result<EntryId, AbortCode> {
+        let id = self.locate(index, sub)?;
+        if !self.sub_object(id).access.readable() {
+            return Err(AbortCode::WRITE_ONLY);
+        }
+        Ok(id)
+    }
+}
+
+impl ObjectAccess for ObjectDictionary {
+    #[inline]
+    fn read(
+        &mut self,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Result<ReadInfo, AbortCode> {
+        let id = self.readable(index, sub)?;
+        Ok(read_from(self.raw(id), offset, buf))
+    }
+
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        self.download(index, sub, data)
+    }
+
+    fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+        self.stage_begin(index, sub, size).map(|_| ())
+    }
+
+    fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let id = self.locate(index, sub)?;
+        self.stage_append(id, data)
+    }
+
+    fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
+        let id = self.locate(index, sub)?;
+        self.stage_commit(id)
+    }
+
+    fn write_cancel(&mut self, _index: u16, _sub: u8) {
+        self.stage_cancel();
+    }
+}
+
+/// Device code behind the objects an [`OdBuilder::hook`](super::OdBuilder::hook) range
+/// marks: validates writes before they land, learns of writes after they land, and may
+/// serve reads itself (a drive parameter computed from the model). The dictionary's own
+/// checks (existence, access, length, limits) run first.
+pub trait OdHooks {
+    /// Serves a read of a hooked object, or `None` to read the stored value.
+    fn read(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Option<Result<ReadInfo, AbortCode>> {
+        let _ = (od, index, sub, offset, buf);
+        None
+    }
+
+    /// Accepts or refuses (with the abort code to send) a write that passed the
+    /// dictionary's checks.
+    fn validate(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), AbortCode> {
+        let _ = (od, index, sub, data);
+        Ok(())
+    }
+
+    /// A write landed in the dictionary.
+    fn written(&mut self, od: &mut ObjectDictionary, index: u16, sub: u8) {
+        let _ = (od, index, sub);
+    }
+}
+
+/// A dictionary together with the device's hooks, as one [`ObjectAccess`]. Built on the
+/// fly (`Hooked::new(&mut self.od, &mut self.model)`) so the hooks reach device state
+/// through a plain `&mut`.
+///
+/// ```
+/// use std::sync::Arc;
+/// use cantwin_canopen::{AbortCode, ObjectAccess};
+/// use cantwin_canopen::od::*;
+///
+/// struct Drive { speed_limit: u16 }
+/// impl OdHooks for Drive {
+///     fn validate(&mut self, _: &ObjectDictionary, _: u16, _: u8, data: &[u8]) -> Result<(), AbortCode> {
+///         let v = u16::from_le_bytes([data[0], data[1]]);
+///         if v > self.speed_limit { Err(AbortCode::DEVICE_STATE) } else { Ok(()) }
+///     }
+/// }
+/// let desc = OdBuilder::new()
+///     .var(0x2000, SubObject::new("Speed", DataType::Unsigned16, Access::Rw))
+///     .hook(0x2000..=0x2FFF)
+///     .build().unwrap();
+/// let mut od = ObjectDictionary::new(Arc::new(desc), 1);
+/// let mut drive = Drive { speed_limit: 3000 };
+/// let mut access = Hooked::new(&mut od, &mut drive);
+/// assert_eq!(access.write(0x2000, 0, &4000u16.to_le_bytes()), Err(AbortCode::DEVICE_STATE));
+/// assert_eq!(access.write(0x2000, 0, &1500u16.to_le_bytes()), Ok(()));
+/// ```
+pub struct Hooked<'a, H: ?Sized> {
+    od: &'a mut ObjectDictionary,
+    hooks: &'a mut H,
+}
+
+impl<'a, H: OdHooks + ?Sized> Hooked<'a, H> {
+    /// Joins a dictionary and its hooks.
+    pub fn new(od: &'a mut ObjectDictionary, hooks: &'a mut H) -> Self {
+        Hooked { od, hooks }
+    }
+
+    /// The dictionary.
+    pub fn od(&mut self) -> &mut ObjectDictionary {
+        self.od
+    }
+}
+
+impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
+    fn read(
+        &mut self,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Result<ReadInfo, AbortCode> {
+        let id = self.od.readable(index, sub)?;
+        if self.od.description().is_hooked(index)
+            && let Some(r) = self.hooks.read(self.od, index, sub, offset, buf)
+        {
+            return r;
+        }
+        Ok(read_from(self.od.raw(id), offset, buf))
+    }
+
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let id = self.od.locate(index, sub)?;
+        self.od.check_download(id, data)?;
+        let hooked = self.od.description().is_hooked(index);
+        if hooked {
+            self.hooks.validate(self.od, index, sub, data)?;
+        }
+        self.od.set_raw(id, data)?;
+        if hooked {
+            self.hooks.written(self.od, index, sub);
+        }
+        Ok(())
+    }
+
+    fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+        self.od.stage_begin(index, sub, size).map(|_| ())
+    }
+
+    fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let id = self.od.locate(index, sub)?;
+        self.od.stage_append(id, data)
+    }
+
+    fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
+        let id = self.od.locate(index, sub)?;
+        self.od.stage_check(id)?;
+        let hooked = self.od.description().is_hooked(index);
+        if hooked {
+            self.hooks.validate(self.od, index, sub, self.od.staged())?;
+        }
+        self.od.stage_commit(id)?;
+        if hooked {
+            self.hooks.written(self.od, index, sub);
+        }
+        Ok(())
+    }
+
+    fn write_cancel(&mut self, _index: u16, _sub: u8) {
+        self.od.stage_cancel();
+    }
+}
