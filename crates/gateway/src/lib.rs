@@ -9,7 +9,8 @@
 //!   [`BusConnector`].
 //!
 //! Servers see buses only through [`BusConnector`] and [`BusPort`], so the same server runs on
-//! the virtual bus, on the in-memory [`memory::MemoryBus`] or on hardware. They bind to
+//! the virtual bus ([`paced::PacedBus`]), on the in-memory [`memory::MemoryBus`] or on
+//! hardware. They bind to
 //! loopback unless told otherwise ([`Limits::allow_remote`]), bound every buffer
 //! ([`Limits`]), answer malformed commands with the protocol's error reply, and drop a client
 //! that cannot keep up instead of ever making the bus wait.
@@ -37,6 +38,7 @@
 #![forbid(unsafe_code)]
 
 pub mod memory;
+pub mod paced;
 mod port;
 mod server;
 pub mod slcan;

@@ -87,6 +87,19 @@ impl MemoryBus {
         }
     }
 
+    /// Deliver `frame` to every port on `channel` as if a node without a port had sent it at
+    /// `timestamp`; `false` for an unknown channel.
+    pub fn inject(&self, channel: &str, frame: Frame, timestamp: SystemTime) -> bool {
+        let Some(ch) = self.channels.get(channel) else {
+            return false;
+        };
+        let ports = ch.ports.lock().unwrap_or_else(|e| e.into_inner());
+        for port in ports.iter().filter_map(Weak::upgrade) {
+            port.deliver(Received { frame, timestamp });
+        }
+        true
+    }
+
     /// How many ports are attached to `channel` right now (0 for an unknown channel).
     pub fn attached(&self, channel: &str) -> usize {
         self.channels.get(channel).map_or(0, |c| {

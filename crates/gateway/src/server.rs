@@ -131,9 +131,18 @@ impl Link<'_> {
     }
 
     /// Detach the client from its bus.
+    ///
+    /// Returns once the node is detached: the writer holds the port while it waits for frames
+    /// (at most one poll interval), and the port detaches when the last holder lets go.
     pub(crate) fn close(&mut self) {
         self.forward(false);
-        *self.conn.port() = None;
+        let port = self.conn.port().take();
+        if let Some(port) = port {
+            let deadline = Instant::now() + RECV_POLL * 2;
+            while Arc::strong_count(&port) > 1 && Instant::now() < deadline {
+                thread::sleep(Duration::from_millis(1));
+            }
+        }
     }
 
     /// Whether the client is attached to a bus.
@@ -147,12 +156,25 @@ impl Link<'_> {
         port.send(frame)
     }
 
-    /// Start (after [`Limits::settle`]) or stop writing bus frames to the client. Frames
-    /// received while stopped are dropped.
+    /// Start (after [`Limits::settle`]) or stop writing bus frames to the client.
+    ///
+    /// Frames received while stopped are dropped, and so is whatever is buffered when the
+    /// stream starts: the client gets exactly the frames that reach the bus port after the
+    /// switch. Starting again while started only restarts the pause.
     pub(crate) fn forward(&mut self, on: bool) {
         let mut f = self.conn.forward();
+        if on && !f.on {
+            // Under the lock the writer drains with, so no frame from before the switch can
+            // be in flight in the writer when it sees the stream on.
+            if let Some(port) = self.conn.port().clone() {
+                while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
+                f.overflow_base = port.overflows();
+            }
+        }
         f.on = on;
         f.after = Instant::now() + self.limits.settle;
+        drop(f);
+        self.conn.switched.notify_all();
     }
 }
 
@@ -167,7 +189,11 @@ struct Stats {
 
 struct Forward {
     on: bool,
+    /// When the first frame may be written.
     after: Instant,
+    /// The port's overflow count when the stream started: overflows while stopped (the
+    /// writer drains only now and then) do not count against the client.
+    overflow_base: u64,
 }
 
 pub(crate) struct Conn {
@@ -175,7 +201,10 @@ pub(crate) struct Conn {
     writer: Mutex<TcpStream>,
     port: Mutex<Option<Arc<dyn BusPort>>>,
     forward: Mutex<Forward>,
+    /// Signalled with `port` when a bus is opened or the connection closed.
     ready: Condvar,
+    /// Signalled with `forward` when the stream is switched or the connection closed.
+    switched: Condvar,
     closed: AtomicBool,
 }
 
@@ -201,6 +230,7 @@ impl Conn {
         let _ = self.stream.shutdown(Shutdown::Both);
         *self.port() = None;
         self.ready.notify_all();
+        self.switched.notify_all();
     }
     fn is_closed(&self) -> bool {
         self.closed.load(Ordering::SeqCst)
@@ -348,8 +378,10 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
         forward: Mutex::new(Forward {
             on: false,
             after: Instant::now(),
+            overflow_base: 0,
         }),
         ready: Condvar::new(),
+        switched: Condvar::new(),
         closed: AtomicBool::new(false),
     });
     {
@@ -459,37 +491,42 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
 fn write_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
     let mut out = Vec::with_capacity(4096);
     while !conn.is_closed() {
-        let port = {
+        let Some(port) = conn.port().clone() else {
+            // Wait for `open` (or for the close that ends the loop).
             let guard = conn.port();
-            match &*guard {
-                Some(p) => Arc::clone(p),
-                None => {
-                    // Wait for `open` (or for the close that ends the loop).
-                    drop(
-                        conn.ready
-                            .wait_timeout(guard, RECV_POLL)
-                            .unwrap_or_else(|e| e.into_inner()),
-                    );
-                    continue;
-                }
+            if guard.is_none() {
+                drop(
+                    conn.ready
+                        .wait_timeout(guard, RECV_POLL)
+                        .unwrap_or_else(|e| e.into_inner()),
+                );
             }
+            continue;
+        };
+        let (after, overflow_base) = {
+            let f = conn.forward();
+            if !f.on {
+                // Stopped: drop what the bus delivers, under the lock `forward` takes, then
+                // sleep until the stream starts or it is time to drain again.
+                while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
+                drop(
+                    conn.switched
+                        .wait_timeout(f, RECV_POLL)
+                        .unwrap_or_else(|e| e.into_inner()),
+                );
+                continue;
+            }
+            (f.after, f.overflow_base)
         };
         let first = match port.recv_timeout(RECV_POLL) {
             Ok(Some(rx)) => rx,
             Ok(None) => continue,
             Err(_) => break,
         };
-        if port.overflows() > 0 {
+        if port.overflows() > overflow_base {
             shared.stats.too_slow.fetch_add(1, Ordering::Relaxed);
             break;
         }
-        let after = {
-            let f = conn.forward();
-            if !f.on {
-                continue;
-            }
-            f.after
-        };
         let wait = after.saturating_duration_since(Instant::now());
         if !wait.is_zero() {
             thread::sleep(wait);
@@ -504,7 +541,7 @@ fn write_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
                 _ => break,
             }
         }
-        if out.is_empty() {
+        if out.is_empty() || !conn.forward().on {
             continue;
         }
         if let Err(e) = conn.write(&out) {

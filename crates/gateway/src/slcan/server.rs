@@ -122,18 +122,17 @@ impl SlSession {
         match cmd {
             Command::Empty => link.reply(wire::OK),
             Command::Open | Command::ListenOnly if open => {
-                link.error(wire::ERROR)?;
                 // Restart the pause before the first frame: python-can sends `O` twice and
                 // frames streamed between the two were seen to get lost.
                 link.forward(true);
-                Ok(())
+                link.error(wire::ERROR)
             }
             Command::Open | Command::ListenOnly => match link.open(&self.channel) {
                 Ok(()) => {
                     self.listen_only = cmd == Command::ListenOnly;
-                    link.reply(wire::OK)?;
+                    // Frames reaching the port from now on are streamed, after a pause.
                     link.forward(true);
-                    Ok(())
+                    link.reply(wire::OK)
                 }
                 Err(_) => link.error(wire::ERROR),
             },

@@ -136,10 +136,11 @@ impl ScSession {
             }
             (Command::RawMode, _) => {
                 self.state = State::Raw;
-                link.reply(wire::OK)?;
-                // Frames start only after the `< ok >` is on its way, and after a pause.
+                // The stream starts with the frames that reach the bus port from now on, so
+                // that a client may act on the bus as soon as it reads `< ok >`; the first
+                // frame is written only after a pause, so the `< ok >` is read alone.
                 link.forward(true);
-                Ok(())
+                link.reply(wire::OK)
             }
             (Command::BcmMode, _) => {
                 self.state = State::Bcm;
