@@ -198,6 +198,8 @@ pub struct Bus {
     arb_heap: BinaryHeap<Reverse<u64>>,
     offering: usize,
     listeners: usize,
+    /// Ports with a bit-rate mismatch.
+    mismatched: usize,
     /// Completions so far; stamps the acceptance cache.
     epoch: u64,
     /// A ring of [`CALL_RING`] bitsets of `words` words: the ports whose node was called
@@ -254,6 +256,7 @@ impl Bus {
             arb_heap: BinaryHeap::new(),
             offering: 0,
             listeners: 0,
+            mismatched: 0,
             epoch: 1,
             called: Vec::new(),
             words: 0,
@@ -579,8 +582,12 @@ impl Bus {
 
     /// Misconfigure a node's bit rate (`Some(rate)` other than the bus's), or fix it (`None`).
     /// Every frame it sends becomes an error frame after 6 bits ([`ErrorKind::BitRateMismatch`]);
-    /// it receives and acknowledges nothing and counts a receive error for every frame it
-    /// sees. Its own error flags on others' frames are not modelled.
+    /// it receives and acknowledges nothing. As a receiver it cannot decode anything: while
+    /// error-active it destroys every other frame with an active error flag after 6 bits too
+    /// (the transmitter's TEC += 8, other receivers' REC += 1) and, seeing the others' error
+    /// flags right after its own, counts REC += 1 + 8 (ISO 11898-1 §12.1.4.2 rules a and b);
+    /// after 15 such errors it is error-passive, its flags are recessive and traffic resumes,
+    /// while it counts REC += 1 for every frame it sees.
     pub fn set_bit_rate_mismatch(
         &mut self,
         port: PortId,
@@ -588,6 +595,7 @@ impl Bus {
     ) -> Result<(), BusError> {
         let i = self.index_of(port)?;
         self.ports[i].mismatch = rate.filter(|r| *r != self.bit_rate);
+        self.mismatched = self.ports.iter().filter(|p| p.mismatch.is_some()).count();
         self.count_listeners();
         self.update_rx_slow();
         Ok(())
@@ -995,7 +1003,15 @@ impl Bus {
         self.attempts += 1;
         let port_id = self.port_id(i);
         let action = self.fault_for(attempt, port_id, &frame);
-        let outcome = if mismatch {
+        // An error-active node at the wrong bit rate flags every frame it hears.
+        let disturbed = self.mismatched > 0
+            && self.ports.iter().enumerate().any(|(j, q)| {
+                j != i
+                    && q.mismatch.is_some()
+                    && q.on_the_bus()
+                    && q.counters.state() == ErrorState::Active
+            });
+        let outcome = if mismatch || disturbed {
             Outcome::Error {
                 kind: ErrorKind::BitRateMismatch,
                 bits_before_flag: 6,
@@ -1160,7 +1176,14 @@ impl Bus {
                 }
                 for i in 0..self.ports.len() {
                     if i != f.port && self.ports[i].on_the_bus() {
+                        let flagged = kind == ErrorKind::BitRateMismatch
+                            && self.ports[i].mismatch.is_some()
+                            && self.ports[i].counters.state() == ErrorState::Active;
                         self.update_counters(i, ErrorCounters::on_receive_error);
+                        if flagged {
+                            // Rule b: the dominant error flags of the others follow its own.
+                            self.update_counters(i, ErrorCounters::on_receive_error_severe);
+                        }
                     }
                 }
                 self.update_rx_slow();

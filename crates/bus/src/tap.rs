@@ -20,8 +20,9 @@ pub enum ErrorKind {
     /// bit; the flag starts where the CRC delimiter would be. Bits before the flag: the
     /// stuffed frame through the CRC sequence, i.e. `bit_length - 13`.
     Corrupted,
-    /// The transmitter runs at another bit rate: receivers see a stuff error after six bits
-    /// of the same level at the latest and flag it; cantwin places the flag after bit 6.
+    /// A node runs at another bit rate: either the transmitter (receivers see a stuff error
+    /// after six bits of the same level at the latest and flag it) or an error-active receiver
+    /// that cannot decode the frame and flags it. cantwin places the flag after bit 6.
     BitRateMismatch,
     /// The transmitter vanished mid-frame (power cut, cable cut, forced bus-off): receivers
     /// see a form or stuff error at the bit where it stopped.

@@ -205,3 +205,36 @@ fn bit_rate_mismatched_node_turns_its_frames_into_error_frames_after_six_bits() 
     );
     assert_eq!(bus.stats().error_frames(), 32);
 }
+
+#[test]
+fn iso11898_1_12_1_4_2_a_listener_at_the_wrong_bit_rate_destroys_frames_until_error_passive() {
+    let f = std_frame(0x181, &[1, 2, 3, 4]);
+    let n = bits(&f);
+    let mut bus = bus();
+    let tap = bus.add_tap(Recorder::new());
+    let a = bus.attach(Probe::new(), PortConfig::default());
+    let b = bus.attach(Probe::new(), PortConfig::default());
+    let m = bus.attach(Probe::new(), PortConfig::default());
+    bus.set_bit_rate_mismatch(m, Some(BitRate::R250K)).unwrap();
+    bus.transmit(a, f).unwrap();
+    bus.run_until(Instant::from_nanos(2_000_000));
+
+    // M flags every frame after 6 bits and counts 1 + 8 per error: error-passive after 15
+    // (REC 135). A's 16th attempt then goes through.
+    let rec = bus.tap::<Recorder>(tap).unwrap();
+    assert_eq!(rec.errors().count(), 15);
+    assert!(
+        rec.errors()
+            .all(|e| e.kind == ErrorKind::BitRateMismatch && e.bits == 23)
+    );
+    assert_eq!(
+        bus.node::<Probe>(m).unwrap().events,
+        [(us(14 * 23 + 6), ControllerEvent::ErrorPassive)]
+    );
+    assert_eq!(bus.node::<Probe>(b).unwrap().rx, [(us(15 * 23 + n - 3), f)]);
+    assert!(bus.node::<Probe>(m).unwrap().rx.is_empty());
+    // A: 15 × 8 - 1; B: 15 - 1; M: 135, + 1 for the frame it could not decode.
+    assert_eq!(bus.port_status(a).unwrap().counters.tec(), 119);
+    assert_eq!(bus.port_status(b).unwrap().counters.rec(), 14);
+    assert_eq!(bus.port_status(m).unwrap().counters.rec(), 136);
+}
