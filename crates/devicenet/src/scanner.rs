@@ -46,9 +46,6 @@ impl ScannerConfig {
 /// A request the scanner cannot queue.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum ScannerError {
-    /// No explicit connection to the slave (allocate or open one first).
-    #[error("no explicit connection to MAC ID {0}")]
-    NotConnected(MacId),
     /// The slave's address is the scanner's own.
     #[error("MAC ID {0} is the scanner's own")]
     OwnMac(MacId),
@@ -108,6 +105,14 @@ pub enum ScannerEvent {
         general: u8,
         /// Additional code.
         additional: u8,
+    },
+    /// The request could not be sent: no explicit connection to the slave when its turn
+    /// came (allocate or open one first).
+    NotConnected {
+        /// The slave.
+        slave: MacId,
+        /// The request's service.
+        service: u8,
     },
     /// No response (or the fragmented transfer was abandoned).
     Timeout {
@@ -488,11 +493,9 @@ impl Scanner {
                     }
                     Op::UcmmClose => {
                         let Some(u) = p.ucmm else {
-                            self.events.push_back(ScannerEvent::Error {
+                            self.events.push_back(ScannerEvent::NotConnected {
                                 slave,
                                 service: service::RELEASE,
-                                general: crate::wire::status::OBJECT_DOES_NOT_EXIST,
-                                additional: crate::wire::status::NO_ADDITIONAL,
                             });
                             continue;
                         };
@@ -510,11 +513,9 @@ impl Scanner {
                             (Some(f), _) => (Route::Predefined, f),
                             (None, Some(u)) => (Route::UcmmConnection, u.format),
                             (None, None) => {
-                                self.events.push_back(ScannerEvent::Error {
+                                self.events.push_back(ScannerEvent::NotConnected {
                                     slave,
                                     service: *service,
-                                    general: crate::wire::status::DEVICE_STATE_CONFLICT,
-                                    additional: crate::wire::status::NO_ADDITIONAL,
                                 });
                                 if browse {
                                     self.drop_browse_ops(slave);
@@ -617,7 +618,13 @@ impl Scanner {
                 if let Some(tx) = p.tx.as_mut() {
                     match tx.on_ack(count, status, now) {
                         TxProgress::Send(f) => out.push(ack_id.frame(&f)),
-                        TxProgress::Done => p.tx = None,
+                        TxProgress::Done => {
+                            // The response timeout runs from the last fragment on.
+                            p.tx = None;
+                            if let Some(f) = p.in_flight.as_mut() {
+                                f.deadline = now + self.config.response_timeout;
+                            }
+                        }
                         TxProgress::Aborted => {
                             p.tx = None;
                             self.finish_timeout(slave, now);

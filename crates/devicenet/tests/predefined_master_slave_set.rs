@@ -330,3 +330,24 @@ fn table_driven_parameter_object_on_the_explicit_connection() {
     assert_eq!(s.parameters().unwrap().value(3), Some(&[0xE8, 0x03][..]));
     assert_eq!(deliver(&mut s, "44C#0A0E0F0401", t), ["44B#0A9416FF"]);
 }
+
+/// Manual §3.2: explicit messages up to 32 bytes. A reply that would not fit is answered
+/// "reply data too large"; one that fits goes in acknowledged fragments.
+#[test]
+fn reply_over_32_bytes_is_refused() {
+    use cantwin_devicenet::SlaveConfig;
+    let mut id = identity();
+    id.product_name = "EXP-CAN/DN-ADV for ADV200 drives".into();
+    assert_eq!(id.product_name.len(), 32);
+    let mut s = cantwin_devicenet::Slave::new(
+        SlaveConfig::new(mac(9), cantwin_can::BitRate::R500K, id),
+        Drive::new(1, 1),
+    )
+    .unwrap();
+    let t = online(&mut s);
+    deliver(&mut s, "44E#0A4B0301010A", t);
+    assert_eq!(deliver(&mut s, "44C#0A010101", t), ["44B#0A9411FF"]);
+    // Attribute 7 alone (33 bytes + service) is too large too; attribute 1 is not.
+    assert_eq!(deliver(&mut s, "44C#0A0E010107", t), ["44B#0A9411FF"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E010101", t), ["44B#0A8E2301"]);
+}

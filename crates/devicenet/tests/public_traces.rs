@@ -116,3 +116,34 @@ fn duplicate_mac_message_layout_lika_datalogic() {
         wire::DnId::g2(mac(9), wire::group2::DUP_MAC_CHECK)
     );
 }
+
+/// The master side of the same Rockwell 1760-DNET trace: the scanner (MAC 0) acknowledges
+/// each fragment of slave 3's response with `41C: 80 C0 00` and `41C: 80 C1 00`.
+#[test]
+fn scanner_acknowledges_fragments_rockwell_1760_dnet() {
+    use cantwin_devicenet::scanner::ScannerConfig;
+    use cantwin_devicenet::{Scanner, ScannerEvent};
+    let mut m = Scanner::new(ScannerConfig::new(mac(0), 1, 2));
+    let mut out = Outbox::new();
+    m.on_power_up(at(0), &mut out);
+    m.on_tick(at(SEC), &mut out);
+    m.on_tick(at(2 * SEC), &mut out);
+    out.clear();
+    let t = at(2 * SEC);
+    m.allocate(mac(3), 1).unwrap();
+    m.request(mac(3), 0x32, 0x64, 1, &[0]).unwrap();
+    m.on_tick(t, &mut out);
+    assert_eq!(sent(&mut out), ["41E#404B03010100"]);
+    assert_eq!(deliver(&mut m, "41B#40CB00", t), ["41C#0032640100"]);
+    assert_eq!(deliver(&mut m, "41B#8000B2C205000509", t), ["41C#80C000"]);
+    assert_eq!(deliver(&mut m, "41B#80810D0504", t), ["41C#80C100"]);
+    let ev: Vec<_> = std::iter::from_fn(|| m.poll_event()).collect();
+    assert_eq!(
+        ev.last(),
+        Some(&ScannerEvent::Response {
+            slave: mac(3),
+            service: 0x32,
+            data: vec![0xC2, 0x05, 0x00, 0x05, 0x09, 0x0D, 0x05, 0x04]
+        })
+    );
+}

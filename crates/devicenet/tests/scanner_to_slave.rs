@@ -398,3 +398,30 @@ fn scanner_with_a_duplicate_mac_id_faults() {
     assert_eq!(events(&mut other), [ScannerEvent::DuplicateMac]);
     assert_eq!(events(&mut m), [ScannerEvent::Online]);
 }
+
+#[test]
+fn request_without_a_connection_is_reported_not_sent() {
+    let (mut m, mut s, mut w) = setup(2);
+    m.get_attribute_single(mac(9), 1, 1, 1).unwrap();
+    m.close_ucmm(mac(9)).unwrap();
+    let since = w.log.len();
+    w.run_until(&mut [&mut m, &mut s], at(3 * SEC));
+    assert!(w.lines(since).is_empty());
+    assert_eq!(
+        events(&mut m),
+        [
+            ScannerEvent::NotConnected {
+                slave: mac(9),
+                service: 0x0E
+            },
+            ScannerEvent::NotConnected {
+                slave: mac(9),
+                service: 0x4C
+            }
+        ]
+    );
+    assert_eq!(
+        m.allocate(mac(0), 1),
+        Err(cantwin_devicenet::scanner::ScannerError::OwnMac(mac(0)))
+    );
+}
