@@ -115,6 +115,9 @@ struct Port {
     last_tick: Option<Instant>,
     suspend_until: Option<Instant>,
     recover_at: Option<Instant>,
+    /// Disconnected with frames to send: when the next ACK error on its own stub of cable
+    /// is detected.
+    stub_at: Option<Instant>,
     source: Option<Source>,
     last_bits: Option<(Frame, u32)>,
     stats: PortStats,
@@ -217,6 +220,7 @@ pub struct Bus {
     idle_at: Instant,
     suspended: Vec<u32>,
     recovering: Vec<u32>,
+    stubs: Vec<u32>,
     rules: Vec<FaultRule>,
     rng: SplitMix64,
     attempts: u64,
@@ -269,6 +273,7 @@ impl Bus {
             idle_at: now,
             suspended: Vec::new(),
             recovering: Vec::new(),
+            stubs: Vec::new(),
             rules: Vec::new(),
             rng: SplitMix64::new(config.seed),
             attempts: 0,
@@ -373,6 +378,7 @@ impl Bus {
             last_tick: None,
             suspend_until: None,
             recover_at: None,
+            stub_at: None,
             source: None,
             last_bits: None,
             stats: PortStats::default(),
@@ -532,15 +538,22 @@ impl Bus {
     }
 
     /// Cut or restore a node's connection to the bus wires. A disconnected node keeps
-    /// running (its timers fire, it queues frames) but sends, receives and acknowledges
-    /// nothing; its queued frames wait for the reconnection. A frame it is sending when cut
-    /// off ends in an error frame for the others.
+    /// running (its timers fire, it queues frames) but receives and acknowledges nothing,
+    /// and nobody hears what it sends: alone on its piece of cable, it sends its
+    /// highest-priority frame again and again and sees an ACK error each time (one every
+    /// `bit_length + 6` bits, the first `bit_length - 11` bits after it starts), until it is
+    /// error-passive (TEC 128), where ACK errors no longer count. Its frames wait for the
+    /// reconnection. A frame it is sending when cut off ends in an error frame for the
+    /// others.
     pub fn set_connected(&mut self, port: PortId, connected: bool) -> Result<(), BusError> {
         let i = self.index_of(port)?;
         if !connected {
             self.abort_if_sending(i);
         }
         self.ports[i].connected = connected;
+        if connected {
+            self.ports[i].stub_at = None;
+        }
         self.refresh(i);
         self.count_listeners();
         Ok(())
@@ -690,6 +703,11 @@ impl Bus {
                 consider(t);
             }
         }
+        for &i in &self.stubs {
+            if let Some(t) = self.ports[i as usize].stub_at {
+                consider(t);
+            }
+        }
         next
     }
 
@@ -723,6 +741,22 @@ impl Bus {
                     }
                 } else {
                     k += 1;
+                }
+            }
+        }
+        if !self.stubs.is_empty() {
+            let mut k = 0;
+            while k < self.stubs.len() {
+                let i = self.stubs[k] as usize;
+                match self.ports[i].stub_at {
+                    Some(s) if s > t => k += 1,
+                    due => {
+                        self.stubs.swap_remove(k);
+                        self.ports[i].stub_at = None;
+                        if due.is_some() {
+                            self.stub_error(i);
+                        }
+                    }
                 }
             }
         }
@@ -912,6 +946,62 @@ impl Bus {
             (true, false) => self.offering += 1,
             (false, true) => self.offering -= 1,
             _ => {}
+        }
+        if !self.ports[i].connected {
+            self.start_stub(i);
+        }
+    }
+
+    /// The frame a port would send next, with its length.
+    fn next_frame(&self, i: usize) -> Option<(Frame, u32)> {
+        let p = &self.ports[i];
+        let queued = p.queue.head().map(|e| (e.frame, e.bits));
+        match (queued, p.babble) {
+            (Some(q), Some(b)) => Some(if b.0.arbitration_key() < q.0.arbitration_key() {
+                b
+            } else {
+                q
+            }),
+            (q, b) => q.or(b),
+        }
+    }
+
+    /// A disconnected node with something to send starts its lone attempts, if they can
+    /// still change its counters (only while error-active).
+    fn start_stub(&mut self, i: usize) {
+        let p = &self.ports[i];
+        if p.stub_at.is_some()
+            || !p.attached()
+            || !p.powered
+            || p.counters.state() != ErrorState::Active
+        {
+            return;
+        }
+        if let Some((_, bits)) = self.next_frame(i) {
+            self.ports[i].stub_at = Some(self.now + self.bits(bits - 11));
+            self.stubs.push(i as u32);
+        }
+    }
+
+    /// An ACK error on a disconnected node's stub of cable.
+    fn stub_error(&mut self, i: usize) {
+        let p = &self.ports[i];
+        if p.connected || !p.powered || p.counters.state() != ErrorState::Active {
+            return;
+        }
+        let Some((_, bits)) = self.next_frame(i) else {
+            return;
+        };
+        // Rest of the error frame, then the next attempt up to its ACK slot; planned before
+        // the counters move so the refresh they cause does not plan another.
+        let next = self.now + self.bits(ErrorKind::OVERHEAD_BITS + bits - 11);
+        self.ports[i].stub_at = Some(next);
+        self.stubs.push(i as u32);
+        self.ports[i].stats.tx_errors += 1;
+        self.update_counters(i, |c| c.on_transmit_error(true));
+        if self.ports[i].counters.state() != ErrorState::Active {
+            // Error-passive: further ACK errors change nothing (§12.1.4.2 rule c, exception 1).
+            self.ports[i].stub_at = None;
         }
     }
 

@@ -7,7 +7,7 @@ mod common;
 use cantwin_bus::{
     Bus, BusConfig, BusEvent, ErrorKind, FaultRule, FrameSelector, PortConfig, Recorder,
 };
-use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
+use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 use common::{Probe, bits, std_frame, us};
 
 fn bus_with_seed(seed: u64) -> Bus {
@@ -184,13 +184,25 @@ fn disconnected_node_neither_sends_nor_receives_until_reconnected() {
     assert_eq!(bus.node::<Probe>(b).unwrap().rx.len(), 2);
     assert!(bus.node::<Probe>(c).unwrap().rx.is_empty());
     assert_eq!(bus.port_status(b).unwrap().queued, 1);
+    // Alone on its stub of cable it saw ACK errors every n + 6 bits from 1500 µs until
+    // error-passive at the 16th.
+    let n = bits(&f);
+    let passive = us(1500 + 15 * (n + 6) + n - 11);
+    assert_eq!(
+        bus.node::<Probe>(b).unwrap().events,
+        [(passive, ControllerEvent::ErrorPassive)]
+    );
+    assert_eq!(bus.port_status(b).unwrap().counters.tec(), 128);
     bus.set_connected(b, true).unwrap();
     bus.run_until(Instant::from_nanos(us(4200)));
-    assert_eq!(
-        bus.node::<Probe>(c).unwrap().rx,
-        [(us(3200) + us(bits(&f) - 3), f)]
-    );
+    let sent = us(3200) + us(n - 3);
+    assert_eq!(bus.node::<Probe>(c).unwrap().rx, [(sent, f)]);
     assert_eq!(bus.node::<Probe>(b).unwrap().rx.len(), 3);
+    // The first good transmission makes it error-active again.
+    assert_eq!(
+        bus.node::<Probe>(b).unwrap().events[1],
+        (sent, ControllerEvent::ErrorActive)
+    );
 }
 
 #[test]
