@@ -7,6 +7,7 @@
 //!   (python-can's `slcan` interface with a `socket://` channel).
 //! * `socketcan` (cargo feature `socketcan`, Linux): real CAN interfaces as a
 //!   [`BusConnector`].
+//! * [`paced`]: the buses of a paced virtual-bus simulation as a [`BusConnector`].
 //!
 //! Servers see buses only through [`BusConnector`] and [`BusPort`], so the same server runs on
 //! the virtual bus ([`paced::PacedBus`]), on the in-memory [`memory::MemoryBus`] or on
@@ -42,6 +43,8 @@ pub mod paced;
 mod port;
 mod server;
 pub mod slcan;
+#[cfg(feature = "socketcan")]
+pub mod socketcan;
 pub mod socketcand;
 
 pub use port::{BusConnector, BusPort, PortError, Received};
