@@ -15,6 +15,30 @@
 //! [`SimHandle::slips`]) and pacing goes on from there. Bus time therefore never runs ahead of
 //! the wall clock, never skips events, and at worst runs slower than it. [`TimeMap`] always
 //! gives the current mapping, which captures use to stamp frames.
+//!
+//! ```
+//! use std::time::Duration;
+//! use cantwin_bus::{BusConfig, ExternalConfig, PacedConfig, PacedSimulation, Simulation};
+//! use cantwin_can::{BitRate, Frame};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let mut sim = Simulation::new();
+//! let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+//! let paced = PacedSimulation::start(sim, PacedConfig::default());
+//! let handle = paced.handle(); // Clone + Send: hand it to server threads
+//! let tool = handle.attach_external(bus, ExternalConfig::default())?;
+//! let other = handle.attach_external(bus, ExternalConfig::default())?;
+//! tool.send(Frame::std(0x000, &[0x01, 0x00])?)?; // NMT start all
+//! let got = other.recv_timeout(Duration::from_secs(5))?.ok_or("nothing received")?;
+//! assert_eq!(got.frame.data_bytes(), [0x01, 0x00]);
+//! let wall = handle.time_map().wall_time(got.at); // for a capture's timestamp
+//! # let _ = wall;
+//! handle.with(|sim| sim.bus(bus).map(|b| b.stats().frames()))?;
+//! let sim = paced.stop(); // the simulation comes back, nodes and all
+//! # assert!(sim.is_some());
+//! # Ok(())
+//! # }
+//! ```
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
@@ -253,7 +277,8 @@ impl core::fmt::Debug for SimHandle {
 
 impl SimHandle {
     /// Run `f` against the simulation, brought up to the wall clock first, so what `f` does
-    /// happens now. The simulation thread then re-plans its sleep.
+    /// happens now. The simulation thread then re-plans its sleep. `f` runs with the
+    /// simulation locked: it must not call back into a [`SimHandle`] or [`ExternalPort`].
     pub fn with<R>(&self, f: impl FnOnce(&mut Simulation) -> R) -> Result<R, BusError> {
         let mut g = self.shared.lock();
         if g.stop {
