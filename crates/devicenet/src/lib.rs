@@ -53,8 +53,9 @@
 //!   example's reply tables are copies of B-2/B-3. Replies carry the request's code | 0x80
 //!   (0xB2–0xB5) as every CIP reply does.
 //!
-//! Not implemented: the offline connection set (group 4; the card does not claim it — the
-//! identifiers are in [`wire::group4`]), bit-strobe, change-of-state, cyclic and multicast
+//! Not implemented: the offline connection set's behaviour (group 4; the card does not
+//! claim it — its messages decode with [`wire::CommFault`] and
+//! [`wire::OfflineOwnership`]), bit-strobe, change-of-state, cyclic and multicast
 //! poll connections, quick connect, deferred delete, Device Heartbeat and Shutdown.
 //!
 //! ```

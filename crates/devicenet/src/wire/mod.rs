@@ -1,6 +1,7 @@
 //! Stateless decode and encode of everything DeviceNet puts on the wire: identifiers,
 //! explicit message headers and bodies, the fragmentation protocol, Allocate/Release and
-//! UCMM bodies, error responses, the duplicate MAC ID check message and I/O fragments.
+//! UCMM bodies, error responses, the duplicate MAC ID check message, the offline
+//! connection set messages (group 4) and I/O fragments.
 //!
 //! State machines consume these types; trace decoders and capture reports reuse them.
 
@@ -250,6 +251,126 @@ impl DupMac {
     }
 }
 
+/// Whom a group 4 communication-faulted request addresses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CommFaultTarget {
+    /// Short form (2 bytes): a MAC ID, with the "match" bit.
+    Mac {
+        /// Match bit.
+        matched: bool,
+        /// The value field (a MAC ID).
+        mac: MacId,
+    },
+    /// Long form (8 bytes): a device by vendor ID and serial number.
+    Device {
+        /// Vendor ID.
+        vendor: u16,
+        /// Serial number.
+        serial: u32,
+    },
+}
+
+/// Communication faulted request/response of the offline connection set (group 4
+/// messages 0x2D/0x2C): `[rsv | match | value][R/R | service]` or
+/// `[reserved][R/R | service][vendor ID][serial number]` (field layout as Wireshark's
+/// DeviceNet dissector decodes it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CommFault {
+    /// Response rather than request.
+    pub response: bool,
+    /// Service code.
+    pub service: u8,
+    /// The addressed device.
+    pub target: CommFaultTarget,
+}
+
+impl CommFault {
+    /// Parse a 2- or 8-byte message.
+    pub fn decode(data: &[u8]) -> Option<CommFault> {
+        let b1 = *data.get(1)?;
+        let target = match data.len() {
+            2 => CommFaultTarget::Mac {
+                matched: data[0] & 0x40 != 0,
+                mac: MacId::from_bits(data[0]),
+            },
+            8 => CommFaultTarget::Device {
+                vendor: u16::from_le_bytes([data[2], data[3]]),
+                serial: u32::from_le_bytes([data[4], data[5], data[6], data[7]]),
+            },
+            _ => return None,
+        };
+        Some(CommFault {
+            response: b1 & 0x80 != 0,
+            service: b1 & 0x7F,
+            target,
+        })
+    }
+
+    /// Encode the message.
+    pub fn encode(&self) -> Vec<u8> {
+        let b1 = ((self.response as u8) << 7) | (self.service & 0x7F);
+        match self.target {
+            CommFaultTarget::Mac { matched, mac } => {
+                vec![((matched as u8) << 6) | mac.get(), b1]
+            }
+            CommFaultTarget::Device { vendor, serial } => {
+                let mut v = vec![0, b1];
+                v.extend_from_slice(&vendor.to_le_bytes());
+                v.extend_from_slice(&serial.to_le_bytes());
+                v
+            }
+        }
+    }
+}
+
+/// Offline ownership request/response (group 4 messages 0x2F/0x2E):
+/// `[client MAC ID][R/R | allocate][vendor ID][serial number]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OfflineOwnership {
+    /// Response rather than request.
+    pub response: bool,
+    /// The client's MAC ID.
+    pub client: MacId,
+    /// Allocate field (7 bits).
+    pub allocate: u8,
+    /// Vendor ID.
+    pub vendor: u16,
+    /// Serial number.
+    pub serial: u32,
+}
+
+impl OfflineOwnership {
+    /// Parse the 8 data bytes.
+    pub fn decode(data: &[u8]) -> Option<OfflineOwnership> {
+        if data.len() != 8 {
+            return None;
+        }
+        Some(OfflineOwnership {
+            response: data[1] & 0x80 != 0,
+            client: MacId::from_bits(data[0]),
+            allocate: data[1] & 0x7F,
+            vendor: u16::from_le_bytes([data[2], data[3]]),
+            serial: u32::from_le_bytes([data[4], data[5], data[6], data[7]]),
+        })
+    }
+
+    /// Encode the 8 data bytes.
+    pub fn encode(&self) -> [u8; 8] {
+        let v = self.vendor.to_le_bytes();
+        let s = self.serial.to_le_bytes();
+        [
+            self.client.get(),
+            ((self.response as u8) << 7) | (self.allocate & 0x7F),
+            v[0],
+            v[1],
+            s[0],
+            s[1],
+            s[2],
+            s[3],
+        ]
+    }
+}
+
 /// Split an I/O message of a fragmented connection into frames' data
 /// `[fragment byte][≤ 7 bytes]` (unacknowledged fragmentation, DeviceNet Vol. 1 §4).
 pub fn io_fragments(data: &[u8]) -> Vec<Vec<u8>> {
@@ -352,6 +473,39 @@ mod tests {
         assert_eq!(frames[0][0], 0x00);
         assert_eq!(frames[1][0], 0x41);
         assert_eq!(frames[4], vec![0x84, 28, 29, 30, 31]);
+    }
+
+    #[test]
+    fn group4_offline_messages_round_trip() {
+        let short = CommFault {
+            response: false,
+            service: 0x4B,
+            target: CommFaultTarget::Mac {
+                matched: true,
+                mac: MacId::new(5).unwrap(),
+            },
+        };
+        assert_eq!(short.encode(), [0x45, 0x4B]);
+        assert_eq!(CommFault::decode(&short.encode()), Some(short));
+        let long = CommFault {
+            response: true,
+            service: 0x4B,
+            target: CommFaultTarget::Device {
+                vendor: 0x0123,
+                serial: 0x0A0B_0C0D,
+            },
+        };
+        assert_eq!(CommFault::decode(&long.encode()), Some(long));
+        assert_eq!(CommFault::decode(&[0, 0, 0]), None);
+        let o = OfflineOwnership {
+            response: false,
+            client: MacId::new(0).unwrap(),
+            allocate: 1,
+            vendor: 0x0123,
+            serial: 7,
+        };
+        assert_eq!(o.encode(), [0, 1, 0x23, 0x01, 7, 0, 0, 0]);
+        assert_eq!(OfflineOwnership::decode(&o.encode()), Some(o));
     }
 
     #[test]
