@@ -7,12 +7,12 @@ mod common;
 use std::sync::Arc;
 use std::time::Duration;
 
-use cantwin_bus::{BusConfig, PacedConfig, PacedSimulation, Recorder, Simulation};
+use cantwin_bus::{BusConfig, PacedConfig, PacedSimulation, PortConfig, Recorder, Simulation};
 use cantwin_can::{BitRate, Frame};
 use cantwin_gateway::paced::PacedBus;
 use cantwin_gateway::socketcand::{Client, Remote, Server};
 use cantwin_gateway::{BusConnector, BusPort, Limits};
-use common::GUARD;
+use common::{GUARD, Peer};
 
 #[test]
 fn socketcand_clients_are_nodes_on_the_paced_bus() {
@@ -93,4 +93,53 @@ fn remote_connector_opens_a_socketcand_bus_like_a_local_one() {
         remote.open("nosuch", 1),
         Err(cantwin_gateway::PortError::UnknownChannel(_))
     ));
+}
+
+#[test]
+fn flooding_client_gets_queue_full_errors_and_the_bus_carries_the_rest() {
+    // 10 kbit/s: an 8-byte frame takes about 13 ms, so a burst of commands fills the
+    // 4-frame transmit queue at once.
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R10K));
+    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let connector =
+        PacedBus::new(paced.handle()).with_port_config(PortConfig::DEFAULT.with_queue_depth(4));
+    let srv = Server::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        Arc::new(connector),
+        Limits::default(),
+    )
+    .unwrap();
+    let listener = Client::connect(srv.local_addr(), "can0", GUARD).unwrap();
+    let mut flood = Peer::connect(srv.local_addr());
+    flood.socketcand_handshake("can0");
+    const N: usize = 500;
+    let mut burst = Vec::new();
+    for _ in 0..N {
+        burst.extend_from_slice(b"< send 100 8 1 2 3 4 5 6 7 8 >");
+    }
+    burst.extend_from_slice(b"< echo >");
+    flood.write(&burst);
+    let mut refused = 0;
+    loop {
+        match flood.read_element().as_str() {
+            "< echo >" => break,
+            "< error transmit queue full >" => refused += 1,
+            other => panic!("unexpected {other}"),
+        }
+    }
+    assert!(refused > 0);
+    let accepted = N - refused;
+    let frame = Frame::std(0x100, &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
+    for _ in 0..accepted {
+        assert_eq!(listener.recv_timeout(GUARD).unwrap().unwrap().frame, frame);
+    }
+    srv.shutdown();
+    let sim = paced.stop().unwrap();
+    let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+    // Exactly the accepted frames went out, none lost or doubled.
+    let records: Vec<_> = rec.frames().collect();
+    assert_eq!(records.len(), accepted);
+    assert!(records.iter().all(|r| r.frame == frame && !r.dropped));
 }
