@@ -228,3 +228,39 @@ fn babbling_node_with_a_high_priority_id_starves_the_bus() {
     bus.run_until(Instant::from_nanos(us(11_000)));
     assert!(bus.stats().load_percent(bus.now()) > 90.0);
 }
+
+#[test]
+fn a_node_losing_power_mid_frame_leaves_an_error_frame_behind() {
+    let f = std_frame(0x181, &[0x11; 8]);
+    let g = std_frame(0x182, &[0x22; 8]);
+    let mut bus = bus_with_seed(0);
+    let tap = bus.add_tap(Recorder::new());
+    let a = bus.attach(Probe::sending(&[f]), PortConfig::default());
+    let b = bus.attach(Probe::sending(&[g]), PortConfig::default());
+    let c = bus.attach(Probe::new(), PortConfig::default());
+    // 40.5 bits into A's frame.
+    bus.run_until(Instant::from_nanos(40_500));
+    bus.set_powered(a, false).unwrap();
+    bus.run_until(Instant::from_nanos(1_000_000));
+    let rec = bus.tap::<Recorder>(tap).unwrap();
+    let e = rec.errors().next().unwrap();
+    assert_eq!(
+        (
+            e.kind,
+            e.sender,
+            e.detected.as_nanos(),
+            e.idle_at.as_nanos()
+        ),
+        (ErrorKind::Aborted, a, 40_500, us(40 + 17))
+    );
+    // B's frame follows the error frame; receivers counted the error, then the good frame.
+    assert_eq!(
+        bus.node::<Probe>(c).unwrap().rx,
+        [(us(57 + bits(&g) - 3), g)]
+    );
+    assert_eq!(bus.port_status(c).unwrap().counters.rec(), 0);
+    assert_eq!(bus.port_status(b).unwrap().counters.rec(), 1);
+    // The powered-off sender's counters were not touched; it lost its queue.
+    let sa = bus.port_status(a).unwrap();
+    assert_eq!((sa.counters.tec(), sa.queued, sa.powered), (0, 0, false));
+}
