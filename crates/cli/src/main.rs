@@ -1,0 +1,52 @@
+//! `cantwin`: digital twins of CAN fieldbus devices, from the command line.
+
+mod bench;
+mod benchmarks_md;
+mod demo;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// Digital twins of CAN fieldbus devices (CANopen, DeviceNet, CAL) on a virtual bus that
+/// behaves like the wire.
+#[derive(Debug, Parser)]
+#[command(name = "cantwin", version, about, long_about = None)]
+#[command(
+    after_help = "Examples:\n  cantwin demo\n  cantwin bench bus\n  cantwin dump capture.pcap"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the embedded demo network in virtual time and print what happened.
+    #[command(after_help = "Examples:\n  cantwin demo\n  cantwin demo --verbose")]
+    Demo(demo::Args),
+    /// Run named benchmarks (release build recommended) and optionally record them.
+    #[command(
+        after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
+                            cantwin bench bus --write"
+    )]
+    Bench(bench::Args),
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Demo(args) => demo::run(&args),
+        Command::Bench(args) => bench::run(&args),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}
