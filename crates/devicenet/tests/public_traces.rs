@@ -22,13 +22,14 @@ fn allocate_explicit_icpdas_i7242d_7_2_8() {
     assert_eq!(s.devicenet_object().master, Some(mac(10)));
 }
 
-/// Same manual, p. 83, step 2: `Set_Attribute_Single` of the expected packet rate,
-/// `0A 10 05 04 09 0A 0E` (class 5, instance 4, attribute 9, 0x0E0A = 3594 ms), answered
-/// `0A 90 10 0E`: the slave rounds the rate up to its timer tick and replies with the value
-/// it uses (0x0E10 = 3600 ms). The I-7242D's instance 4 is its COS/cyclic connection; this
-/// slave has polled I/O only (instance 2), so the same request goes to instance 2.
+/// ICP DAS "CAN-8124/CAN-8224/CAN-8424 User Manual" v2.0 (Aug 2007), §7.2.2 "How to apply
+/// the Poll IO connection", step 2 (p. 113): Set_Attribute_Single of the poll connection's
+/// expected packet rate, `ID=10 001001 100 Data= 0A 10 05 02 09 0A 0E` (0x0E0A = 3594 ms),
+/// answered `ID=10 001001 011 Data= 0A 90 10 0E`: the slave rounds the rate up to its timer
+/// tick and replies with the value it uses (0x0E10 = 3600 ms). The I-7242D manual (p. 83)
+/// shows the same exchange on its COS/cyclic instance 4.
 #[test]
-fn set_expected_packet_rate_replies_actual_value_icpdas_i7242d_p83() {
+fn set_expected_packet_rate_replies_actual_value_icpdas_can8x24_7_2_2() {
     let req = Request::decode(&[0x10, 0x05, 0x04, 0x09, 0x0A, 0x0E], BodyFormat::F8_8).unwrap();
     assert_eq!(
         (req.class, req.instance, req.data),
@@ -86,8 +87,8 @@ fn fragmented_response_rockwell_1760_dnet() {
     assert!(s.explicit_connection().unwrap().tx.is_none());
 }
 
-/// MKS DeviceNet manual, explicit messaging examples (slave MAC 5, master MAC 1): an
-/// unsupported service is answered `42B: 01 94 08 FF`.
+/// MKS Baratron DMA series manual, Appendix D, explicit messaging example 3 (slave MAC 5,
+/// master MAC 1): an unsupported service is answered `42B: 01 94 08 FF`.
 #[test]
 fn service_not_supported_mks() {
     let mut s = slave(5);
@@ -146,4 +147,45 @@ fn scanner_acknowledges_fragments_rockwell_1760_dnet() {
             data: vec![0xC2, 0x05, 0x00, 0x05, 0x09, 0x0D, 0x05, 0x04]
         })
     );
+}
+
+/// Same CAN-8x24 manual, §7.2.2 step 1 (p. 112): the master allocates explicit, polled and
+/// bit-strobed connections, `ID=10 001001 110 Data= 0A 4B 03 01 07 0A`. The gateway accepts;
+/// the drive card has no bit-strobe connection and refuses the whole choice (invalid
+/// allocation choice), leaving nothing allocated.
+#[test]
+fn allocate_with_bit_strobe_refused_icpdas_can8x24_7_2_2() {
+    let mut s = slave(9);
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "44E#0A4B0301070A", t), ["44B#0A942002"]);
+    assert_eq!(s.devicenet_object().master, None);
+}
+
+/// MKS Baratron DMA series manual, Appendix D, explicit messaging examples 1 and 2: the
+/// master (MAC 1) reads the Identity vendor ID of the device at MAC 5,
+/// `42C: 01 0E 01 01 01` → `42B: 01 8E 36 00` (vendor 0x0036).
+#[test]
+fn get_attribute_single_vendor_id_mks_appendix_d() {
+    let mut id = identity();
+    id.vendor = 0x0036;
+    let mut s = Slave::new(
+        SlaveConfig::new(mac(5), cantwin_can::BitRate::R125K, id),
+        Drive::new(1, 1),
+    )
+    .unwrap();
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "42E#014B03010101", t), ["42B#01CB00"]);
+    assert_eq!(deliver(&mut s, "42C#010E010101", t), ["42B#018E3600"]);
+}
+
+/// BEI IDEACOD DeviceNet user manual (UME-OCD-D2, 05/04), "Release Master / Slave
+/// Connection Set", release polling: `41E: 0A 4C 03 01 03` (slave MAC 3, master 0x0A).
+#[test]
+fn release_bei_ideacod_ume_ocd_d2() {
+    let mut s = slave(3);
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "41E#0A4B0301030A", t), ["41B#0ACB00"]);
+    assert_eq!(deliver(&mut s, "41E#0A4C030103", t), ["41B#0ACC"]);
+    assert_eq!(s.devicenet_object().master, None);
+    assert!(s.poll_connection().is_none() && s.explicit_connection().is_none());
 }
