@@ -809,6 +809,8 @@ impl Bus {
         let now = self.now;
         let p = &mut self.ports[i];
         p.powered = true;
+        // A controller starts empty: nothing queued while it was off survives.
+        p.queue.clear();
         p.counters = ErrorCounters::new();
         p.last_tick = None;
         if let Some(node) = p.node.as_mut() {
