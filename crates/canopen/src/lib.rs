@@ -2,7 +2,8 @@
 //!
 //! * [`od`]: the object dictionary — shared descriptions, per-device values, device hooks
 //!   and the [`ObjectAccess`] view the SDO server works through;
-//! * [`abort`]: SDO abort codes ([`AbortCode`]).
+//! * [`abort`]: SDO abort codes ([`AbortCode`]);
+//! * [`sdo`]: SDO frames and the SDO server ([`sdo::SdoServer`]).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -24,6 +25,7 @@
 
 pub mod abort;
 pub mod od;
+pub mod sdo;
 
 pub use abort::AbortCode;
 pub use od::ObjectAccess;

@@ -33,6 +33,13 @@ pub trait ObjectAccess {
         buf: &mut [u8],
     ) -> Result<ReadInfo, AbortCode>;
 
+    /// The size of the value's type if it is fixed (used for an expedited download that
+    /// does not indicate its size, CiA 301 §7.2.4.3.3: e = 1, s = 0). `None` by default.
+    fn fixed_size(&mut self, index: u16, sub: u8) -> Option<usize> {
+        let _ = (index, sub);
+        None
+    }
+
     /// Writes a whole value (expedited download).
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode>;
 
@@ -79,6 +86,11 @@ impl ObjectAccess for ObjectDictionary {
     ) -> Result<ReadInfo, AbortCode> {
         let id = self.readable(index, sub)?;
         Ok(read_from(self.raw(id), offset, buf))
+    }
+
+    fn fixed_size(&mut self, index: u16, sub: u8) -> Option<usize> {
+        let id = self.locate(index, sub).ok()?;
+        self.sub_object(id).data_type.fixed_size()
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
@@ -199,6 +211,10 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
             return r;
         }
         Ok(read_from(self.od.raw(id), offset, buf))
+    }
+
+    fn fixed_size(&mut self, index: u16, sub: u8) -> Option<usize> {
+        self.od.fixed_size(index, sub)
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {

@@ -649,7 +649,11 @@ pub struct ObjectDictionary {
     vars: Vec<Vec<u8>>,
     /// Receives segmented and block downloads before they are validated and committed.
     staging: Vec<u8>,
+    staging_limit: usize,
 }
+
+/// The default largest segmented or block download the dictionary buffers.
+pub const DEFAULT_STAGING_LIMIT: usize = 1 << 20;
 
 /// Never reserve more than this for a download on the strength of an indicated size alone.
 const MAX_PRERESERVE: usize = 64 * 1024;
@@ -663,6 +667,7 @@ impl ObjectDictionary {
             desc,
             node_id,
             staging: Vec::new(),
+            staging_limit: DEFAULT_STAGING_LIMIT,
         };
         od.restore_defaults(0..=0xFFFF);
         od
@@ -806,6 +811,12 @@ impl ObjectDictionary {
         self.set_raw(id, data)
     }
 
+    /// Sets the largest segmented or block download this device buffers (default
+    /// [`DEFAULT_STAGING_LIMIT`]); a longer one is aborted with 0x05040005 (out of memory).
+    pub fn set_staging_limit(&mut self, bytes: usize) {
+        self.staging_limit = bytes;
+    }
+
     /// The bytes of a segmented or block download received so far.
     pub fn staged(&self) -> &[u8] {
         &self.staging
@@ -825,6 +836,9 @@ impl ObjectDictionary {
         }
         if let Some(size) = size {
             check_length(d, size)?;
+            if size > self.staging_limit {
+                return Err(AbortCode::OUT_OF_MEMORY);
+            }
         }
         self.staging.clear();
         let reserve = size.unwrap_or(0).min(MAX_PRERESERVE);

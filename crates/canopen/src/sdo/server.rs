@@ -1,0 +1,802 @@
+//! One SDO server channel (CiA 301 §7.2.4): expedited, segmented and block transfers in
+//! both directions, answered within the call that delivers the request.
+//!
+//! The server is sans-IO: [`SdoServer::on_frame`] takes a frame, the current time and the
+//! device's [`ObjectAccess`], and queues its answer into the [`Outbox`];
+//! [`SdoServer::on_tick`] enforces the SDO timeout. It keeps no copy of the data being
+//! transferred: uploads read the value segment by segment from the device and downloads
+//! stream into it ([`ObjectAccess::write_begin`] …). The expedited path does not allocate.
+//!
+//! Decisions where CiA 301 leaves room, all as CANopenNode v4 does:
+//! * A frame whose command specifier is not the next step of the transfer in progress
+//!   (including a new initiate) aborts that transfer with 0x05040001 and is not served;
+//!   the client starts again. An abort from the client ends the transfer silently.
+//! * Frames with fewer than 8 data bytes and remote frames are not SDO requests (CiA 301
+//!   §7.2.4.3: the SDO data field is 8 bytes) and are ignored.
+//! * An expedited download without indicated size writes the type's size if it is below
+//!   4 bytes, else 4 bytes.
+//! * Block download: a segment out of sequence is ignored; at the end of the block (or at
+//!   the segment flagged last) the acknowledgement carries the last sequence number
+//!   received in order, so the client repeats the rest (§7.2.4.3.10). A sequence number of
+//!   0 or above the block size aborts with 0x05040003.
+//! * Block upload switches to a normal (expedited or segmented) upload when the client's
+//!   protocol switch threshold is not 0 and the size is at or below it (§7.2.4.3.12).
+//! * The server supports CRC; it is used when the client supports it too.
+
+use super::crc::Crc16;
+use super::wire::{BlockSegment, Initiate, Mux, Request, Response};
+use crate::abort::AbortCode;
+use crate::od::ObjectAccess;
+use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
+
+/// The default SDO timeout.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// The largest number of segments in a block (CiA 301 §7.2.4.3.9).
+pub const MAX_BLOCK_SIZE: u8 = 127;
+
+/// Decodes a CiA 301 COB-ID entry (e.g. 0x1200 sub-indices 1 and 2, §7.5.2.33): bit 31 set
+/// means not valid, bit 29 selects a 29-bit identifier. `None` if not valid or out of range.
+pub fn cob_id(raw: u32) -> Option<Id> {
+    if raw & 0x8000_0000 != 0 {
+        return None;
+    }
+    if raw & 0x2000_0000 != 0 {
+        Id::extended(raw & 0x1FFF_FFFF).ok()
+    } else {
+        u16::try_from(raw & 0x1FFF_FFFF)
+            .ok()
+            .and_then(|r| Id::standard(r).ok())
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum State {
+    Idle,
+    Download {
+        toggle: bool,
+        size: Option<u32>,
+        received: u32,
+    },
+    Upload {
+        toggle: bool,
+        size: u32,
+        offset: u32,
+    },
+    BlockDownload {
+        crc_on: bool,
+        size: Option<u32>,
+        /// Bytes handed to the device so far (the held-back segment not included).
+        flushed: u32,
+        /// Sequence number of the last segment received in order in this block.
+        seq: u8,
+        /// The last segment received in order is held back until it is known how many of
+        /// its bytes are data (the end frame says so for the last one).
+        pending: Option<[u8; 7]>,
+        /// The segment flagged last was received and acknowledged: the end frame is next.
+        finished: bool,
+    },
+    BlockUploadInitiated {
+        crc_on: bool,
+        size: u32,
+        blksize: u8,
+    },
+    BlockUpload {
+        crc_on: bool,
+        size: u32,
+        blksize: u8,
+        /// Offset of the first byte of the current block.
+        block_start: u32,
+        /// Segments sent in the current block.
+        sent: u8,
+        /// Data bytes in the last segment sent, when the block holds the last segment.
+        last_len: Option<u8>,
+    },
+    BlockUploadEnding,
+}
+
+/// One SDO server channel.
+#[derive(Debug, Clone)]
+pub struct SdoServer {
+    rx: Option<Id>,
+    tx: Option<Id>,
+    timeout: Duration,
+    block_size: u8,
+    state: State,
+    mux: Mux,
+    deadline: Option<Instant>,
+    crc: Crc16,
+    /// CRC after each segment of the current upload block (index = sequence number), so a
+    /// repeated block resumes the CRC where the acknowledged data ends.
+    block_crcs: [u16; 128],
+}
+
+impl SdoServer {
+    /// A server receiving requests on `rx` and answering on `tx`.
+    pub fn new(rx: Id, tx: Id) -> Self {
+        SdoServer {
+            rx: Some(rx),
+            tx: Some(tx),
+            timeout: DEFAULT_TIMEOUT,
+            block_size: MAX_BLOCK_SIZE,
+            state: State::Idle,
+            mux: Mux::default(),
+            deadline: None,
+            crc: Crc16::new(),
+            block_crcs: [0; 128],
+        }
+    }
+
+    /// The default server of a node (0x1200: 0x600 + node-ID / 0x580 + node-ID, CiA 301
+    /// §7.3.3 pre-defined connection set). Node-IDs outside 1..=127 give an invalid server.
+    pub fn for_node(node_id: u8) -> Self {
+        let id = u32::from(node_id);
+        let (rx, tx) = if (1..=127).contains(&node_id) {
+            (0x600 + id, 0x580 + id)
+        } else {
+            (0x8000_0000, 0x8000_0000)
+        };
+        let mut s = SdoServer::new(
+            Id::Standard(cantwin_can::StandardId::MAX),
+            Id::Standard(cantwin_can::StandardId::MAX),
+        );
+        s.set_cob_ids(rx, tx);
+        s
+    }
+
+    /// Sets the COB-IDs from their CiA 301 object dictionary form (0x1200..0x127F
+    /// sub-indices 1 and 2). The channel works only while both are valid. A transfer in
+    /// progress ends without a frame.
+    pub fn set_cob_ids(&mut self, client_to_server: u32, server_to_client: u32) {
+        self.rx = cob_id(client_to_server);
+        self.tx = cob_id(server_to_client);
+        self.state = State::Idle;
+        self.deadline = None;
+    }
+
+    /// The identifier requests arrive on, if the channel is valid.
+    pub fn rx_id(&self) -> Option<Id> {
+        self.rx.filter(|_| self.tx.is_some())
+    }
+
+    /// The identifier answers are sent on, if the channel is valid.
+    pub fn tx_id(&self) -> Option<Id> {
+        self.tx.filter(|_| self.rx.is_some())
+    }
+
+    /// Sets the SDO timeout (default 1 s): a transfer with no request for this long is
+    /// aborted with 0x05040000.
+    pub fn set_timeout(&mut self, timeout: Duration) {
+        self.timeout = timeout;
+    }
+
+    /// The SDO timeout.
+    pub fn timeout(&self) -> Duration {
+        self.timeout
+    }
+
+    /// Sets the block size the server offers for block downloads (clamped to 1..=127).
+    pub fn set_block_size(&mut self, blksize: u8) {
+        self.block_size = blksize.clamp(1, MAX_BLOCK_SIZE);
+    }
+
+    /// Whether no transfer is in progress.
+    pub fn is_idle(&self) -> bool {
+        self.state == State::Idle
+    }
+
+    /// When [`Self::on_tick`] must be called next (the SDO timeout of the transfer in
+    /// progress).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.deadline
+    }
+
+    /// Ends any transfer without a frame (NMT reset, channel disabled).
+    pub fn reset(&mut self, access: &mut dyn ObjectAccess) {
+        self.cancel(access);
+    }
+
+    /// Handles a frame if it is addressed to this server; returns whether it was.
+    #[inline]
+    pub fn on_frame(
+        &mut self,
+        frame: &Frame,
+        now: Instant,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> bool {
+        if frame.is_remote() || Some(frame.id()) != self.rx_id() {
+            return false;
+        }
+        if let Ok(data) = <&[u8; 8]>::try_from(frame.data_bytes()) {
+            self.on_request(data, now, access, out);
+        }
+        true
+    }
+
+    /// The SDO timeout: aborts a transfer that has waited too long.
+    pub fn on_tick(&mut self, now: Instant, access: &mut dyn ObjectAccess, out: &mut Outbox) {
+        if self.deadline.is_some_and(|d| now >= d) {
+            self.abort(AbortCode::TIMEOUT, access, out);
+        }
+    }
+
+    /// Handles the 8 data bytes of a request.
+    pub fn on_request(
+        &mut self,
+        b: &[u8; 8],
+        now: Instant,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) {
+        let Some(tx) = self.tx_id() else { return };
+        // Block download segments carry no command specifier.
+        if let State::BlockDownload {
+            finished: false, ..
+        } = self.state
+        {
+            self.deadline = now.checked_add(self.timeout);
+            self.block_segment(BlockSegment::decode(b), tx, access, out);
+            return;
+        }
+        let req = match Request::decode(b) {
+            Ok(r) => r,
+            Err(_) => {
+                if self.state == State::Idle {
+                    self.mux = Mux::default();
+                }
+                self.abort(AbortCode::INVALID_COMMAND, access, out);
+                return;
+            }
+        };
+        if let Request::Abort { .. } = req {
+            self.cancel(access);
+            return;
+        }
+        self.deadline = now.checked_add(self.timeout);
+        let result = match self.state {
+            State::Idle => self.initiate(req, tx, access, out),
+            State::Download { .. } => self.download_segment(req, tx, access, out),
+            State::Upload { .. } => self.upload_segment(req, tx, access, out),
+            State::BlockDownload { .. } => self.block_download_end(req, tx, access, out),
+            State::BlockUploadInitiated { .. } => match req {
+                Request::BlockUploadStart => self.send_block(tx, access, out),
+                _ => Err(AbortCode::INVALID_COMMAND),
+            },
+            State::BlockUpload { .. } => self.block_upload_ack(req, tx, access, out),
+            State::BlockUploadEnding => match req {
+                Request::BlockUploadEnd => {
+                    self.finish();
+                    Ok(())
+                }
+                _ => Err(AbortCode::INVALID_COMMAND),
+            },
+        };
+        if let Err(code) = result {
+            self.abort(code, access, out);
+        } else if self.state == State::Idle {
+            self.deadline = None;
+        }
+    }
+
+    fn send(out: &mut Outbox, tx: Id, r: Response) {
+        out.push(Frame::data_array(tx, r.encode()));
+    }
+
+    fn finish(&mut self) {
+        self.state = State::Idle;
+        self.deadline = None;
+    }
+
+    /// Ends the transfer without a frame, dropping a partial download.
+    fn cancel(&mut self, access: &mut dyn ObjectAccess) {
+        if matches!(
+            self.state,
+            State::Download { .. } | State::BlockDownload { .. }
+        ) {
+            access.write_cancel(self.mux.index, self.mux.sub);
+        }
+        self.finish();
+    }
+
+    /// Sends an abort for the current multiplexer and ends the transfer.
+    fn abort(&mut self, code: AbortCode, access: &mut dyn ObjectAccess, out: &mut Outbox) {
+        self.cancel(access);
+        if let Some(tx) = self.tx_id() {
+            Self::send(
+                out,
+                tx,
+                Response::Abort {
+                    mux: self.mux,
+                    code,
+                },
+            );
+        }
+    }
+
+    fn initiate(
+        &mut self,
+        req: Request,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        match req {
+            Request::InitiateUpload { mux } => {
+                self.mux = mux;
+                self.start_upload(mux, tx, access, out)
+            }
+            Request::InitiateDownload { mux, init } => {
+                self.mux = mux;
+                match init {
+                    Initiate::Expedited { data, len } => {
+                        let len = match len {
+                            Some(l) => usize::from(l),
+                            None => access
+                                .fixed_size(mux.index, mux.sub)
+                                .filter(|s| *s < 4)
+                                .unwrap_or(4),
+                        };
+                        access.write(mux.index, mux.sub, &data[..len])?;
+                    }
+                    Initiate::Segmented { size } => {
+                        access.write_begin(mux.index, mux.sub, size.map(|s| s as usize))?;
+                        self.state = State::Download {
+                            toggle: false,
+                            size,
+                            received: 0,
+                        };
+                    }
+                }
+                Self::send(out, tx, Response::InitiateDownload { mux });
+                Ok(())
+            }
+            Request::BlockDownloadInitiate { mux, crc, size } => {
+                self.mux = mux;
+                access.write_begin(mux.index, mux.sub, size.map(|s| s as usize))?;
+                self.crc = Crc16::new();
+                self.state = State::BlockDownload {
+                    crc_on: crc,
+                    size,
+                    flushed: 0,
+                    seq: 0,
+                    pending: None,
+                    finished: false,
+                };
+                Self::send(
+                    out,
+                    tx,
+                    Response::BlockDownloadInitiate {
+                        mux,
+                        crc: true,
+                        blksize: self.block_size,
+                    },
+                );
+                Ok(())
+            }
+            Request::BlockUploadInitiate {
+                mux,
+                crc,
+                blksize,
+                pst,
+            } => {
+                self.mux = mux;
+                if blksize == 0 || blksize > MAX_BLOCK_SIZE {
+                    return Err(AbortCode::INVALID_BLOCK_SIZE);
+                }
+                let info = access.read(mux.index, mux.sub, 0, &mut [])?;
+                let size = u32::try_from(info.size).map_err(|_| AbortCode::LENGTH_TOO_HIGH)?;
+                if pst != 0 && size <= u32::from(pst) {
+                    return self.start_upload(mux, tx, access, out);
+                }
+                self.state = State::BlockUploadInitiated {
+                    crc_on: crc,
+                    size,
+                    blksize,
+                };
+                Self::send(
+                    out,
+                    tx,
+                    Response::BlockUploadInitiate {
+                        mux,
+                        crc: true,
+                        size: Some(size),
+                    },
+                );
+                Ok(())
+            }
+            _ => {
+                self.mux = Mux::default();
+                Err(AbortCode::INVALID_COMMAND)
+            }
+        }
+    }
+
+    /// Initiate upload response: expedited up to 4 bytes, otherwise segmented with size.
+    fn start_upload(
+        &mut self,
+        mux: Mux,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let mut data = [0u8; 4];
+        let info = access.read(mux.index, mux.sub, 0, &mut data)?;
+        let size = u32::try_from(info.size).map_err(|_| AbortCode::LENGTH_TOO_HIGH)?;
+        let init = if (1..=4).contains(&info.size) {
+            Initiate::Expedited {
+                data,
+                len: Some(info.size as u8),
+            }
+        } else {
+            self.state = State::Upload {
+                toggle: false,
+                size,
+                offset: 0,
+            };
+            Initiate::Segmented { size: Some(size) }
+        };
+        Self::send(out, tx, Response::InitiateUpload { mux, init });
+        Ok(())
+    }
+
+    fn download_segment(
+        &mut self,
+        req: Request,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let (
+            State::Download {
+                toggle: expected,
+                size,
+                received,
+            },
+            Request::DownloadSegment {
+                toggle,
+                last,
+                len,
+                data,
+            },
+        ) = (self.state, req)
+        else {
+            return Err(AbortCode::INVALID_COMMAND);
+        };
+        if toggle != expected {
+            return Err(AbortCode::TOGGLE_BIT_NOT_ALTERNATED);
+        }
+        let received = received.saturating_add(u32::from(len));
+        if size.is_some_and(|s| received > s) {
+            return Err(AbortCode::LENGTH_TOO_HIGH);
+        }
+        access.write_segment(self.mux.index, self.mux.sub, &data[..usize::from(len)])?;
+        if last {
+            if size.is_some_and(|s| received < s) {
+                return Err(AbortCode::LENGTH_TOO_LOW);
+            }
+            access.write_end(self.mux.index, self.mux.sub)?;
+            self.finish();
+        } else {
+            self.state = State::Download {
+                toggle: !toggle,
+                size,
+                received,
+            };
+        }
+        Self::send(out, tx, Response::DownloadSegment { toggle });
+        Ok(())
+    }
+
+    fn upload_segment(
+        &mut self,
+        req: Request,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let (
+            State::Upload {
+                toggle: expected,
+                size,
+                offset,
+            },
+            Request::UploadSegment { toggle },
+        ) = (self.state, req)
+        else {
+            return Err(AbortCode::INVALID_COMMAND);
+        };
+        if toggle != expected {
+            return Err(AbortCode::TOGGLE_BIT_NOT_ALTERNATED);
+        }
+        let (data, len) = self.read_segment(access, offset, size)?;
+        let offset = offset + u32::from(len);
+        let last = offset >= size;
+        if last {
+            self.finish();
+        } else {
+            self.state = State::Upload {
+                toggle: !toggle,
+                size,
+                offset,
+            };
+        }
+        Self::send(
+            out,
+            tx,
+            Response::UploadSegment {
+                toggle,
+                last,
+                len,
+                data,
+            },
+        );
+        Ok(())
+    }
+
+    /// Reads up to 7 bytes at `offset` of a value announced as `size` bytes long. A value
+    /// that shrank under the transfer aborts it (0x08000024, no data available).
+    fn read_segment(
+        &self,
+        access: &mut dyn ObjectAccess,
+        offset: u32,
+        size: u32,
+    ) -> Result<([u8; 7], u8), AbortCode> {
+        let mut data = [0u8; 7];
+        let want = (size - offset.min(size)).min(7) as usize;
+        let info = access.read(
+            self.mux.index,
+            self.mux.sub,
+            offset as usize,
+            &mut data[..want],
+        )?;
+        if info.copied < want {
+            return Err(AbortCode::NO_DATA);
+        }
+        Ok((data, want as u8))
+    }
+
+    fn block_segment(
+        &mut self,
+        seg: BlockSegment,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) {
+        let State::BlockDownload {
+            crc_on,
+            size,
+            mut flushed,
+            seq,
+            mut pending,
+            ..
+        } = self.state
+        else {
+            return;
+        };
+        if seg.seqno == 0 || seg.seqno > self.block_size {
+            self.abort(AbortCode::INVALID_SEQUENCE_NUMBER, access, out);
+            return;
+        }
+        let end_of_block = seg.last || seg.seqno == self.block_size;
+        if seg.seqno != seq + 1 {
+            // Out of sequence (a segment was lost, or this one is repeated): ignore it, and
+            // at the end of the block acknowledge what arrived in order.
+            if end_of_block {
+                Self::send(
+                    out,
+                    tx,
+                    Response::BlockDownloadAck {
+                        ackseq: seq,
+                        blksize: self.block_size,
+                    },
+                );
+                self.set_block_seq(0);
+            }
+            return;
+        }
+        if let Some(prev) = pending {
+            flushed = flushed.saturating_add(7);
+            if size.is_some_and(|s| flushed > s) {
+                self.abort(AbortCode::LENGTH_TOO_HIGH, access, out);
+                return;
+            }
+            if let Err(code) = access.write_segment(self.mux.index, self.mux.sub, &prev) {
+                self.abort(code, access, out);
+                return;
+            }
+            self.crc.update(&prev);
+        }
+        pending = Some(seg.data);
+        self.state = State::BlockDownload {
+            crc_on,
+            size,
+            flushed,
+            seq: if end_of_block { 0 } else { seg.seqno },
+            pending,
+            finished: seg.last,
+        };
+        if end_of_block {
+            Self::send(
+                out,
+                tx,
+                Response::BlockDownloadAck {
+                    ackseq: seg.seqno,
+                    blksize: self.block_size,
+                },
+            );
+        }
+    }
+
+    fn set_block_seq(&mut self, new: u8) {
+        if let State::BlockDownload { seq, .. } = &mut self.state {
+            *seq = new;
+        }
+    }
+
+    fn block_download_end(
+        &mut self,
+        req: Request,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let (
+            State::BlockDownload {
+                crc_on,
+                size,
+                flushed,
+                pending,
+                ..
+            },
+            Request::BlockDownloadEnd { unused, crc },
+        ) = (self.state, req)
+        else {
+            return Err(AbortCode::INVALID_COMMAND);
+        };
+        let last = pending.unwrap_or_default();
+        let len = 7 - usize::from(unused.min(7));
+        let total = flushed.saturating_add(len as u32);
+        if let Some(s) = size {
+            if total > s {
+                return Err(AbortCode::LENGTH_TOO_HIGH);
+            }
+            if total < s {
+                return Err(AbortCode::LENGTH_TOO_LOW);
+            }
+        }
+        access.write_segment(self.mux.index, self.mux.sub, &last[..len])?;
+        self.crc.update(&last[..len]);
+        if crc_on && self.crc.value() != crc {
+            return Err(AbortCode::CRC_ERROR);
+        }
+        access.write_end(self.mux.index, self.mux.sub)?;
+        self.finish();
+        Self::send(out, tx, Response::BlockDownloadEnd);
+        Ok(())
+    }
+
+    /// Sends the segments of one upload block, from the current block start.
+    fn send_block(
+        &mut self,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let (crc_on, size, blksize, block_start) = match self.state {
+            State::BlockUploadInitiated {
+                crc_on,
+                size,
+                blksize,
+            } => {
+                self.crc = Crc16::new();
+                (crc_on, size, blksize, 0)
+            }
+            State::BlockUpload {
+                crc_on,
+                size,
+                blksize,
+                block_start,
+                ..
+            } => (crc_on, size, blksize, block_start),
+            _ => return Err(AbortCode::INVALID_COMMAND),
+        };
+        let mut crc = self.crc;
+        self.block_crcs[0] = crc.value();
+        let mut offset = block_start;
+        let mut sent = 0u8;
+        let mut last_len = None;
+        while sent < blksize {
+            sent += 1;
+            let (data, len) = self.read_segment(access, offset, size)?;
+            offset += u32::from(len);
+            crc.update(&data[..usize::from(len)]);
+            self.block_crcs[usize::from(sent)] = crc.value();
+            let last = offset >= size;
+            Self::send_segment(
+                out,
+                tx,
+                BlockSegment {
+                    last,
+                    seqno: sent,
+                    data,
+                },
+            );
+            if last {
+                last_len = Some(len);
+                break;
+            }
+        }
+        self.state = State::BlockUpload {
+            crc_on,
+            size,
+            blksize,
+            block_start,
+            sent,
+            last_len,
+        };
+        Ok(())
+    }
+
+    fn send_segment(out: &mut Outbox, tx: Id, seg: BlockSegment) {
+        out.push(Frame::data_array(tx, seg.encode()));
+    }
+
+    fn block_upload_ack(
+        &mut self,
+        req: Request,
+        tx: Id,
+        access: &mut dyn ObjectAccess,
+        out: &mut Outbox,
+    ) -> Result<(), AbortCode> {
+        let (
+            State::BlockUpload {
+                crc_on,
+                size,
+                block_start,
+                sent,
+                last_len,
+                ..
+            },
+            Request::BlockUploadAck { ackseq, blksize },
+        ) = (self.state, req)
+        else {
+            return Err(AbortCode::INVALID_COMMAND);
+        };
+        if blksize == 0 || blksize > MAX_BLOCK_SIZE {
+            return Err(AbortCode::INVALID_BLOCK_SIZE);
+        }
+        if ackseq > sent {
+            return Err(AbortCode::INVALID_SEQUENCE_NUMBER);
+        }
+        // CRC of the data acknowledged so far.
+        self.crc = Crc16::from_value(self.block_crcs[usize::from(ackseq)]);
+        if ackseq == sent
+            && let Some(len) = last_len
+        {
+            self.state = State::BlockUploadEnding;
+            let crc = if crc_on { self.crc.value() } else { 0 };
+            Self::send(
+                out,
+                tx,
+                Response::BlockUploadEnd {
+                    unused: 7 - len,
+                    crc,
+                },
+            );
+            return Ok(());
+        }
+        // Segments 1..=ackseq were full (the last one is never followed by more); the next
+        // block starts after them, repeating whatever was not acknowledged.
+        let block_start = block_start + 7 * u32::from(ackseq);
+        self.state = State::BlockUpload {
+            crc_on,
+            size,
+            blksize,
+            block_start,
+            sent: 0,
+            last_len: None,
+        };
+        self.send_block(tx, access, out)
+    }
+}
