@@ -161,3 +161,27 @@ fn time_map_converts_both_ways() {
     );
     assert_eq!(map.unix_nanos(t), 1_700_000_000_000_000_000 + 1_000_000);
 }
+
+#[test]
+fn a_simulation_that_falls_behind_gives_up_the_backlog_and_slips_its_time_map() {
+    let mut sim = Simulation::new();
+    sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    // No lag allowed at all: any time that passed before the simulation caught up is given
+    // up, and the wall time of bus instants moves later by as much.
+    let paced = PacedSimulation::start(
+        sim,
+        PacedConfig {
+            max_lag: Duration::ZERO,
+            ..PacedConfig::default()
+        },
+    );
+    let h = paced.handle();
+    let before = h.time_map();
+    let now = h.now().unwrap();
+    assert!(h.slips() >= 1);
+    let after = h.time_map();
+    assert_eq!(after.bus_origin, before.bus_origin);
+    assert!(after.wall_origin > before.wall_origin);
+    // With no lag allowed the simulation stands exactly at the wall clock it read.
+    assert!(now > Instant::ZERO);
+}
