@@ -351,3 +351,28 @@ fn reply_over_32_bytes_is_refused() {
     assert_eq!(deliver(&mut s, "44C#0A0E010107", t), ["44B#0A9411FF"]);
     assert_eq!(deliver(&mut s, "44C#0A0E010101", t), ["44B#0A8E2301"]);
 }
+
+/// Message Router (class 0x02): routes requests; exposes only its class revision. Unknown
+/// classes, instances, attributes and services get their general status codes.
+#[test]
+fn message_router_and_general_status_codes() {
+    let (mut s, t) = allocated(0x01);
+    assert_eq!(deliver(&mut s, "44C#0A0E020001", t), ["44B#0A8E0100"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E020101", t), ["44B#0A9414FF"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E020201", t), ["44B#0A9416FF"]);
+    assert_eq!(
+        deliver(&mut s, "44C#0A10020101 00".replace(' ', "").as_str(), t),
+        ["44B#0A9414FF"]
+    );
+    // Unknown class, unknown Identity attribute, Get with extra data, request too short.
+    assert_eq!(deliver(&mut s, "44C#0A0E990101", t), ["44B#0A9416FF"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E010163", t), ["44B#0A9414FF"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E01010100", t), ["44B#0A9415FF"]);
+    assert_eq!(deliver(&mut s, "44C#0A0E01", t), ["44B#0A9413FF"]);
+    // Identity: class revision, and Set of a Get-only attribute.
+    assert_eq!(deliver(&mut s, "44C#0A0E010001", t), ["44B#0A8E0100"]);
+    assert_eq!(
+        deliver(&mut s, "44C#0A1001010101 00".replace(' ', "").as_str(), t),
+        ["44B#0A940EFF"]
+    );
+}
