@@ -26,6 +26,7 @@
 pub mod abort;
 pub mod od;
 pub mod sdo;
+pub mod wire;
 
 pub use abort::AbortCode;
 pub use od::ObjectAccess;
