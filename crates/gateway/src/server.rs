@@ -355,9 +355,8 @@ fn accept_loop<P: Protocol>(shared: &Arc<Shared<P>>, listener: &TcpListener) {
         match listener.accept() {
             Ok((stream, _peer)) => {
                 next_id += 1;
-                if let Err(_e) = admit(shared, stream, next_id) {
-                    // The client vanished while being set up: nothing to clean.
-                }
+                // A client that vanished while being set up leaves nothing behind.
+                let _ = admit(shared, stream, next_id);
             }
             Err(e) if e.kind() == ErrorKind::WouldBlock => thread::sleep(ACCEPT_POLL),
             Err(e) if e.kind() == ErrorKind::Interrupted => {}
