@@ -9,10 +9,10 @@
 //!
 //! # Catch-up policy
 //!
-//! If the host cannot keep up (the simulation falls more than [`PacedConfig::max_lag`] of bus
-//! time behind the wall clock), the backlog beyond `max_lag` is given up: bus time does not
-//! jump, the mapping to wall time slips by the excess instead (counted in
-//! [`SimHandle::slips`]) and pacing goes on from there. Bus time therefore never runs ahead of
+//! If the host cannot keep up (an event due more than [`PacedConfig::max_lag`] ago has not
+//! run yet), the backlog beyond `max_lag` is given up: bus time does not jump, the mapping to
+//! wall time slips by the excess instead (counted in [`SimHandle::slips`]) and pacing goes on
+//! from there. Bus time therefore never runs ahead of
 //! the wall clock, never skips events, and at worst runs slower than it. [`TimeMap`] always
 //! gives the current mapping, which captures use to stamp frames.
 //!
@@ -135,12 +135,15 @@ impl State {
     /// Run the simulation up to the wall clock, applying the catch-up policy.
     fn advance(&mut self) {
         let mut target = self.target();
-        let Some(sim) = self.sim.as_ref() else { return };
-        let limit = sim.now() + self.config.max_lag;
-        if target > limit {
-            self.slipped += target - limit;
+        let Some(sim) = self.sim.as_mut() else { return };
+        // Late is an event that was due more than `max_lag` ago and has not run yet.
+        if let Some(next) = sim.next_event_time()
+            && target > next + self.config.max_lag
+        {
+            let give_up = target - (next + self.config.max_lag);
+            self.slipped += give_up;
             self.slips += 1;
-            target = limit;
+            target -= give_up;
         }
         let map = self.time_map();
         if let Some(sim) = self.sim.as_mut() {
