@@ -159,3 +159,46 @@ proptest! {
 fn mac9() -> cantwin_devicenet::MacId {
     mac(9)
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(128))]
+
+    /// Lost frames during fragmented transfers (both directions, acknowledges included)
+    /// end in the exact response or a timeout, never in wrong data; the slave applies the
+    /// typed write whole or not at all.
+    #[test]
+    fn lost_fragments_give_exact_data_or_timeout(drops in prop::collection::vec(any::<bool>(), 0..40)) {
+        use cantwin_devicenet::ScannerEvent;
+        let mut m = Scanner::new(ScannerConfig::new(mac(0), 1, 2));
+        let mut s = slave(9);
+        let mut w = Wire::new();
+        w.power_up(&mut [&mut m, &mut s]);
+        w.run_until(&mut [&mut m, &mut s], at(2 * SEC));
+        m.open_ucmm(mac(9), BodyFormat::F8_16).unwrap();
+        w.run_until(&mut [&mut m, &mut s], at(2 * SEC));
+        while m.poll_event().is_some() {}
+        m.request(mac(9), 0x01, 1, 1, &[]).unwrap();
+        m.request(mac(9), 0x35, 0x66, 700, &[7, 0x40, 0x0D, 0x03, 0x00]).unwrap();
+        let mut n = 0usize;
+        w.drop = Box::new(move |_, _| {
+            n += 1;
+            drops.get(n - 1).copied().unwrap_or(false)
+        });
+        w.run_until(&mut [&mut m, &mut s], at(20 * SEC));
+        let all = identity();
+        for e in std::iter::from_fn(|| m.poll_event()) {
+            match e {
+                ScannerEvent::Response { service: 0x01, data, .. } => {
+                    prop_assert_eq!(cantwin_devicenet::scanner::parse_identity(&data), Some(all.clone()));
+                }
+                ScannerEvent::Response { service: 0x35, data, .. } => {
+                    prop_assert_eq!(data, vec![0, 0]);
+                }
+                ScannerEvent::Timeout { .. } => {}
+                other => prop_assert!(false, "{:?}", other),
+            }
+        }
+        let v = s.app().pars[&700].value;
+        prop_assert!(v == 100_000 || v == 200_000, "{}", v);
+    }
+}

@@ -425,3 +425,50 @@ fn request_without_a_connection_is_reported_not_sent() {
         Err(cantwin_devicenet::scanner::ScannerError::OwnMac(mac(0)))
     );
 }
+
+/// The transaction ID tells a late answer to an abandoned request from the answer to the
+/// next one.
+#[test]
+fn stale_response_with_the_old_xid_is_ignored() {
+    let mut m = scanner();
+    let mut out = cantwin_can::Outbox::new();
+    m.on_power_up(at(0), &mut out);
+    m.on_tick(at(SEC), &mut out);
+    m.on_tick(at(2 * SEC), &mut out);
+    events(&mut m);
+    m.allocate(mac(9), choice::EXPLICIT).unwrap();
+    m.get_attribute_single(mac(9), 1, 1, 1).unwrap();
+    out.clear();
+    m.on_tick(at(2 * SEC), &mut out);
+    assert_eq!(sent(&mut out), ["44E#404B03010100"]);
+    assert_eq!(
+        deliver(&mut m, "44B#40CB00", at(2 * SEC)),
+        ["44C#000E010101"]
+    );
+    // No answer to the first Get (XID 0): timeout, then the second Get goes with XID 1.
+    m.get_attribute_single(mac(9), 1, 1, 6).unwrap();
+    m.on_tick(at(3 * SEC), &mut out);
+    assert_eq!(sent(&mut out), ["44C#400E010106"]);
+    // The late answer to the first Get (XID 0) is not taken for the second.
+    assert!(deliver(&mut m, "44B#008E2301", at(3 * SEC)).is_empty());
+    assert!(deliver(&mut m, "44B#408E0D0C0B0A", at(3 * SEC)).is_empty());
+    assert_eq!(
+        events(&mut m),
+        [
+            ScannerEvent::Allocated {
+                slave: mac(9),
+                choice: 1,
+                format: BodyFormat::F8_8
+            },
+            ScannerEvent::Timeout {
+                slave: mac(9),
+                service: 0x0E
+            },
+            ScannerEvent::Response {
+                slave: mac(9),
+                service: 0x0E,
+                data: vec![0x0D, 0x0C, 0x0B, 0x0A]
+            }
+        ]
+    );
+}

@@ -137,6 +137,7 @@ impl Scanner {
                 p.in_flight = Some(InFlight {
                     op,
                     service: svc,
+                    xid: p.xid,
                     route,
                     deadline: now + timeout,
                     browse,
@@ -177,7 +178,7 @@ impl Scanner {
         let Some(f) = p.in_flight.as_ref() else {
             return;
         };
-        if !routes.contains(&f.route) {
+        if !routes.contains(&f.route) || frame.header().xid != f.xid {
             return;
         }
         let route = f.route;

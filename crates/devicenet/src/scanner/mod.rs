@@ -169,6 +169,8 @@ enum Route {
 struct InFlight {
     op: Op,
     service: u8,
+    /// The transaction ID sent; the server echoes it, so stale answers are told apart.
+    xid: bool,
     route: Route,
     deadline: Instant,
     browse: bool,
