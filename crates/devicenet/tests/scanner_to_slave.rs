@@ -472,3 +472,27 @@ fn stale_response_with_the_old_xid_is_ignored() {
         ]
     );
 }
+
+/// A single poll through the API, without a cycle.
+#[test]
+fn one_shot_poll() {
+    let (mut m, mut s, mut w) = setup(2);
+    m.allocate(mac(9), choice::EXPLICIT | choice::POLLED)
+        .unwrap();
+    m.set_expected_packet_rate(mac(9), 2, 1000).unwrap();
+    w.run_until(&mut [&mut m, &mut s], at(2 * SEC));
+    events(&mut m);
+    let mut out = cantwin_can::Outbox::new();
+    m.poll(mac(9), &[9, 8, 7, 6], 4, &mut out);
+    let frames: Vec<Frame> = out.drain().collect();
+    assert_eq!(frames.len(), 1);
+    w.inject(&mut [&mut m, &mut s], 0, frames[0]);
+    assert_eq!(
+        events(&mut m),
+        [ScannerEvent::PollResponse {
+            slave: mac(9),
+            data: vec![0, 1, 2, 3]
+        }]
+    );
+    assert_eq!(s.app().consumed, vec![vec![9, 8, 7, 6]]);
+}

@@ -260,3 +260,16 @@ fn lost_acknowledge_retry_and_abort() {
     assert!(tick(&mut s, t1 + cantwin_can::Duration::from_secs(1)).is_empty());
     assert!(s.ucmm_connections()[0].tx.is_none());
 }
+
+/// A device configured to answer Allocate with 8/16 reaches every PAR on the predefined
+/// connection too.
+#[test]
+fn predefined_connection_with_8_16_allocation() {
+    let mut cfg =
+        cantwin_devicenet::SlaveConfig::new(mac(9), cantwin_can::BitRate::R500K, identity());
+    cfg.allocate_format = cantwin_devicenet::wire::BodyFormat::F8_16;
+    let mut s = Slave::new(cfg, Drive::new(1, 1)).unwrap();
+    let t = online(&mut s);
+    assert_eq!(deliver(&mut s, "44E#0A4B0301010A", t), ["44B#0ACB01"]);
+    assert_eq!(deliver(&mut s, "44C#0A32665802", t), ["44B#0AB200000000"]);
+}
