@@ -130,7 +130,9 @@ impl Connection {
     }
 
     /// The inactivity watchdog period: 4 × expected packet rate (DeviceNet Vol. 1,
-    /// Connection object, "Expected Packet Rate"), or `None` when the rate is 0.
+    /// Connection object, "Expected Packet Rate"; Rockwell 1769-SDN user manual, "Expected
+    /// Packet Rate": a device that receives nothing for four times the EPR drops the
+    /// connection), or `None` when the rate is 0.
     pub fn watchdog_period(&self) -> Option<Duration> {
         (self.epr_ms > 0).then(|| Duration::from_millis(4 * u64::from(self.epr_ms)))
     }
