@@ -1,0 +1,119 @@
+//! Turning a scenario into a running simulation.
+
+use std::path::PathBuf;
+
+use cantwin_bus::{BusConfig, BusId, PortId, Simulation};
+
+use crate::error::{Located, ScenarioError};
+use crate::model::Scenario;
+use crate::registry::{Registry, Settings};
+
+/// What the host provides to devices being built.
+#[derive(Debug, Clone, Default)]
+pub struct BuildEnv {
+    /// Where devices keep what they store (CANopen 0x1010) between runs; `None` keeps it in
+    /// memory only.
+    pub state_dir: Option<PathBuf>,
+}
+
+/// A device placed on a bus.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BuiltDevice {
+    /// Its name in the scenario.
+    pub name: String,
+    /// Its kind.
+    pub kind: String,
+    /// Its port.
+    pub port: PortId,
+}
+
+/// A scenario built into a simulation, with names resolved to ids.
+pub struct Built {
+    /// The simulation, at time zero.
+    pub sim: Simulation,
+    /// Buses by name, in file order.
+    pub buses: Vec<(String, BusId)>,
+    /// Devices in file order.
+    pub devices: Vec<BuiltDevice>,
+}
+
+impl Built {
+    /// The bus named `name`.
+    pub fn bus(&self, name: &str) -> Option<BusId> {
+        self.buses
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, id)| *id)
+    }
+
+    /// The device named `name`.
+    pub fn device(&self, name: &str) -> Option<&BuiltDevice> {
+        self.devices.iter().find(|d| d.name == name)
+    }
+}
+
+impl Scenario {
+    /// Build the buses and devices. Devices are powered at time zero in file order.
+    pub fn build(&self, registry: &Registry, env: &BuildEnv) -> Result<Built, ScenarioError> {
+        let mut sim = Simulation::new();
+        let mut buses = Vec::new();
+        for b in &self.buses {
+            let id = sim.add_bus(BusConfig::new(b.name.clone(), b.bit_rate).with_seed(self.seed));
+            buses.push((b.name.clone(), id));
+        }
+        let mut devices = Vec::new();
+        for d in &self.devices {
+            let kind = registry.get(&d.kind).ok_or_else(|| {
+                let known: Vec<&str> = registry.kinds().map(|k| k.name()).collect();
+                ScenarioError::Invalid {
+                    at: Located {
+                        file: self.file.clone(),
+                        line: Some(d.line),
+                        key: Some(format!("device[{}].kind", d.index)),
+                    },
+                    message: format!(
+                        "unknown device kind {:?} (kinds: {})",
+                        d.kind,
+                        known.join(", ")
+                    ),
+                }
+            })?;
+            let (spec, bus_id) = self
+                .buses
+                .iter()
+                .zip(&buses)
+                .find(|(b, _)| b.name == d.bus)
+                .map(|(b, (_, id))| (b, *id))
+                .ok_or_else(|| ScenarioError::Invalid {
+                    at: Located {
+                        file: self.file.clone(),
+                        line: Some(d.line),
+                        key: Some(format!("device[{}].bus", d.index)),
+                    },
+                    message: format!("no bus named {:?}", d.bus),
+                })?;
+            let settings = Settings::new(d, &self.file);
+            let (node, port_config) = kind.build(&settings, spec, env)?;
+            settings.finish()?;
+            let bus = sim.bus_mut(bus_id).ok_or_else(|| ScenarioError::Invalid {
+                at: Located {
+                    file: self.file.clone(),
+                    line: Some(d.line),
+                    key: None,
+                },
+                message: format!("bus {:?} vanished while building", d.bus),
+            })?;
+            let port = bus.attach_boxed(node, port_config);
+            devices.push(BuiltDevice {
+                name: d.name.clone(),
+                kind: d.kind.clone(),
+                port,
+            });
+        }
+        Ok(Built {
+            sim,
+            buses,
+            devices,
+        })
+    }
+}

@@ -1,0 +1,3 @@
+//! The device kinds built into cantwin.
+
+pub mod generator;
