@@ -189,3 +189,22 @@ fn release_bei_ideacod_ume_ocd_d2() {
     assert_eq!(s.devicenet_object().master, None);
     assert!(s.poll_connection().is_none() && s.explicit_connection().is_none());
 }
+
+/// I-7242D manual §7.2.11.1 "Unacknowledged Fragmentation example": a poll connection
+/// consuming 10 bytes gets `ID=10 001001 101 Data= 00 01 02 03 04 05 06 07` then
+/// `81 08 09 0A` from master 0x0A.
+#[test]
+fn io_fragmented_poll_command_icpdas_i7242d_7_2_11_1() {
+    let data: Vec<u8> = (1..=10).collect();
+    assert_eq!(
+        wire::io_fragments(&data),
+        vec![vec![0x00, 1, 2, 3, 4, 5, 6, 7], vec![0x81, 8, 9, 10]]
+    );
+    let mut s = slave_with(9, Drive::new(5, 1));
+    let t = online(&mut s);
+    deliver(&mut s, "44E#0A4B0301030A", t);
+    deliver(&mut s, "44C#0A100502096400", t);
+    assert!(deliver(&mut s, "44D#0001020304050607", t).is_empty());
+    assert_eq!(deliver(&mut s, "44D#8108090A", t), ["3C9#0001"]);
+    assert_eq!(s.app().consumed, vec![data]);
+}

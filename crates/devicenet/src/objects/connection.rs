@@ -176,6 +176,8 @@ impl Connection {
     /// expected packet rate is rounded up to it and the Set reply carries the value
     /// actually used (as the I-7242D trace of a Set EPR shows: 0x0E0A → 0x0E10).
     pub fn serve(&mut self, req: &Request<'_>, resolution_ms: u16, now: Instant) -> Reply {
+        // Reset restarts the inactivity timer and brings a timed-out connection back to
+        // Established (as the Rockwell 1403-NDNET data tables describe the service).
         if req.service == service::RESET {
             if !req.data.is_empty() {
                 return CipError::new(status::TOO_MUCH_DATA).into();
