@@ -3,6 +3,7 @@
 mod bench;
 mod benchmarks_md;
 mod demo;
+mod sim;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -24,6 +25,15 @@ enum Command {
     /// Run the embedded demo network in virtual time and print what happened.
     #[command(after_help = "Examples:\n  cantwin demo\n  cantwin demo --verbose")]
     Demo(demo::Args),
+    /// Run a scenario paced to the wall clock, with gateways for external tools.
+    #[command(
+        after_help = "Examples:\n  cantwin sim scenarios/cia301-device.toml --socketcand 29536\n  \
+                            cantwin sim scenarios/cia301-device.toml --socketcand 0 --duration 60\n  \
+                            cantwin sim scenario.toml --slcan 127.0.0.1:29537 --slcan-bus can0\n\n\
+                            Once a gateway accepts connections it prints one line per bus it serves:\n  \
+                            socketcand 127.0.0.1:29536 can0\n  slcan 127.0.0.1:29537 can0"
+    )]
+    Sim(sim::Args),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -37,6 +47,7 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Sim(args) => sim::run(&args),
     }
 }
 

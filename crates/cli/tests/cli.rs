@@ -90,3 +90,116 @@ fn bench_bus_short_run_prints_figures_and_records_them() {
     assert!(md.contains("cantwin -- bench bus --write"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn temp_dir(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("cantwin-cli-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+const GENERATORS: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\
+    [[device]]\nname = \"a\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x100\nperiod_ms = 20\n\
+    [[device]]\nname = \"b\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x200\nperiod_ms = 50\nlen = 0\n";
+
+#[test]
+fn sim_reports_scenario_errors_with_file_line_and_key() {
+    let dir = temp_dir("sim-err");
+    let file = dir.join("bad.toml");
+    std::fs::write(&file, "[[bus]]\nname = \"can0\"\nbit_rate = \"9k\"\n").unwrap();
+    let (ok, _, err) = cantwin(&["sim", file.to_str().unwrap(), "--duration", "1"]);
+    assert!(!ok);
+    assert!(
+        err.contains("bad.toml:3: key `bus[0].bit_rate`: unsupported CAN bit rate \"9k\""),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn sim_refuses_ambiguous_slcan_bus_and_non_loopback_without_flag() {
+    let dir = temp_dir("sim-args");
+    let file = dir.join("two.toml");
+    std::fs::write(
+        &file,
+        "[[bus]]\nname = \"can0\"\nbit_rate = \"1M\"\n[[bus]]\nname = \"can1\"\nbit_rate = \"1M\"\n",
+    )
+    .unwrap();
+    let (ok, _, err) = cantwin(&[
+        "sim",
+        file.to_str().unwrap(),
+        "--slcan",
+        "0",
+        "--duration",
+        "1",
+    ]);
+    assert!(!ok);
+    assert!(
+        err.contains("choose the one slcan serves with --slcan-bus NAME"),
+        "{err}"
+    );
+    let (ok, _, err) = cantwin(&[
+        "sim",
+        file.to_str().unwrap(),
+        "--socketcand",
+        "0.0.0.0:0",
+        "--duration",
+        "1",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("not a loopback address"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn sim_serves_socketcand_and_prints_one_line_per_bus() {
+    use std::io::BufRead;
+    let dir = temp_dir("sim-run");
+    let file = dir.join("gen.toml");
+    std::fs::write(&file, GENERATORS).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args([
+            "sim",
+            file.to_str().unwrap(),
+            "--socketcand",
+            "0",
+            "--duration",
+            "3",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(stdout)
+        .read_line(&mut line)
+        .unwrap();
+    let parts: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(parts.len(), 3, "{line}");
+    assert_eq!(parts[0], "socketcand");
+    assert_eq!(parts[2], "can0");
+    let addr: std::net::SocketAddr = parts[1].parse().unwrap();
+    assert!(addr.ip().is_loopback());
+    let client = cantwin_gateway::socketcand::Client::connect(
+        addr,
+        "can0",
+        std::time::Duration::from_secs(5),
+    )
+    .unwrap();
+    use cantwin_gateway::BusPort;
+    let mut ids = std::collections::BTreeSet::new();
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    while ids.len() < 2 && std::time::Instant::now() < until {
+        if let Some(rx) = client
+            .recv_timeout(std::time::Duration::from_millis(200))
+            .unwrap()
+        {
+            ids.insert(rx.frame.id().as_raw());
+        }
+    }
+    assert_eq!(ids.into_iter().collect::<Vec<_>>(), [0x100, 0x200]);
+    drop(client);
+    let status = child.wait().unwrap();
+    assert!(status.success());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,178 @@
+//! `cantwin sim SCENARIO.toml`: run a scenario paced to the wall clock, with gateways for
+//! external tools, until Ctrl-C or `--duration`.
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration as WallDuration, Instant as WallInstant};
+
+use anyhow::{Context, Result, bail};
+use cantwin_bus::{PacedConfig, PacedSimulation};
+use cantwin_gateway::paced::PacedBus;
+use cantwin_gateway::{Limits, slcan, socketcand};
+use cantwin_scenario::{BuildEnv, Registry, Scenario};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The scenario file (TOML).
+    scenario: PathBuf,
+    /// Serve every bus over the socketcand protocol on [ADDR:]PORT (ADDR defaults to
+    /// 127.0.0.1; port 0 picks a free port). Channel names are the scenario's bus names.
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    socketcand: Option<String>,
+    /// Serve one bus as an slcan (Lawicel) adapter over TCP on [ADDR:]PORT, for tools that
+    /// need remote frames (python-can `slcan` with `socket://ADDR:PORT`).
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    slcan: Option<String>,
+    /// The bus the slcan gateway serves (needed when the scenario has several).
+    #[arg(long, value_name = "NAME")]
+    slcan_bus: Option<String>,
+    /// Allow gateways to listen on addresses other than loopback. Anyone who can reach the
+    /// address can then put frames on the simulated buses.
+    #[arg(long)]
+    allow_remote: bool,
+    /// Stop after this many seconds of wall time (default: run until Ctrl-C).
+    #[arg(long, value_name = "SECONDS")]
+    duration: Option<f64>,
+    /// Directory where devices keep what they store (CANopen 0x1010) between runs.
+    #[arg(long, value_name = "DIR")]
+    state_dir: Option<PathBuf>,
+}
+
+/// `[ADDR:]PORT` with ADDR defaulting to loopback.
+fn parse_listen(spec: &str, flag: &str) -> Result<SocketAddr> {
+    if let Ok(port) = spec.parse::<u16>() {
+        return Ok(SocketAddr::new(IpAddr::V4(Ipv4Addr::LOCALHOST), port));
+    }
+    spec.parse::<SocketAddr>().with_context(|| {
+        format!("{flag} {spec:?}: expected PORT or ADDR:PORT, e.g. 29536 or 127.0.0.1:29536")
+    })
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let scenario = Scenario::load(&args.scenario)?;
+    if let Some(dir) = &args.state_dir {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating the state directory {}", dir.display()))?;
+    }
+    let env = BuildEnv {
+        state_dir: args.state_dir.clone(),
+    };
+    let built = scenario.build(&Registry::builtin(), &env)?;
+    let bus_names: Vec<String> = built.buses.iter().map(|(n, _)| n.clone()).collect();
+    let slcan_bus = match (&args.slcan, &args.slcan_bus) {
+        (None, Some(_)) => bail!("--slcan-bus needs --slcan"),
+        (None, None) => None,
+        (Some(_), Some(name)) => {
+            if !bus_names.contains(name) {
+                bail!(
+                    "--slcan-bus {name:?}: no such bus in {} (buses: {})",
+                    args.scenario.display(),
+                    bus_names.join(", ")
+                );
+            }
+            Some(name.clone())
+        }
+        (Some(_), None) if bus_names.len() == 1 => Some(bus_names[0].clone()),
+        (Some(_), None) => bail!(
+            "the scenario has several buses ({}): choose the one slcan serves with --slcan-bus NAME",
+            bus_names.join(", ")
+        ),
+    };
+    if let Some(d) = args.duration
+        && !(d.is_finite() && d > 0.0)
+    {
+        bail!("--duration must be a positive number of seconds, not {d}");
+    }
+    let limits = Limits {
+        allow_remote: args.allow_remote,
+        ..Limits::default()
+    };
+
+    let paced = PacedSimulation::start(built.sim, PacedConfig::default());
+    let handle = paced.handle();
+    let connector = Arc::new(PacedBus::new(handle.clone()));
+
+    eprintln!(
+        "cantwin sim: {} ({} buses, {} devices), paced to the wall clock",
+        scenario.name,
+        bus_names.len(),
+        built.devices.len()
+    );
+    for d in &built.devices {
+        let bus = built
+            .buses
+            .iter()
+            .find(|(_, id)| *id == d.port.bus())
+            .map(|(n, _)| n.as_str())
+            .unwrap_or("?");
+        eprintln!("  {} ({}) on {bus}", d.name, d.kind);
+    }
+    let mut socketcand_server = None;
+    if let Some(spec) = &args.socketcand {
+        let addr = parse_listen(spec, "--socketcand")?;
+        let server = socketcand::Server::bind(addr, connector.clone(), limits.clone())
+            .with_context(|| format!("starting the socketcand gateway on {addr}"))?;
+        for name in &bus_names {
+            println!("socketcand {} {name}", server.local_addr());
+        }
+        socketcand_server = Some(server);
+    }
+    let mut slcan_server = None;
+    if let (Some(spec), Some(bus)) = (&args.slcan, &slcan_bus) {
+        let addr = parse_listen(spec, "--slcan")?;
+        let server = slcan::Server::bind(addr, connector.clone(), bus, limits.clone())
+            .with_context(|| format!("starting the slcan gateway on {addr}"))?;
+        println!("slcan {} {bus}", server.local_addr());
+        slcan_server = Some(server);
+    }
+    use std::io::Write as _;
+    std::io::stdout().flush().ok();
+
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .context("installing the Ctrl-C handler")?;
+    }
+    let started = WallInstant::now();
+    let deadline = args
+        .duration
+        .map(|d| started + WallDuration::from_secs_f64(d));
+    while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| WallInstant::now() < d) {
+        std::thread::sleep(WallDuration::from_millis(20));
+    }
+
+    if let Some(s) = socketcand_server {
+        s.shutdown();
+    }
+    if let Some(s) = slcan_server {
+        s.shutdown();
+    }
+    let slips = handle.slips();
+    let sim = paced
+        .stop()
+        .context("the simulation thread stopped unexpectedly")?;
+    eprintln!(
+        "cantwin sim: stopped after {:.1} s ({} of bus time{})",
+        started.elapsed().as_secs_f64(),
+        sim.now(),
+        if slips > 0 {
+            format!(", fell behind the wall clock {slips} times")
+        } else {
+            String::new()
+        }
+    );
+    for bus in sim.buses() {
+        let s = bus.stats();
+        eprintln!(
+            "  {}: {} frames, {} error frames, bus load {:.1} %",
+            bus.name(),
+            s.frames(),
+            s.error_frames(),
+            s.load_percent(sim.now())
+        );
+    }
+    Ok(())
+}
