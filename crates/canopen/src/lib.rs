@@ -25,6 +25,7 @@
 
 pub mod abort;
 pub mod od;
+pub mod pdo;
 pub mod sdo;
 pub mod wire;
 
