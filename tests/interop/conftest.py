@@ -1,0 +1,161 @@
+"""Fixtures for the interop suite: a `cantwin sim` subprocess with its gateways.
+
+`run.sh` sets CANTWIN_BIN (the built binary) and CANTWIN_SCENARIOS (the repository's
+scenarios folder). Every wait is bounded so that a broken server fails a test instead of
+hanging the suite.
+"""
+
+import os
+import queue
+import shutil
+import subprocess
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent.parent
+LOCAL_SCENARIOS = HERE / "scenarios"
+SCENARIOS = Path(os.environ.get("CANTWIN_SCENARIOS", ROOT / "scenarios"))
+
+# How long `cantwin sim` may take to print its listening lines.
+START_TIMEOUT = 20.0
+# How long it may take to exit after SIGTERM before it is killed.
+STOP_TIMEOUT = 5.0
+
+
+def cantwin_bin() -> str:
+    path = os.environ.get("CANTWIN_BIN")
+    if path:
+        return path
+    found = shutil.which("cantwin")
+    if found:
+        return found
+    pytest.fail("CANTWIN_BIN is not set and cantwin is not on PATH (run tests/interop/run.sh)")
+
+
+@dataclass
+class Sim:
+    """A running `cantwin sim`: where its gateways listen."""
+
+    process: subprocess.Popen
+    socketcand: dict = field(default_factory=dict)  # bus name -> (host, port)
+    slcan: dict = field(default_factory=dict)  # bus name -> (host, port)
+    stderr_lines: list = field(default_factory=list)
+
+    def socketcand_addr(self, bus: str = "can0"):
+        return self.socketcand[bus]
+
+    def slcan_url(self, bus: str = "can0") -> str:
+        host, port = self.slcan[bus]
+        return f"socket://{host}:{port}"
+
+    def stderr(self) -> str:
+        return "\n".join(self.stderr_lines)
+
+
+def _split_addr(text: str):
+    host, _, port = text.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+def _pump(stream, sink_queue, sink_list):
+    for raw in iter(stream.readline, ""):
+        line = raw.rstrip("\n")
+        if sink_queue is not None:
+            sink_queue.put(line)
+        if sink_list is not None:
+            sink_list.append(line)
+    if sink_queue is not None:
+        sink_queue.put(None)
+
+
+def stop_process(process: subprocess.Popen) -> None:
+    """Terminate, then kill after STOP_TIMEOUT: never leave the simulator behind."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=STOP_TIMEOUT)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(timeout=STOP_TIMEOUT)
+
+
+def start_sim(scenario: Path, *, socketcand=True, slcan=False, extra=()) -> Sim:
+    """Start `cantwin sim` on ephemeral ports and wait for one listening line per gateway."""
+    args = [cantwin_bin(), "sim", str(scenario)]
+    if socketcand:
+        args += ["--socketcand", "0"]
+    if slcan:
+        args += ["--slcan", "0"]
+    args += list(extra)
+    process = subprocess.Popen(
+        args,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        bufsize=1,
+    )
+    sim = Sim(process=process)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=_pump, args=(process.stdout, lines, None), daemon=True).start()
+    threading.Thread(
+        target=_pump, args=(process.stderr, None, sim.stderr_lines), daemon=True
+    ).start()
+
+    # The scenario's bus count is not known here; stop waiting once every requested gateway
+    # has announced at least one bus and no further line arrives shortly after.
+    deadline = time.monotonic() + START_TIMEOUT
+    settle = None
+    while True:
+        now = time.monotonic()
+        wanted = (not socketcand or sim.socketcand) and (not slcan or sim.slcan)
+        if wanted and settle is None:
+            settle = now + 0.2
+        limit = settle if settle is not None else deadline
+        if now >= limit:
+            if wanted:
+                return sim
+            stop_process(process)
+            pytest.fail(
+                f"cantwin sim did not announce its gateways within {START_TIMEOUT} s:\n"
+                + sim.stderr()
+            )
+        try:
+            line = lines.get(timeout=max(0.0, limit - now))
+        except queue.Empty:
+            continue
+        if line is None:
+            stop_process(process)
+            pytest.fail(
+                f"cantwin sim exited early (status {process.poll()}):\n" + sim.stderr()
+            )
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "socketcand":
+            sim.socketcand[parts[2]] = _split_addr(parts[1])
+        elif len(parts) == 3 and parts[0] == "slcan":
+            sim.slcan[parts[2]] = _split_addr(parts[1])
+
+
+@pytest.fixture
+def generators_sim():
+    """Generator devices on can0 behind socketcand and slcan."""
+    sim = start_sim(LOCAL_SCENARIOS / "generators.toml", slcan=True)
+    try:
+        yield sim
+    finally:
+        stop_process(sim.process)
+
+
+@pytest.fixture
+def quiet_sim():
+    """A bus with a single silent listener (so frames are acknowledged) behind both gateways."""
+    sim = start_sim(LOCAL_SCENARIOS / "quiet.toml", slcan=True)
+    try:
+        yield sim
+    finally:
+        stop_process(sim.process)
