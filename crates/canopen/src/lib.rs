@@ -24,9 +24,19 @@
 #![forbid(unsafe_code)]
 
 pub mod abort;
+pub mod objects;
 pub mod od;
 pub mod pdo;
 pub mod sdo;
+pub mod device;
+pub mod emcy;
+pub mod error_behaviour;
+pub mod guarding;
+pub mod heartbeat;
+pub mod nmt;
+pub mod sync;
+pub mod storage;
+pub mod time;
 pub mod wire;
 
 pub use abort::AbortCode;

@@ -335,6 +335,13 @@ impl Emcy {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct CobId(pub u32);
 
+impl Default for CobId {
+    /// Not valid: bit 31 set, identifier 0.
+    fn default() -> Self {
+        CobId(0x8000_0000)
+    }
+}
+
 impl CobId {
     /// Bit 31.
     pub const fn bit31(self) -> bool {

@@ -1,0 +1,1164 @@
+//! The composite CiA 301 device: object dictionary, NMT slave, error control, EMCY, SYNC,
+//! TIME, SDO servers, PDOs and parameter storage behind one [`Node`].
+//!
+//! A [`Device`] is driven entirely through [`Node`]; it implements [`ObjectAccess`] with
+//! the rules of the communication objects on top of the dictionary's own checks, so a
+//! test, a device model or the SDO servers write through the same path.
+//!
+//! Behaviour chosen where CiA 301 leaves room (each pinned by a test in `tests/`):
+//!
+//! * **Boot-up** (§7.3.2.2.1): [`Node::on_power_up`] sets every object to its default,
+//!   applies the stored parameters, sends the boot-up message and enters pre-operational in
+//!   the same instant. Reset node and reset communication do the same for their areas.
+//! * **Reset communication** restores 0x1000–0x1FFF to the power-on values (defaults, then
+//!   stored communication parameters); this empties 0x1003, clears active errors, resets
+//!   the guarding toggle bit and aborts SDO transfers silently. **Reset node** restores
+//!   0x2000–0x9FFF first (stored manufacturer and application parameters on top of the
+//!   defaults), reports [`Event::ResetApplication`], then resets communication.
+//! * **Communication errors** (heartbeat consumer timeout, life guarding event, bus-off)
+//!   apply 0x1029 sub 1. The heartbeat and guarding losses raise EMCY 0x8130, with the
+//!   lost producer's node-ID in the first manufacturer-specific byte (0 for life
+//!   guarding); it is cleared (EMCY 0x0000) once no partner is lost any more.
+//! * **Controller events**: receive overrun raises 0x8110, cleared by the next frame
+//!   received; error passive raises 0x8120, cleared when the controller is error-active
+//!   again; recovery from bus-off raises 0x8140, cleared when the next frame of the device
+//!   is confirmed sent ([`Node::on_sent`]) — the bus works again.
+//! * **Stopped**: only NMT, node guarding and heartbeat; EMCYs queued at the transition are
+//!   dropped (errors are still recorded in 0x1001/0x1003), SDO transfers end silently.
+
+use crate::abort::AbortCode;
+use crate::emcy;
+use crate::error_behaviour::Reaction;
+use crate::guarding::Guarding;
+use crate::heartbeat::{self, Heard};
+use crate::nmt::{self, Service, State, Transition};
+use crate::od::{
+    Hooked, ObjectAccess, ObjectDictionary, OdDescription, OdHooks, ReadInfo, TimeOfDay, Value,
+};
+use crate::pdo::{PdoEngine, PdoEvent};
+use crate::sdo::SdoServer;
+use crate::storage::{self, Group, Storage, StorageError};
+use crate::sync::SyncService;
+use crate::time::TimeService;
+use crate::wire::{self, CobId, ErrorControl, NmtCommand};
+use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+/// EMCY 0x8110: CAN overrun, objects lost (CiA 301 table 21).
+pub const EMCY_CAN_OVERRUN: u16 = 0x8110;
+/// EMCY 0x8120: CAN in error passive mode.
+pub const EMCY_ERROR_PASSIVE: u16 = 0x8120;
+/// EMCY 0x8130: life guard error or heartbeat error.
+pub const EMCY_LIFE_GUARD_HEARTBEAT: u16 = 0x8130;
+/// EMCY 0x8140: recovered from bus off.
+pub const EMCY_BUS_OFF_RECOVERED: u16 = 0x8140;
+
+/// At most this many unpolled [`Event`]s are kept; older ones are dropped.
+pub const MAX_EVENTS: usize = 32;
+
+/// Device hooks that do nothing: every application object is a plain stored value.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct NoHooks;
+
+impl OdHooks for NoHooks {}
+
+/// What a device cannot be built with.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceError {
+    /// Node-IDs are 1..=127 (CiA 301 §7.3.2.1).
+    #[error("node-ID {0} is outside 1..=127")]
+    NodeId(u8),
+}
+
+/// How a device is set up besides its dictionary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DeviceConfig {
+    /// The node-ID, 1..=127.
+    pub node_id: u8,
+    /// The SDO servers' timeout.
+    pub sdo_timeout: Duration,
+    /// Whether the device can produce SYNC (0x1005 bit 30 may be set).
+    pub sync_producer: bool,
+    /// Whether the device can produce TIME (0x1012 bit 30 may be set).
+    pub time_producer: bool,
+}
+
+impl DeviceConfig {
+    /// A device with node-ID `node_id`, a 1 s SDO timeout, able to produce SYNC and TIME.
+    pub const fn new(node_id: u8) -> Self {
+        DeviceConfig {
+            node_id,
+            sdo_timeout: crate::sdo::server::DEFAULT_TIMEOUT,
+            sync_producer: true,
+            time_producer: true,
+        }
+    }
+}
+
+/// Something the application (device model, test) may want to know.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// The NMT state changed.
+    StateChanged {
+        /// The previous state.
+        from: State,
+        /// The new state.
+        to: State,
+    },
+    /// Reset node: application parameters are back at their power-on values; the device
+    /// model should restart its application.
+    ResetApplication,
+    /// Reset communication (also part of reset node and power-up).
+    ResetCommunication,
+    /// A monitored heartbeat producer timed out.
+    HeartbeatLost {
+        /// Its node-ID.
+        node: u8,
+    },
+    /// A monitored heartbeat producer is heard again after a timeout.
+    HeartbeatRecovered {
+        /// Its node-ID.
+        node: u8,
+    },
+    /// A monitored heartbeat producer sent a boot-up message.
+    RemoteBootUp {
+        /// Its node-ID.
+        node: u8,
+    },
+    /// The NMT master stopped guarding within the life time.
+    LifeGuardingLost,
+    /// Guarding resumed after a life guarding event.
+    LifeGuardingRecovered,
+    /// The controller went bus-off.
+    BusOff,
+    /// A SYNC was received or produced.
+    Sync {
+        /// Its counter.
+        counter: Option<u8>,
+    },
+    /// A TIME message was received.
+    Time(TimeOfDay),
+    /// An EMCY from a consumed COB-ID (0x1028).
+    Emcy {
+        /// The identifier it came on.
+        id: Id,
+        /// The message.
+        emcy: wire::Emcy,
+    },
+    /// Something the PDO engine reported.
+    Pdo(PdoEvent),
+    /// Stored parameters could not be loaded (damaged blob or backend failure); the
+    /// defaults stay in effect for the group.
+    StorageLoadFailed(Group),
+}
+
+/// Everything but the SDO servers, so that a server can borrow it as [`ObjectAccess`].
+struct Core<H> {
+    config: DeviceConfig,
+    od: ObjectDictionary,
+    hooks: H,
+    state: State,
+    now: Instant,
+    heartbeat: heartbeat::Producer,
+    consumer: heartbeat::Consumer,
+    guarding: Guarding,
+    emcy: emcy::Producer,
+    emcy_rx: Vec<Id>,
+    sync: SyncService,
+    time: TimeService,
+    reaction: Reaction,
+    pdo: Option<PdoEngine>,
+    storage: Option<Box<dyn Storage>>,
+    events: VecDeque<Event>,
+    error_passive: bool,
+    overrun: bool,
+    bus_off_recovered: bool,
+    /// The SDO server parameters changed: the servers must be reconfigured.
+    sdo_changed: bool,
+    /// SDO transfers must end silently (stopped, reset).
+    sdo_reset: bool,
+}
+
+/// A CiA 301 device. See the [module documentation](self).
+pub struct Device<H = NoHooks> {
+    core: Core<H>,
+    sdo: Vec<SdoServer>,
+}
+
+impl<H> core::fmt::Debug for Device<H> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Device")
+            .field("node_id", &self.core.config.node_id)
+            .field("state", &self.core.state)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Device<NoHooks> {
+    /// A device on `desc` with no device hooks.
+    pub fn new(desc: Arc<OdDescription>, config: DeviceConfig) -> Result<Self, DeviceError> {
+        Device::with_hooks(desc, config, NoHooks)
+    }
+}
+
+fn u32_of(data: &[u8]) -> u32 {
+    let mut b = [0u8; 4];
+    let n = data.len().min(4);
+    b[..n].copy_from_slice(&data[..n]);
+    u32::from_le_bytes(b)
+}
+
+impl<H: OdHooks> Device<H> {
+    /// A device on `desc` whose objects in hooked ranges are served by `hooks`. It is not
+    /// powered: nothing happens until [`Node::on_power_up`].
+    pub fn with_hooks(
+        desc: Arc<OdDescription>,
+        config: DeviceConfig,
+        hooks: H,
+    ) -> Result<Self, DeviceError> {
+        if !(1..=127).contains(&config.node_id) {
+            return Err(DeviceError::NodeId(config.node_id));
+        }
+        let od = ObjectDictionary::new(desc, config.node_id);
+        let history = od
+            .description()
+            .object(0x1003)
+            .map_or(0, |o| o.sub_number().saturating_sub(1) as u8);
+        let consumers = od
+            .description()
+            .object(0x1016)
+            .map_or(0, |o| o.sub_number().saturating_sub(1) as u8);
+        let pdo = PdoEngine::new(&od)
+            .ok()
+            .filter(|p| p.rpdo_slots() + p.tpdo_slots() > 0);
+        let mut core = Core {
+            config,
+            od,
+            hooks,
+            state: State::Initialising,
+            now: Instant::ZERO,
+            heartbeat: heartbeat::Producer::default(),
+            consumer: heartbeat::Consumer::new(consumers),
+            guarding: Guarding::default(),
+            emcy: emcy::Producer::new(history),
+            emcy_rx: Vec::new(),
+            sync: SyncService::default(),
+            time: TimeService::default(),
+            reaction: Reaction::PreOperational,
+            pdo,
+            storage: None,
+            events: VecDeque::new(),
+            error_passive: false,
+            overrun: false,
+            bus_off_recovered: false,
+            sdo_changed: true,
+            sdo_reset: false,
+        };
+        core.configure();
+        let mut device = Device {
+            core,
+            sdo: Vec::new(),
+        };
+        device.apply_sdo_config();
+        Ok(device)
+    }
+
+    /// Uses `storage` for 0x1010/0x1011 and for the power-on values of every reset.
+    pub fn set_storage(&mut self, storage: Box<dyn Storage>) {
+        self.core.storage = Some(storage);
+    }
+
+    /// The node-ID.
+    pub fn node_id(&self) -> u8 {
+        self.core.config.node_id
+    }
+
+    /// The NMT state.
+    pub fn state(&self) -> State {
+        self.core.state
+    }
+
+    /// The dictionary.
+    pub fn od(&self) -> &ObjectDictionary {
+        &self.core.od
+    }
+
+    /// The dictionary, for the device model. Communication objects changed here take
+    /// effect at the next reset communication; use [`ObjectAccess::write`] for immediate
+    /// effect.
+    pub fn od_mut(&mut self) -> &mut ObjectDictionary {
+        &mut self.core.od
+    }
+
+    /// Sets an application value as the device itself would (no access check) and tells
+    /// the PDO engine it changed (event-driven TPDOs mapping it are sent).
+    pub fn set_value(&mut self, index: u16, sub: u8, value: &Value) -> Result<(), AbortCode> {
+        self.core.od.set(index, sub, value)?;
+        if let Some(p) = &mut self.core.pdo {
+            p.mark_changed(index, sub);
+        }
+        Ok(())
+    }
+
+    /// The device hooks.
+    pub fn hooks(&self) -> &H {
+        &self.core.hooks
+    }
+
+    /// The device hooks, mutably.
+    pub fn hooks_mut(&mut self) -> &mut H {
+        &mut self.core.hooks
+    }
+
+    /// The PDO engine, if the dictionary has PDOs.
+    pub fn pdo(&self) -> Option<&PdoEngine> {
+        self.core.pdo.as_ref()
+    }
+
+    /// The PDO engine, mutably (to trigger event-driven TPDOs).
+    pub fn pdo_mut(&mut self) -> Option<&mut PdoEngine> {
+        self.core.pdo.as_mut()
+    }
+
+    /// The error register (0x1001).
+    pub fn error_register(&self) -> u8 {
+        self.core.emcy.register()
+    }
+
+    /// Raising and clearing the device's own errors.
+    pub fn emcy(&mut self) -> Emcy<'_, H> {
+        Emcy {
+            core: &mut self.core,
+        }
+    }
+
+    /// Queues a TIME message with `time` into `out`, if the device is a TIME producer
+    /// (0x1012 bit 30) and TIME is allowed in its NMT state. Returns whether it did.
+    pub fn publish_time(&mut self, time: TimeOfDay, out: &mut Outbox) -> bool {
+        if !self.core.state.allows(Service::Time) {
+            return false;
+        }
+        match self.core.time.produce(time) {
+            Some(f) => {
+                out.push(f);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The next event for the application, oldest first.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.core.events.pop_front()
+    }
+
+    /// Bytes of heap this device uses (its share: the shared description not counted).
+    pub fn heap_bytes(&self) -> usize {
+        self.core.od.heap_bytes()
+            + self.sdo.capacity() * core::mem::size_of::<SdoServer>()
+            + self.core.emcy_rx.capacity() * core::mem::size_of::<Id>()
+            + self.core.events.capacity() * core::mem::size_of::<Event>()
+            + self.core.emcy.heap_bytes()
+            + self.core.consumer.heap_bytes()
+    }
+
+    fn apply_sdo_config(&mut self) {
+        if !self.core.sdo_changed {
+            return;
+        }
+        self.core.sdo_changed = false;
+        let od = &self.core.od;
+        let mut wanted: Vec<(u32, u32)> = Vec::new();
+        if od.description().object(0x1200).is_none() {
+            let n = u32::from(self.core.config.node_id);
+            wanted.push((0x600 + n, 0x580 + n));
+        }
+        for k in 0..0x80u16 {
+            let index = 0x1200 + k;
+            if od.description().object(index).is_none() {
+                continue;
+            }
+            let rx = od.get_unsigned(index, 1).unwrap_or(0x8000_0000) as u32;
+            let tx = od.get_unsigned(index, 2).unwrap_or(0x8000_0000) as u32;
+            wanted.push((rx, tx));
+        }
+        self.sdo
+            .resize_with(wanted.len(), || SdoServer::for_node(0));
+        for (server, (rx, tx)) in self.sdo.iter_mut().zip(wanted) {
+            let want = (wire::CobId(rx), wire::CobId(tx));
+            let now = (
+                server.rx_id().map(|i| i.as_raw()),
+                server.tx_id().map(|i| i.as_raw()),
+            );
+            let new = (
+                crate::sdo::server::cob_id(want.0.0).map(|i| i.as_raw()),
+                crate::sdo::server::cob_id(want.1.0).map(|i| i.as_raw()),
+            );
+            if now != new {
+                server.set_cob_ids(rx, tx);
+            }
+            server.set_timeout(self.core.config.sdo_timeout);
+        }
+    }
+
+    fn after(&mut self, now: Instant, out: &mut Outbox) {
+        if self.core.sdo_reset {
+            self.core.sdo_reset = false;
+            for s in &mut self.sdo {
+                s.reset(&mut self.core);
+            }
+        }
+        self.apply_sdo_config();
+        self.core.run_timers(now, out);
+        if self.core.state.allows(Service::Sdo) {
+            for s in &mut self.sdo {
+                s.on_tick(now, &mut self.core, out);
+            }
+        }
+        self.core.mirror_errors();
+    }
+}
+
+/// Raises and clears the device's errors; see [`Device::emcy`].
+pub struct Emcy<'a, H> {
+    core: &'a mut Core<H>,
+}
+
+impl<H> Emcy<'_, H> {
+    /// Raises error `code` with five manufacturer-specific bytes: recorded in 0x1001 and
+    /// 0x1003 and sent as EMCY (subject to the inhibit time) at the next [`Node::on_tick`]
+    /// if EMCY is allowed in the NMT state. Raising an active code again does nothing.
+    pub fn raise(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
+        let send = self.core.state.allows(Service::Emcy);
+        let r = self.core.emcy.raise(code, manufacturer, send);
+        self.core.mirror_errors();
+        r
+    }
+
+    /// Clears error `code` (sends EMCY 0x0000 with the new error register).
+    pub fn clear(&mut self, code: u16) -> bool {
+        let send = self.core.state.allows(Service::Emcy);
+        let r = self.core.emcy.clear(code, send);
+        self.core.mirror_errors();
+        r
+    }
+
+    /// Whether `code` is active.
+    pub fn is_active(&self, code: u16) -> bool {
+        self.core.emcy.is_active(code)
+    }
+
+    /// The error register.
+    pub fn register(&self) -> u8 {
+        self.core.emcy.register()
+    }
+
+    /// Sets or clears error register bits the application owns (bit 5 device profile,
+    /// bit 7 manufacturer-specific).
+    pub fn set_register_bits(&mut self, mask: u8, on: bool) {
+        self.core.emcy.set_register_bits(mask, on);
+        self.core.mirror_errors();
+    }
+}
+
+impl<H> Core<H> {
+    fn push_event(&mut self, e: Event) {
+        if self.events.len() >= MAX_EVENTS {
+            self.events.pop_front();
+        }
+        self.events.push_back(e);
+    }
+
+    fn running(&self) -> bool {
+        matches!(self.state, State::PreOperational | State::Operational)
+    }
+
+    fn u32(&self, index: u16, sub: u8) -> Option<u32> {
+        self.od.get_unsigned(index, sub).map(|v| v as u32)
+    }
+
+    /// Reads every communication parameter from the dictionary into the services.
+    fn configure(&mut self) {
+        let now = self.now;
+        let running = self.running();
+        let node = self.config.node_id;
+        self.heartbeat
+            .set_time(self.u32(0x1017, 0).unwrap_or(0) as u16, now, false);
+        let n = self
+            .od
+            .description()
+            .object(0x1016)
+            .map_or(0, |o| o.sub_number());
+        for sub in 1..n.min(256) as u16 {
+            let v = self.u32(0x1016, sub as u8).unwrap_or(0);
+            self.consumer.set(sub as u8, v);
+        }
+        self.guarding.set_life_time(
+            self.u32(0x100C, 0).unwrap_or(0) as u16,
+            self.u32(0x100D, 0).unwrap_or(0) as u8,
+        );
+        self.emcy
+            .set_cob_id(CobId(self.u32(0x1014, 0).unwrap_or(0x80 + u32::from(node))));
+        self.emcy
+            .set_inhibit(self.u32(0x1015, 0).unwrap_or(0) as u16);
+        self.sync
+            .set_overflow(self.u32(0x1019, 0).unwrap_or(0) as u8);
+        self.sync.set_window(self.u32(0x1007, 0).unwrap_or(0));
+        self.sync
+            .set_cob_id(CobId(self.u32(0x1005, 0).unwrap_or(0x80)), now, false);
+        self.sync
+            .set_period(self.u32(0x1006, 0).unwrap_or(0), now, running);
+        self.time = TimeService::new(CobId(self.u32(0x1012, 0).unwrap_or(0x100)));
+        self.reaction = self
+            .u32(0x1029, 1)
+            .and_then(|v| Reaction::from_u8(v as u8))
+            .unwrap_or(Reaction::PreOperational);
+        self.configure_emcy_consumers();
+        self.sdo_changed = true;
+    }
+
+    fn configure_emcy_consumers(&mut self) {
+        self.emcy_rx.clear();
+        let n = self
+            .od
+            .description()
+            .object(0x1028)
+            .map_or(0, |o| o.sub_number());
+        for sub in 1..n.min(256) {
+            let c = CobId(self.u32(0x1028, sub as u8).unwrap_or(0x8000_0000));
+            if !c.bit31() {
+                self.emcy_rx.push(c.can_id());
+            }
+        }
+    }
+
+    /// Mirrors the error register and the error history into 0x1001 and 0x1003.
+    fn mirror_errors(&mut self) {
+        if !self.emcy.take_changed() {
+            return;
+        }
+        let _ = self
+            .od
+            .set(0x1001, 0, &Value::Unsigned8(self.emcy.register()));
+        if let Some(o) = self.od.description().object(0x1003) {
+            let n = o.sub_number().saturating_sub(1);
+            let history = self.emcy.history();
+            let count = history.len().min(n) as u8;
+            let _ = self.od.set(0x1003, 0, &Value::Unsigned8(count));
+            for k in 0..n {
+                let v = history.get(k).copied().unwrap_or(0);
+                let _ = self.od.set(0x1003, (k + 1) as u8, &Value::Unsigned32(v));
+            }
+        }
+    }
+
+    /// Loads the stored parameters of `group` on top of the defaults.
+    fn load_group(&mut self, group: Group) {
+        self.od.restore_defaults(group.range());
+        let Some(storage) = &mut self.storage else {
+            return;
+        };
+        let loaded = match storage.load(group) {
+            Ok(Some(blob)) => storage::apply(&mut self.od, group, &blob).map(|_| ()),
+            Ok(None) => Ok(()),
+            Err(e) => Err(e),
+        };
+        if loaded.is_err() {
+            self.od.restore_defaults(group.range());
+            self.push_event(Event::StorageLoadFailed(group));
+        }
+    }
+
+    fn enter(&mut self, to: State, now: Instant) {
+        let from = self.state;
+        if from == to {
+            return;
+        }
+        self.state = to;
+        if let Some(p) = &mut self.pdo {
+            p.set_operational(to == State::Operational, now);
+        }
+        match to {
+            State::Stopped => {
+                self.emcy.drop_queue();
+                self.sync.stop();
+                self.sdo_reset = true;
+            }
+            State::PreOperational | State::Operational
+                if matches!(from, State::Stopped | State::Initialising) =>
+            {
+                self.sync.restart(now, true);
+            }
+            _ => {}
+        }
+        self.push_event(Event::StateChanged { from, to });
+    }
+
+    fn reset_communication(&mut self, now: Instant, out: &mut Outbox) {
+        self.enter(State::Initialising, now);
+        self.heartbeat.stop();
+        self.sync.stop();
+        self.load_group(Group::Communication);
+        self.emcy.reset();
+        self.guarding.reset();
+        self.overrun = false;
+        self.bus_off_recovered = false;
+        self.configure();
+        if let Some(p) = &mut self.pdo {
+            let _ = p.configure(&self.od, now);
+        }
+        self.sdo_reset = true;
+        self.push_event(Event::ResetCommunication);
+        // §7.3.2.2.1: the boot-up message ends initialisation; the device is then
+        // pre-operational, and the boot-up counts as the first heartbeat.
+        out.push(ErrorControl::boot_up(self.config.node_id).encode());
+        self.enter(State::PreOperational, now);
+        self.heartbeat.start(now);
+        if self.error_passive {
+            self.emcy.raise(EMCY_ERROR_PASSIVE, [0; 5], true);
+        }
+    }
+
+    fn reset_node(&mut self, now: Instant, out: &mut Outbox) {
+        self.enter(State::Initialising, now);
+        self.load_group(Group::Manufacturer);
+        self.load_group(Group::Application);
+        self.push_event(Event::ResetApplication);
+        self.reset_communication(now, out);
+    }
+
+    /// A communication error: 0x1029 sub 1.
+    fn communication_error(&mut self, now: Instant) {
+        if let Some(to) = self.reaction.apply(self.state) {
+            self.enter(to, now);
+        }
+    }
+
+    fn raise(&mut self, code: u16, manufacturer: [u8; 5]) {
+        let send = self.state.allows(Service::Emcy);
+        self.emcy.raise(code, manufacturer, send);
+    }
+
+    fn clear(&mut self, code: u16) {
+        let send = self.state.allows(Service::Emcy);
+        self.emcy.clear(code, send);
+    }
+
+    fn partner_recovered(&mut self) {
+        if !self.consumer.any_lost() && !self.guarding.is_lost() {
+            self.clear(EMCY_LIFE_GUARD_HEARTBEAT);
+        }
+    }
+
+    fn run_timers(&mut self, now: Instant, out: &mut Outbox) {
+        self.now = now;
+        if self.state == State::Initialising {
+            return;
+        }
+        let mut lost = [0u8; 8];
+        let mut n_lost = 0;
+        let mut more = Vec::new();
+        self.consumer.on_tick(now, |node| {
+            if n_lost < lost.len() {
+                lost[n_lost] = node;
+                n_lost += 1;
+            } else {
+                more.push(node);
+            }
+        });
+        for node in lost[..n_lost].iter().copied().chain(more) {
+            self.push_event(Event::HeartbeatLost { node });
+            self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [node, 0, 0, 0, 0]);
+            self.communication_error(now);
+        }
+        if self.guarding.on_tick(now) {
+            self.push_event(Event::LifeGuardingLost);
+            self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [0; 5]);
+            self.communication_error(now);
+        }
+        if self.heartbeat.poll(now) {
+            out.push(ErrorControl::heartbeat(self.config.node_id, self.state.wire()).encode());
+        }
+        if self.state.allows(Service::Sync)
+            && let Some((frame, counter)) = self.sync.poll(now)
+        {
+            out.push(frame);
+            self.push_event(Event::Sync { counter });
+            if let Some(p) = &mut self.pdo {
+                p.on_sync(counter, now, &mut self.od, out);
+            }
+        }
+        if let Some(p) = &mut self.pdo {
+            p.on_tick(now, &self.od, out);
+        }
+        self.pdo_events();
+        if self.state.allows(Service::Emcy) {
+            while let Some(e) = self.emcy.poll(now) {
+                out.push(e.encode(self.emcy.cob_id().can_id()));
+            }
+        }
+    }
+
+    fn pdo_events(&mut self) {
+        while let Some(e) = self.pdo.as_mut().and_then(PdoEngine::poll_event) {
+            if let Some(code) = e.emcy_code() {
+                self.raise(code, [0; 5]);
+            }
+            self.push_event(Event::Pdo(e));
+        }
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        if self.state == State::Initialising {
+            return None;
+        }
+        [
+            self.consumer.next_deadline(),
+            self.guarding.next_deadline(),
+            self.heartbeat.next_deadline(),
+            if self.state.allows(Service::Sync) {
+                self.sync.next_deadline()
+            } else {
+                None
+            },
+            self.pdo.as_ref().and_then(PdoEngine::next_deadline),
+            if self.state.allows(Service::Emcy) {
+                self.emcy.next_deadline().map(|t| t.max(self.now))
+            } else {
+                None
+            },
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    /// The frame handling of everything but SDO; returns whether the frame was consumed.
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) -> bool {
+        self.now = now;
+        if self.overrun {
+            self.overrun = false;
+            self.clear(EMCY_CAN_OVERRUN);
+        }
+        let id = frame.id();
+        if matches!(id, Id::Standard(s) if s.as_raw() == wire::NMT_COB_ID) {
+            if let Ok(cmd) = NmtCommand::decode(frame)
+                && cmd.addresses(self.config.node_id)
+            {
+                match nmt::command(self.state, cmd.cs) {
+                    Transition::None => {}
+                    Transition::Enter(s) => self.enter(s, now),
+                    Transition::ResetNode => self.reset_node(now, out),
+                    Transition::ResetCommunication => self.reset_communication(now, out),
+                }
+            }
+            return true;
+        }
+        if self.state == State::Initialising {
+            return true;
+        }
+        if id == self.sync.id() && !frame.is_remote() {
+            if self.state.allows(Service::Sync) {
+                match self.sync.on_receive(frame, now) {
+                    Ok(counter) => {
+                        self.push_event(Event::Sync { counter });
+                        if let Some(p) = &mut self.pdo {
+                            p.on_sync(counter, now, &mut self.od, out);
+                        }
+                        self.pdo_events();
+                    }
+                    Err(code) => self.raise(code, [0; 5]),
+                }
+            }
+            return true;
+        }
+        if let Id::Standard(s) = id {
+            let raw = s.as_raw();
+            if raw & !0x7F == wire::ERROR_CONTROL_BASE {
+                self.on_error_control(frame, (raw & 0x7F) as u8, now, out);
+                return true;
+            }
+        }
+        if id == self.time.id() && self.time.consumer() {
+            if self.state.allows(Service::Time)
+                && let Some(t) = self.time.consume(frame)
+            {
+                self.push_event(Event::Time(t));
+            }
+            return true;
+        }
+        if !frame.is_remote() && self.emcy_rx.contains(&id) {
+            if self.state.allows(Service::Emcy)
+                && let Ok(emcy) = wire::Emcy::decode(frame)
+            {
+                self.push_event(Event::Emcy { id, emcy });
+            }
+            return true;
+        }
+        false
+    }
+
+    fn on_error_control(&mut self, frame: &Frame, node: u8, now: Instant, out: &mut Outbox) {
+        if !self.state.allows(Service::ErrorControl) || node == 0 {
+            return;
+        }
+        let Ok(msg) = ErrorControl::decode(frame, node) else {
+            return;
+        };
+        match msg {
+            ErrorControl::GuardRequest { node } if node == self.config.node_id => {
+                // Heartbeat takes precedence: with 0x1017 ≠ 0 guarding is not used.
+                if self.heartbeat.enabled() {
+                    return;
+                }
+                let a = self.guarding.on_request(self.state.wire() as u8, now);
+                out.push(Frame::data_array(frame.id(), [a.byte]));
+                if a.recovered {
+                    self.push_event(Event::LifeGuardingRecovered);
+                    self.partner_recovered();
+                }
+            }
+            ErrorControl::State { node, state, .. } => {
+                match self.consumer.on_heartbeat(node, state, now) {
+                    Heard::NotMonitored | Heard::Alive => {}
+                    Heard::Recovered => {
+                        self.push_event(Event::HeartbeatRecovered { node });
+                        self.partner_recovered();
+                    }
+                    Heard::BootUp { was_lost } => {
+                        self.push_event(Event::RemoteBootUp { node });
+                        if was_lost {
+                            self.partner_recovered();
+                        }
+                    }
+                }
+            }
+            ErrorControl::GuardRequest { .. } => {}
+        }
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant) {
+        self.now = now;
+        match event {
+            ControllerEvent::ErrorPassive => {
+                self.error_passive = true;
+                self.raise(EMCY_ERROR_PASSIVE, [0; 5]);
+            }
+            ControllerEvent::ErrorActive => {
+                self.error_passive = false;
+                self.clear(EMCY_ERROR_PASSIVE);
+            }
+            ControllerEvent::BusOff => {
+                self.push_event(Event::BusOff);
+                self.communication_error(now);
+            }
+            ControllerEvent::BusOffRecovered => {
+                self.error_passive = false;
+                self.clear(EMCY_ERROR_PASSIVE);
+                self.bus_off_recovered = true;
+                self.raise(EMCY_BUS_OFF_RECOVERED, [0; 5]);
+            }
+            ControllerEvent::RxOverrun => {
+                self.overrun = true;
+                self.raise(EMCY_CAN_OVERRUN, [0; 5]);
+            }
+            ControllerEvent::TxDropped => {}
+        }
+    }
+}
+
+impl<H: OdHooks> Core<H> {
+    /// The rules of the communication objects (CiA 301 §7.5.2) for a whole value.
+    fn write_comm(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let id = self.od.locate(index, sub)?;
+        self.od.check_download(id, data)?;
+        let v = u32_of(data);
+        let old = CobId(self.u32(index, sub).unwrap_or(0));
+        let new = CobId(v);
+        match (index, sub) {
+            (0x1003, 0) => {
+                // §7.5.2.4: only 0 may be written, and it clears the field.
+                if v != 0 {
+                    return Err(AbortCode::INVALID_VALUE);
+                }
+                self.emcy.clear_history();
+                self.mirror_errors();
+                return Ok(());
+            }
+            (0x1010, 1..) => return self.store(sub, v),
+            (0x1011, 1..) => return self.restore(sub, v),
+            _ => {}
+        }
+        let invalid = AbortCode::INVALID_VALUE;
+        let refused = match (index, sub) {
+            // §7.5.2.5: bit 30 only if the device can produce SYNC; the identifier is
+            // fixed while the device produces.
+            (0x1005, 0) => (new.bit30() && !self.config.sync_producer
+                || old.bit30() && new.id_differs(old))
+            .then_some(invalid),
+            // §7.5.2.12: likewise for TIME, fixed while consumed or produced.
+            (0x1012, 0) => (new.bit30() && !self.config.time_producer
+                || (old.bit30() || old.bit31()) && new.id_differs(old))
+            .then_some(invalid),
+            // §7.5.2.15, §7.5.2.31: bit 30 reserved; the identifier is fixed while the
+            // object is valid (bit 31 = 0).
+            (0x1014, 0) | (0x1028, 1..) => {
+                (new.bit30() || !old.bit31() && new.id_differs(old)).then_some(invalid)
+            }
+            // §7.5.2.21: one entry per monitored node.
+            (0x1016, 1..) => self
+                .consumer
+                .conflicts(sub, v)
+                .then_some(AbortCode::PARAMETER_INCOMPATIBLE),
+            // §7.5.2.37: changes only while no SYNC is produced; 1 and 241..=255 are
+            // reserved.
+            (0x1019, 0) if !self.sync.period().is_zero() => Some(AbortCode::DEVICE_STATE),
+            (0x1019, 0) => (v == 1 || v > 240).then_some(invalid),
+            (0x1029, 1..) => Reaction::from_u8(v as u8).is_none().then_some(invalid),
+            // §7.5.2.33: the identifier is fixed while both directions are valid.
+            (0x1201..=0x127F, 1 | 2) => {
+                (!old.bit31() && !new.bit31() && new.id_differs(old)).then_some(invalid)
+            }
+            (0x1201..=0x127F, 3) => (v == 0 || v > 127).then_some(invalid),
+            (0x1400..=0x1BFF, _) => self
+                .pdo
+                .as_ref()
+                .and_then(|p| p.validate_write(&self.od, index, sub, data).err()),
+            _ => None,
+        };
+        if let Some(code) = refused {
+            return Err(code);
+        }
+        let hooked = !(0x1400..=0x1BFF).contains(&index) && self.od.description().is_hooked(index);
+        if hooked {
+            self.hooks.validate(&self.od, index, sub, data)?;
+        }
+        self.od.set_raw(id, data)?;
+        self.apply_comm(index, sub, v);
+        if hooked {
+            self.hooks.written(&mut self.od, index, sub);
+        }
+        Ok(())
+    }
+
+    /// A landed communication parameter takes effect.
+    fn apply_comm(&mut self, index: u16, sub: u8, v: u32) {
+        let now = self.now;
+        let running = self.running();
+        match index {
+            0x1005 => self.sync.set_cob_id(CobId(v), now, running),
+            0x1006 => self.sync.set_period(v, now, running),
+            0x1007 => self.sync.set_window(v),
+            0x1019 => self.sync.set_overflow(v as u8),
+            0x100C | 0x100D => self.guarding.set_life_time(
+                self.u32(0x100C, 0).unwrap_or(0) as u16,
+                self.u32(0x100D, 0).unwrap_or(0) as u8,
+            ),
+            0x1012 => self.time = TimeService::new(CobId(v)),
+            0x1014 => self.emcy.set_cob_id(CobId(v)),
+            0x1015 => self.emcy.set_inhibit(v as u16),
+            0x1016 => self.consumer.set(sub, v),
+            0x1017 => self
+                .heartbeat
+                .set_time(v as u16, now, self.state != State::Initialising),
+            0x1028 => self.configure_emcy_consumers(),
+            0x1029 if sub == 1 => {
+                self.reaction = Reaction::from_u8(v as u8).unwrap_or(Reaction::NoChange);
+            }
+            0x1200..=0x127F => self.sdo_changed = true,
+            0x1400..=0x1BFF => {
+                if let Some(p) = &mut self.pdo {
+                    p.after_write(&self.od, index, sub, now);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// 0x1010: "save" stores the selected groups.
+    fn store(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
+        if v != storage::SAVE {
+            return Err(AbortCode::DATA_TRANSFER);
+        }
+        let Some(s) = &mut self.storage else {
+            return Err(AbortCode::HARDWARE_ERROR);
+        };
+        for g in Group::for_sub(sub) {
+            let blob = storage::encode(&self.od, *g);
+            s.save(*g, &blob)
+                .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
+        }
+        Ok(())
+    }
+
+    /// 0x1011: "load" erases the selected groups; defaults apply after the next reset.
+    fn restore(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
+        if v != storage::LOAD {
+            return Err(AbortCode::DATA_TRANSFER);
+        }
+        let Some(s) = &mut self.storage else {
+            return Err(AbortCode::HARDWARE_ERROR);
+        };
+        for g in Group::for_sub(sub) {
+            s.erase(*g)
+                .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
+        }
+        Ok(())
+    }
+}
+
+impl<H: OdHooks> ObjectAccess for Core<H> {
+    fn read(
+        &mut self,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Result<ReadInfo, AbortCode> {
+        Hooked::new(&mut self.od, &mut self.hooks).read(index, sub, offset, buf)
+    }
+
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        if index < 0x2000 {
+            let r = self.write_comm(index, sub, data);
+            self.mirror_errors();
+            return r;
+        }
+        Hooked::new(&mut self.od, &mut self.hooks).write(index, sub, data)?;
+        if let Some(p) = &mut self.pdo {
+            p.mark_changed(index, sub);
+        }
+        Ok(())
+    }
+
+    fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+        self.od.stage_begin(index, sub, size).map(|_| ())
+    }
+
+    fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let id = self.od.locate(index, sub)?;
+        self.od.stage_append(id, data)
+    }
+
+    fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
+        if index < 0x2000 {
+            let data = self.od.staged().to_vec();
+            self.od.stage_cancel();
+            return self.write(index, sub, &data);
+        }
+        Hooked::new(&mut self.od, &mut self.hooks).write_end(index, sub)?;
+        if let Some(p) = &mut self.pdo {
+            p.mark_changed(index, sub);
+        }
+        Ok(())
+    }
+
+    fn write_cancel(&mut self, _index: u16, _sub: u8) {
+        self.od.stage_cancel();
+    }
+}
+
+impl<H: OdHooks> ObjectAccess for Device<H> {
+    fn read(
+        &mut self,
+        index: u16,
+        sub: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Result<ReadInfo, AbortCode> {
+        self.core.read(index, sub, offset, buf)
+    }
+
+    fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        let r = self.core.write(index, sub, data);
+        self.apply_sdo_config();
+        r
+    }
+
+    fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
+        self.core.write_begin(index, sub, size)
+    }
+
+    fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
+        self.core.write_segment(index, sub, data)
+    }
+
+    fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
+        let r = self.core.write_end(index, sub);
+        self.apply_sdo_config();
+        r
+    }
+
+    fn write_cancel(&mut self, index: u16, sub: u8) {
+        self.core.write_cancel(index, sub);
+    }
+}
+
+impl<H: OdHooks> Node for Device<H> {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.core.now = now;
+        self.core.state = State::Initialising;
+        self.core.error_passive = false;
+        self.core.events.clear();
+        self.core.od.restore_defaults(0x0000..=0xFFFF);
+        self.core.load_group(Group::Manufacturer);
+        self.core.load_group(Group::Application);
+        self.core.reset_communication(now, out);
+        self.after(now, out);
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        if !self.core.on_frame(frame, now, out) && self.core.state.allows(Service::Sdo) {
+            let mut handled = false;
+            for s in &mut self.sdo {
+                if s.on_frame(frame, now, &mut self.core, out) {
+                    handled = true;
+                    break;
+                }
+            }
+            if !handled
+                && self.core.state == State::Operational
+                && let Some(p) = &mut self.core.pdo
+            {
+                p.on_frame(frame, now, &mut self.core.od, out);
+                self.core.pdo_events();
+            }
+        }
+        self.after(now, out);
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.after(now, out);
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        let sdo = if self.core.state.allows(Service::Sdo) {
+            self.sdo.iter().filter_map(SdoServer::next_deadline).min()
+        } else {
+            None
+        };
+        match (self.core.next_deadline(), sdo) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.core.now = now;
+        if let Some(p) = &mut self.core.pdo {
+            p.on_sent(frame, now);
+        }
+        if self.core.bus_off_recovered {
+            // A frame of ours made it onto the bus: the recovery is complete.
+            self.core.bus_off_recovered = false;
+            self.core.clear(EMCY_BUS_OFF_RECOVERED);
+        }
+        self.after(now, out);
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        self.core.on_controller_event(event, now);
+        self.after(now, out);
+    }
+}
