@@ -1,0 +1,130 @@
+//! Parse errors: every one names the line, and the section and key when there is one.
+
+use core::fmt;
+
+/// What is wrong (see [`ParseError`] for where).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ParseErrorKind {
+    /// A `key=value` line before the first section header.
+    #[error("a line outside any section")]
+    OutsideSection,
+    /// A `[` line without its `]`, or an empty name.
+    #[error("malformed section header")]
+    BadHeader,
+    /// A line in a section that is neither a comment nor `key=value`.
+    #[error("expected `key=value`")]
+    NotKeyValue,
+    /// `=value` without a key.
+    #[error("empty key")]
+    EmptyKey,
+    /// The section already appeared (section names are case-insensitive).
+    #[error("duplicate section, first defined at line {0}")]
+    DuplicateSection(usize),
+    /// The key already appeared in this section (key names are case-insensitive).
+    #[error("duplicate key, first defined at line {0}")]
+    DuplicateKey(usize),
+    /// A key CiA 306 requires is absent.
+    #[error("missing required key")]
+    MissingKey,
+    /// The value does not have the form the key needs.
+    #[error("invalid value {value:?}: expected {expected}")]
+    InvalidValue {
+        /// The text found.
+        value: String,
+        /// What was expected.
+        expected: String,
+    },
+    /// A sub-object or helper section for an index that has no object section.
+    #[error("no object section [{0:04X}] for this section")]
+    NoObject(u16),
+    /// Sub-object sections next to `CompactSubObj`, which already defines the sub-objects.
+    #[error("object {0:04X} uses CompactSubObj and also has sub-object sections")]
+    CompactWithSubs(u16),
+    /// An object list names a number past its `SupportedObjects` (or `ObjectLinks`,
+    /// `NrOfEntries`, `Lines`) count, or leaves one out.
+    #[error("entry {0} is outside the count or missing")]
+    ListEntry(u32),
+}
+
+/// An error in an EDS or DCF file, at a line (1-based), in a section and key where known.
+///
+/// Displays as `line 12 [1018sub1] DataType: invalid value ...`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ParseError {
+    /// The line the error is on (1-based).
+    pub line: usize,
+    /// The section the line belongs to.
+    pub section: Option<String>,
+    /// The key concerned.
+    pub key: Option<String>,
+    /// What is wrong.
+    pub kind: ParseErrorKind,
+}
+
+impl ParseError {
+    pub(crate) fn at(line: usize, kind: ParseErrorKind) -> Self {
+        ParseError {
+            line,
+            section: None,
+            key: None,
+            kind,
+        }
+    }
+
+    pub(crate) fn in_section(mut self, section: &str) -> Self {
+        self.section = Some(section.to_owned());
+        self
+    }
+
+    pub(crate) fn with_key(mut self, key: &str) -> Self {
+        self.key = Some(key.to_owned());
+        self
+    }
+
+    pub(crate) fn invalid(
+        line: usize,
+        section: &str,
+        key: &str,
+        value: &str,
+        expected: &str,
+    ) -> Self {
+        ParseError::at(
+            line,
+            ParseErrorKind::InvalidValue {
+                value: value.to_owned(),
+                expected: expected.to_owned(),
+            },
+        )
+        .in_section(section)
+        .with_key(key)
+    }
+}
+
+impl fmt::Display for ParseError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "line {}", self.line)?;
+        if let Some(s) = &self.section {
+            write!(f, " [{s}]")?;
+        }
+        if let Some(k) = &self.key {
+            write!(f, " {k}")?;
+        }
+        write!(f, ": {}", self.kind)
+    }
+}
+
+impl std::error::Error for ParseError {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn display_names_line_section_and_key() {
+        let e = ParseError::invalid(12, "1018sub1", "DataType", "x", "a number");
+        assert_eq!(
+            e.to_string(),
+            "line 12 [1018sub1] DataType: invalid value \"x\": expected a number"
+        );
+    }
+}

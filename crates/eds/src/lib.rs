@@ -1,0 +1,92 @@
+//! CiA 306 EDS and DCF files.
+//!
+//! * [`parse`] reads a file into the typed model [`Eds`]: every section and key of CiA 306
+//!   (`FileInfo`, `DeviceInfo` with bit rates and granularity, `DummyUsage`, `Comments`, the
+//!   object lists, objects and sub-objects, `CompactSubObj` with its `Name`/`Value`/
+//!   `Denotation` sections, `ObjectLinks`, DCF `ParameterValue`, `Denotation` and
+//!   `[DeviceComissioning]`), with values typed by their `DataType` and `$NODEID` kept
+//!   symbolic ([`EdsValue::NodeId`]); unknown sections and keys are kept in order. Errors
+//!   name the line, section and key ([`ParseError`]); bad input never panics.
+//! * [`write`] writes the canonical layout; `parse(&write(&m))? == m` for every parsed `m`.
+//! * [`Eds::check`] reports errors and warnings ([`Report`]).
+//! * [`render_markdown`] documents a device.
+//! * [`from_od`] makes the EDS of a device from its object dictionary; [`to_od`] builds an
+//!   object dictionary description from an EDS and [`apply_parameter_values`] loads a DCF's
+//!   configured values into a device.
+//!
+//! Parsing decisions (CiA 306 leaves them open): section and key names are matched without
+//! regard to case; a `;` starts a comment only at the start of a line; a duplicate section,
+//! or a duplicate key in a section, is an error naming both lines.
+//!
+//! ```
+//! use cantwin_eds::{EdsValue, parse, write};
+//!
+//! let text = "\
+//! [DeviceInfo]
+//! VendorName=Example
+//! BaudRate_500=1
+//!
+//! [MandatoryObjects]
+//! SupportedObjects=1
+//! 1=0x1000
+//!
+//! [1000]
+//! ParameterName=Device type
+//! ObjectType=0x7
+//! DataType=0x0007
+//! AccessType=ro
+//! DefaultValue=0x00000191
+//!
+//! [1014]
+//! ParameterName=COB-ID EMCY
+//! DataType=0x0007
+//! AccessType=ro
+//! DefaultValue=$NODEID+0x80
+//! ";
+//! let eds = parse(text)?;
+//! assert_eq!(eds.device_info.baud_rates(), vec![500]);
+//! let emcy = eds.entry(0x1014, 0).and_then(|e| e.default_value.as_ref());
+//! assert_eq!(emcy, Some(&EdsValue::NodeId(0x80)));
+//! assert_eq!(emcy.and_then(|v| v.evaluate(5)), Some(0x85));
+//! assert_eq!(parse(&write(&eds))?, eds);
+//!
+//! let err = parse("[1000]\nParameterName=x\nDataType=0x0007\nAccessType=rx\n").unwrap_err();
+//! assert_eq!(err.to_string(), "line 4 [1000] AccessType: invalid value \"rx\": expected ro, wo, rw, rwr, rww or const");
+//! # Ok::<(), cantwin_eds::ParseError>(())
+//! ```
+#![forbid(unsafe_code)]
+
+mod check;
+mod doc;
+mod error;
+mod ini;
+mod model;
+mod od;
+mod parse;
+mod value;
+mod write;
+
+pub use check::{Issue, Report, Severity};
+pub use doc::render_markdown;
+pub use error::{ParseError, ParseErrorKind};
+pub use model::{
+    DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, ObjectList, Section,
+};
+pub use od::{ConvertError, apply_parameter_values, from_od, to_od};
+pub use parse::{decode, parse};
+pub use value::{EdsValue, parse_integer, parse_node_id_expr};
+pub use write::write;
+
+/// Object code DOMAIN (CiA 301 table 42).
+pub const DOMAIN: u8 = 0x2;
+/// Object code VAR.
+pub const VAR: u8 = 0x7;
+/// Object code ARRAY.
+pub const ARRAY: u8 = 0x8;
+/// Object code RECORD.
+pub const RECORD: u8 = 0x9;
+
+/// Parses bytes: UTF-8 when valid, ISO 8859-1 otherwise (see [`decode`]).
+pub fn parse_bytes(bytes: &[u8]) -> Result<Eds, ParseError> {
+    parse(&decode(bytes))
+}
