@@ -230,10 +230,12 @@ impl SdoServer {
         out: &mut Outbox,
     ) {
         let Some(tx) = self.tx_id() else { return };
-        // Block download segments carry no command specifier.
+        // Block download segments carry no command specifier; 0x80 cannot be a segment
+        // (sequence number 0), so it is the client's abort.
         if let State::BlockDownload {
             finished: false, ..
         } = self.state
+            && b[0] != 0x80
         {
             self.deadline = now.checked_add(self.timeout);
             self.block_segment(BlockSegment::decode(b), tx, access, out);
