@@ -2,7 +2,9 @@
 
 mod bench;
 mod benchmarks_md;
+mod capture_tap;
 mod demo;
+mod dump;
 mod sim;
 
 use anyhow::Result;
@@ -34,6 +36,11 @@ enum Command {
                             socketcand 127.0.0.1:29536 can0\n  slcan 127.0.0.1:29537 can0"
     )]
     Sim(sim::Args),
+    /// Print a capture (pcap, pcapng or candump log), one frame a line.
+    #[command(
+        after_help = "Examples:\n  cantwin dump capture.pcap\n  cantwin dump candump-2024-01-01.log"
+    )]
+    Dump(dump::Args),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -48,6 +55,7 @@ fn main() -> Result<()> {
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Sim(args) => sim::run(&args),
+        Command::Dump(args) => dump::run(&args),
     }
 }
 

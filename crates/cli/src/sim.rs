@@ -13,6 +13,10 @@ use cantwin_gateway::paced::PacedBus;
 use cantwin_gateway::{Limits, slcan, socketcand};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
 
+use cantwin_capture::Format;
+
+use crate::capture_tap::Captures;
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The scenario file (TOML).
@@ -35,6 +39,14 @@ pub struct Args {
     /// Stop after this many seconds of wall time (default: run until Ctrl-C).
     #[arg(long, value_name = "SECONDS")]
     duration: Option<f64>,
+    /// Record every frame of every bus, with bus timestamps mapped to wall time, into a pcap
+    /// file (one file per bus, `STEM-BUS.pcap`, when there are several) or a pcapng file (one
+    /// interface per bus), by extension.
+    #[arg(long, value_name = "FILE")]
+    pcap: Option<PathBuf>,
+    /// Record every frame of every bus into a can-utils candump log.
+    #[arg(long, value_name = "FILE")]
+    candump: Option<PathBuf>,
     /// Directory where devices keep what they store (CANopen 0x1010) between runs.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
@@ -59,7 +71,20 @@ pub fn run(args: &Args) -> Result<()> {
     let env = BuildEnv {
         state_dir: args.state_dir.clone(),
     };
-    let built = scenario.build(&Registry::builtin(), &env)?;
+    let mut built = scenario.build(&Registry::builtin(), &env)?;
+    let mut captures = Captures::new();
+    let pcap = args.pcap.as_ref().map(|p| {
+        let ng = p
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("pcapng"));
+        (p, if ng { Format::Pcapng } else { Format::Pcap })
+    });
+    let candump = args.candump.as_ref().map(|p| (p, Format::Candump));
+    for (path, format) in [pcap, candump].into_iter().flatten() {
+        for file in captures.add(&mut built.sim, path, format)? {
+            eprintln!("recording {}", file.display());
+        }
+    }
     let bus_names: Vec<String> = built.buses.iter().map(|(n, _)| n.clone()).collect();
     let slcan_bus = match (&args.slcan, &args.slcan_bus) {
         (None, Some(_)) => bail!("--slcan-bus needs --slcan"),
@@ -154,6 +179,7 @@ pub fn run(args: &Args) -> Result<()> {
     let sim = paced
         .stop()
         .context("the simulation thread stopped unexpectedly")?;
+    captures.finish()?;
     eprintln!(
         "cantwin sim: stopped after {:.1} s ({} of bus time{})",
         started.elapsed().as_secs_f64(),
