@@ -482,6 +482,7 @@ impl PdoEngine {
                 self.sync_rx_pending.retain(|&p| usize::from(p) != n);
             }
             Direction::Tx => {
+                let was_running = self.tpdos[n].id.is_some();
                 self.tpdos[n] = Tpdo {
                     cob,
                     ttype,
@@ -493,7 +494,9 @@ impl PdoEngine {
                     ..Tpdo::default()
                 };
                 if self.operational {
-                    self.start_tpdo(n, now);
+                    // A PDO that starts running sends its current values once, as on
+                    // entering OPERATIONAL; a parameter change of a running PDO does not.
+                    self.start_tpdo(n, now, !was_running);
                 }
             }
         }
@@ -532,11 +535,11 @@ impl PdoEngine {
         self.tx_index.dedup_by_key(|e| e.0);
     }
 
-    fn start_tpdo(&mut self, n: usize, now: Instant) {
+    fn start_tpdo(&mut self, n: usize, now: Instant, initial_event: bool) {
         let t = &mut self.tpdos[n];
         t.sync_left = t.ttype;
         t.wait_start = t.sync_start != 0;
-        t.event = t.is_event_driven();
+        t.event = initial_event && t.is_event_driven();
         t.inhibit_until = Instant::ZERO;
         t.timer_due =
             (t.is_event_driven() && !t.event_timer.is_zero()).then(|| now + t.event_timer);
@@ -562,7 +565,7 @@ impl PdoEngine {
         self.sync_rx_pending.clear();
         for n in 0..self.tpdos.len() {
             if operational {
-                self.start_tpdo(n, now);
+                self.start_tpdo(n, now, true);
             } else {
                 let t = &mut self.tpdos[n];
                 t.event = false;
