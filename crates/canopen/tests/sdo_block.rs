@@ -1,13 +1,13 @@
 //! SDO block transfer conformance (CiA 301 §7.2.4.3.9–7.2.4.3.16): exact frames.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+mod sdo_harness;
 
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::Value;
 use cantwin_canopen::sdo::crc::Crc16;
 use cantwin_canopen::sdo::wire::{BlockSegment, Response};
-use common::*;
+use sdo_harness::*;
 
 fn seg(last: bool, seqno: u8, data: &[u8]) -> [u8; 8] {
     let mut d = [0u8; 7];

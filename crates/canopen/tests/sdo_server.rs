@@ -1,14 +1,14 @@
 //! SDO server conformance (CiA 301 §7.2.4.3): exact frames on the wire, exact times.
 #![allow(clippy::unwrap_used)]
 
-mod common;
+mod sdo_harness;
 
 use cantwin_can::{Duration, Id, Instant, Outbox};
 use cantwin_canopen::od::{ObjectDictionary, ReadInfo, Value};
 use cantwin_canopen::sdo::SdoServer;
 use cantwin_canopen::sdo::crc::Crc16;
 use cantwin_canopen::{AbortCode, ObjectAccess};
-use common::*;
+use sdo_harness::*;
 use std::sync::Arc;
 
 fn resp(b0: u8, rest: [u8; 7]) -> [u8; 8] {
