@@ -12,7 +12,7 @@ use std::io::{BufRead, Write};
 /// ```text
 /// 1700000000.000123000  can0  123#DEADBEEF           [4]
 /// 1700000000.000124000  can0  12345678#R4            [4]  remote
-/// 1700000000.000125000  can0  20000044#0004000000000000  [8]  error: controller-problem|bus-off
+/// 1700000000.000125000  can0  20000044#0004000000000000 [8]  error: controller-problem|bus-off
 /// ```
 ///
 /// Seconds and nanoseconds since the Unix epoch, the channel, the frame in candump notation,

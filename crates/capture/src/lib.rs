@@ -35,7 +35,7 @@
 //! assert_eq!(records, [record.clone()]);
 //! assert_eq!(
 //!     cantwin_capture::format_record(&record),
-//!     "1700000000.000123456  can0  181#0102                [2]"
+//!     "1700000000.000123456  can0  181#0102               [2]"
 //! );
 //! # Ok(())
 //! # }

@@ -471,6 +471,7 @@ mod tests {
         assert_eq!(to_nanos(1, 6, 10), Some(10_000_001_000));
         assert_eq!(to_nanos(0, 6, -1), None);
         assert_eq!(to_nanos(u64::MAX, 0, 0), None);
-        assert_eq!(to_nanos(u64::MAX, 200, 0), Some(0));
+        assert_eq!(to_nanos(u64::MAX, 0x7F, 0), Some(0));
+        assert_eq!(to_nanos(u64::MAX, 0xC8, 0), Some(3_906_249));
     }
 }
