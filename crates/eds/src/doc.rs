@@ -29,6 +29,19 @@ fn code_name(code: u8) -> String {
     }
 }
 
+/// One table row; an empty cell is written `| |`.
+fn table_row(md: &mut String, cells: &[&str]) {
+    md.push('|');
+    for c in cells {
+        if c.is_empty() {
+            md.push_str(" |");
+        } else {
+            let _ = write!(md, " {c} |");
+        }
+    }
+    md.push('\n');
+}
+
 fn row(md: &mut String, index: &str, sub: &str, code: &str, e: &Entry) {
     let dt = e.data_type;
     let v =
@@ -37,17 +50,24 @@ fn row(md: &mut String, index: &str, sub: &str, code: &str, e: &Entry) {
         (None, None) => String::new(),
         (lo, hi) => format!("{} .. {}", v(lo), v(hi)),
     };
-    let _ = writeln!(
+    let pdo = if e.pdo_mapping == Some(true) {
+        "yes"
+    } else {
+        ""
+    };
+    table_row(
         md,
-        "| {index} | {sub} | {} | {code} | {} | {} | {} | {} | {limits} |",
-        cell(&e.parameter_name),
-        type_name(dt),
-        e.access_type.map(|a| a.eds_name()).unwrap_or_default(),
-        match e.pdo_mapping {
-            Some(true) => "yes",
-            _ => "",
-        },
-        v(&e.default_value),
+        &[
+            index,
+            sub,
+            &cell(&e.parameter_name),
+            code,
+            &type_name(dt),
+            e.access_type.map(|a| a.eds_name()).unwrap_or_default(),
+            pdo,
+            &v(&e.default_value),
+            &limits,
+        ],
     );
 }
 
