@@ -1,6 +1,6 @@
 //! What a capture holds: timestamped events on named channels.
 
-use cantwin_can::Frame;
+use cantwin_can::{Frame, Instant};
 use core::fmt;
 
 /// SocketCAN error classes (the `CAN_ERR_*` bits of an error frame's identifier, Linux
@@ -151,11 +151,52 @@ impl Record {
         }
     }
 
+    /// A record of an event seen at bus time `now` of a simulation whose bus time 0 is
+    /// `epoch_ns` nanoseconds after the Unix epoch (saturating at `u64::MAX`).
+    pub fn at_bus_time(
+        epoch_ns: u64,
+        now: Instant,
+        channel: impl Into<String>,
+        event: impl Into<Event>,
+    ) -> Record {
+        Record::new(epoch_ns.saturating_add(now.as_nanos()), channel, event)
+    }
+
     /// The frame, if this record holds one.
     pub fn frame(&self) -> Option<&Frame> {
         match &self.event {
             Event::Frame(f) => Some(f),
             Event::Error(_) => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bus_time_maps_onto_the_start_epoch() {
+        let f = Frame::std(0x80, &[]).unwrap();
+        let r = Record::at_bus_time(
+            1_700_000_000_000_000_000,
+            Instant::from_nanos(1_234),
+            "can0",
+            f,
+        );
+        assert_eq!(r.timestamp_ns, 1_700_000_000_000_001_234);
+        assert_eq!(r.frame(), Some(&f));
+        let r = Record::at_bus_time(u64::MAX - 1, Instant::from_nanos(5), "can0", f);
+        assert_eq!(r.timestamp_ns, u64::MAX);
+    }
+
+    #[test]
+    fn error_class_display_names_bits() {
+        let e = ErrorFrame::new(error_class::CONTROLLER | error_class::BUS_OFF, [0; 8]).unwrap();
+        assert_eq!(e.to_string(), "controller-problem|bus-off");
+        assert_eq!(
+            ErrorFrame::new(0x2000_0000, [0; 8]),
+            Err(ErrorClassError(0x2000_0000))
+        );
     }
 }

@@ -164,3 +164,20 @@ fn tshark_reads_cantwin_pcapng_with_two_interfaces() {
         .collect();
     assert_eq!(lines, want);
 }
+
+/// Wireshark 4.0 also opens candump logs, as long as the lines carry no direction flag.
+#[test]
+fn tshark_reads_cantwin_candump_log() {
+    if !tshark_available() {
+        return;
+    }
+    let file = path("tshark_reads_cantwin_candump.log");
+    write(&file, &frames("can0", 1_700_000_000_000_000_000));
+    let lines = tshark_fields(&file, &["frame.number"]);
+    let want: Vec<String> = EXPECTED
+        .iter()
+        .enumerate()
+        .map(|(i, e)| format!("{},{e}", i + 1))
+        .collect();
+    assert_eq!(lines, want);
+}
