@@ -41,6 +41,7 @@ impl Registry {
     pub fn builtin() -> Self {
         let mut r = Registry::new();
         r.register(Box::new(crate::kinds::generator::Generator));
+        r.register(Box::new(crate::kinds::cia301::Cia301));
         r
     }
 

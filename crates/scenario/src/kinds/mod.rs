@@ -1,3 +1,4 @@
 //! The device kinds built into cantwin.
 
+pub mod cia301;
 pub mod generator;

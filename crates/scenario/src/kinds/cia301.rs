@@ -1,0 +1,462 @@
+//! `kind = "cia301"`: a generic CiA 301 device — the communication objects with the
+//! standard's defaults, a large DOMAIN, PDOs on a few application objects, and hooks that let
+//! an outside tool provoke an EMCY.
+//!
+//! Keys:
+//!
+//! | key | default | object |
+//! |---|---|---|
+//! | `node_id` | required, 1–127 | |
+//! | `heartbeat_ms` | 0 | 0x1017 producer heartbeat time at power-on |
+//! | `device_name` | `"cantwin CiA 301 device"` | 0x1008 (any length) |
+//! | `hardware_version`, `software_version` | `"1.0"`, the crate version | 0x1009, 0x100A |
+//! | `device_type` | 0 | 0x1000 |
+//! | `vendor_id`, `product_code`, `revision`, `serial` | 0 | 0x1018 sub 1–4 |
+//! | `domain_size` | 65536 | 0x2000: a DOMAIN of that many bytes (at most 16 MiB) |
+//! | `rpdos`, `tpdos` | 4, 4 | number of RPDOs and TPDOs (at most 8 each) |
+//! | `tpdo_transmission_type` | 1 (every SYNC) | 0x1800.. sub 2 |
+//! | `rpdo_transmission_type` | 255 | 0x1400.. sub 2 |
+//! | `sdo_timeout_ms` | 1000 | SDO server timeout |
+//!
+//! Application objects:
+//!
+//! * 0x2000 DOMAIN, `rw`: initially byte *i* is `i mod 251` (a prime, so the pattern does not
+//!   repeat on a power-of-two boundary and a misplaced segment shows); a download replaces
+//!   it with up to `domain_size` bytes.
+//! * 0x2001 UNSIGNED16 "EMCY trigger", `rw`: writing a code raises that error (EMCY with the
+//!   code, error register bit 0 "generic"); writing 0 clears it; writing another code
+//!   clears the previous one first. CiA 301 lets the application raise errors (§7.2.7); this
+//!   object is how a test outside the process makes the device do it.
+//! * 0x2002 UNSIGNED8 "Set point", `rw`, limits 0–100: a value range for abort 0x06090030.
+//! * 0x2100 ARRAY of 8 UNSIGNED16 "Inputs", `rw`, mappable: sub 1 counts the SYNCs the
+//!   device received (modulo 2¹⁶); the others hold what was written. TPDO *k* (1-based)
+//!   maps sub 2*k*−1 and 2*k* (4 bytes).
+//! * 0x2200 ARRAY of 8 UNSIGNED16 "Outputs", `rw`, mappable: RPDO *k* maps sub 2*k*−1 and
+//!   2*k*; an RPDO shorter than its 4 mapped bytes is not processed and raises EMCY 0x8210
+//!   (CiA 301 §7.2.2.3).
+//!
+//! With `--state-dir`, the device keeps what 0x1010 stores in the directory
+//! `STATE_DIR/<device name>/`.
+//!
+//! `heartbeat_ms` is the power-on value of 0x1017 when no stored value sets it: after every
+//! reset communication (power-up included) the device writes it to 0x1017 if 0x1017 came
+//! out 0, so a stored non-zero heartbeat time wins, and a restore of the defaults (0x1011)
+//! brings back `heartbeat_ms`.
+
+use std::sync::Arc;
+
+use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use cantwin_canopen::ObjectAccess;
+use cantwin_canopen::device::{Device, DeviceConfig, Event};
+use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
+use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject, Value};
+use cantwin_canopen::pdo::PdoObjects;
+use cantwin_canopen::storage::FileStorage;
+
+use crate::build::BuildEnv;
+use crate::error::ScenarioError;
+use crate::model::BusSpec;
+use crate::registry::{DeviceKind, Settings};
+
+/// The DOMAIN object.
+pub const DOMAIN_INDEX: u16 = 0x2000;
+/// The EMCY trigger object.
+pub const EMCY_TRIGGER_INDEX: u16 = 0x2001;
+/// The set point object, limited to 0..=100.
+pub const SET_POINT_INDEX: u16 = 0x2002;
+/// The inputs array, mapped into the TPDOs.
+pub const INPUTS_INDEX: u16 = 0x2100;
+/// The outputs array, mapped into the RPDOs.
+pub const OUTPUTS_INDEX: u16 = 0x2200;
+/// The largest `domain_size` accepted.
+pub const MAX_DOMAIN_SIZE: usize = 16 << 20;
+/// The most PDOs of each direction (two 16-bit entries each over 8 array entries would run
+/// out at 4; up to 8 map the same entries again).
+pub const MAX_PDOS: u16 = 8;
+
+/// Entries of the inputs and outputs arrays.
+const IO_ENTRIES: u8 = 8;
+/// The default of 0x2000, byte `i`.
+fn domain_byte(i: usize) -> u8 {
+    (i % 251) as u8
+}
+
+/// The `cia301` kind.
+pub struct Cia301;
+
+/// A CiA 301 [`Device`] with the scenario's power-on heartbeat time, a SYNC counter in
+/// 0x2100 sub 1 and the EMCY trigger 0x2001 (see the [module documentation](self)).
+pub struct Cia301Node {
+    device: Device,
+    heartbeat_ms: u16,
+    /// The code raised through 0x2001, 0 if none.
+    emcy_code: u16,
+    syncs: u16,
+}
+
+impl core::fmt::Debug for Cia301Node {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Cia301Node")
+            .field("device", &self.device)
+            .field("heartbeat_ms", &self.heartbeat_ms)
+            .field("emcy_code", &self.emcy_code)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Cia301Node {
+    /// The device.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The device, mutably.
+    pub fn device_mut(&mut self) -> &mut Device {
+        &mut self.device
+    }
+
+    /// Reacts to what the device reported and to writes of 0x2001, after every call into it.
+    fn after(&mut self, now: Instant, out: &mut Outbox) {
+        let mut flush = false;
+        while let Some(event) = self.device.poll_event() {
+            match event {
+                Event::ResetCommunication => {
+                    let current = self.device.od().get_unsigned(0x1017, 0).unwrap_or(0);
+                    if current == 0 && self.heartbeat_ms != 0 {
+                        // Through ObjectAccess so that the producer restarts at once.
+                        let _ = self
+                            .device
+                            .write(0x1017, 0, &self.heartbeat_ms.to_le_bytes());
+                    }
+                    self.syncs = 0;
+                }
+                Event::ResetApplication => {
+                    // 0x2001 is back at 0 and the error is gone with the reset.
+                    self.emcy_code = 0;
+                }
+                Event::Sync { .. } => {
+                    self.syncs = self.syncs.wrapping_add(1);
+                    let _ = self
+                        .device
+                        .set_value(INPUTS_INDEX, 1, &Value::Unsigned16(self.syncs));
+                }
+                _ => {}
+            }
+        }
+        let wanted = self
+            .device
+            .od()
+            .get_unsigned(EMCY_TRIGGER_INDEX, 0)
+            .unwrap_or(0) as u16;
+        if wanted != self.emcy_code {
+            let mut emcy = self.device.emcy();
+            if self.emcy_code != 0 {
+                emcy.clear(self.emcy_code);
+            }
+            if wanted != 0 {
+                emcy.raise(wanted, [0; 5]);
+            }
+            self.emcy_code = wanted;
+            flush = true;
+        }
+        if flush {
+            // Raised and cleared errors are sent at the device's next tick.
+            self.device.on_tick(now, out);
+        }
+    }
+}
+
+impl Node for Cia301Node {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.emcy_code = 0;
+        self.syncs = 0;
+        self.device.on_power_up(now, out);
+        self.after(now, out);
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.device.on_frame(frame, now, out);
+        self.after(now, out);
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.device.on_tick(now, out);
+        self.after(now, out);
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.device.next_deadline()
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.device.on_sent(frame, now, out);
+        self.after(now, out);
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        self.device.on_controller_event(event, now, out);
+        self.after(now, out);
+    }
+
+    fn accepts(&self, id: Id) -> bool {
+        self.device.accepts(id)
+    }
+}
+
+/// The object dictionary of the kind, from its settings.
+struct Layout {
+    options: Cia301Options,
+    domain_size: usize,
+    rpdos: u16,
+    tpdos: u16,
+    rpdo_type: u8,
+    tpdo_type: u8,
+}
+
+fn mapping(index: u16, k: u16) -> [u32; 2] {
+    // Entries wrap around the 8-entry array for PDOs 5..8.
+    let first = ((2 * k) % u16::from(IO_ENTRIES) + 1) as u32;
+    let entry = |sub: u32| (u32::from(index) << 16) | (sub << 8) | 16;
+    [entry(first), entry(first + 1)]
+}
+
+fn description(l: &Layout) -> Result<cantwin_canopen::od::OdDescription, String> {
+    let mut pdos = PdoObjects::new(l.rpdos, l.tpdos);
+    for k in 0..l.rpdos {
+        pdos = pdos.rpdo(k, l.rpdo_type, &mapping(OUTPUTS_INDEX, k));
+    }
+    for k in 0..l.tpdos {
+        pdos = pdos.tpdo(k, l.tpdo_type, &mapping(INPUTS_INDEX, k));
+    }
+    let domain: Vec<u8> = (0..l.domain_size).map(domain_byte).collect();
+    let io = |name: &str| {
+        SubObject::new(name, DataType::Unsigned16, Access::Rw)
+            .mappable()
+            .default(Value::Unsigned16(0))
+    };
+    let b = cia301_defaults(OdBuilder::new(), &l.options)
+        .var(
+            DOMAIN_INDEX,
+            SubObject::new("Domain", DataType::Domain, Access::Rw)
+                .default(Value::Domain(domain))
+                .max_len(l.domain_size),
+        )
+        .var(
+            EMCY_TRIGGER_INDEX,
+            SubObject::new("EMCY trigger", DataType::Unsigned16, Access::Rw),
+        )
+        .var(
+            SET_POINT_INDEX,
+            SubObject::new("Set point", DataType::Unsigned8, Access::Rw)
+                .limits(Value::Unsigned8(0), Value::Unsigned8(100)),
+        )
+        .array_of(INPUTS_INDEX, "Inputs", IO_ENTRIES, io("Input"))
+        .array_of(OUTPUTS_INDEX, "Outputs", IO_ENTRIES, io("Output"));
+    pdos.add_to(b).build().map_err(|e| e.to_string())
+}
+
+impl DeviceKind for Cia301 {
+    fn name(&self) -> &'static str {
+        "cia301"
+    }
+
+    fn summary(&self) -> &'static str {
+        "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs"
+    }
+
+    fn build(
+        &self,
+        s: &Settings<'_>,
+        _bus: &BusSpec,
+        env: &BuildEnv,
+    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+        let node_id: u8 = s.require("node_id")?;
+        if !(1..=127).contains(&node_id) {
+            return Err(s.error(
+                "node_id",
+                format!("`node_id` is 1–127 (CiA 301 §7.3.2.1), not {node_id}"),
+            ));
+        }
+        let heartbeat_ms: u16 = s.get_or("heartbeat_ms", 0)?;
+        let defaults = Cia301Options::default();
+        let options = Cia301Options {
+            device_type: s.get_or("device_type", 0)?,
+            vendor_id: s.get_or("vendor_id", 0)?,
+            product_code: s.get_or("product_code", 0)?,
+            revision: s.get_or("revision", 0)?,
+            serial: s.get_or("serial", 0)?,
+            device_name: s.get_or("device_name", "cantwin CiA 301 device".to_string())?,
+            hardware_version: s.get_or("hardware_version", defaults.hardware_version.clone())?,
+            software_version: s.get_or("software_version", defaults.software_version.clone())?,
+            ..defaults
+        };
+        let domain_size: usize = s.get_or("domain_size", 65536)?;
+        if domain_size > MAX_DOMAIN_SIZE {
+            return Err(s.error(
+                "domain_size",
+                format!("`domain_size` is at most {MAX_DOMAIN_SIZE} bytes"),
+            ));
+        }
+        let rpdos: u16 = s.get_or("rpdos", 4)?;
+        let tpdos: u16 = s.get_or("tpdos", 4)?;
+        for (key, n) in [("rpdos", rpdos), ("tpdos", tpdos)] {
+            if n > MAX_PDOS {
+                return Err(s.error(key, format!("`{key}` is at most {MAX_PDOS}")));
+            }
+        }
+        let tpdo_type: u8 = s.get_or("tpdo_transmission_type", 1)?;
+        let rpdo_type: u8 = s.get_or("rpdo_transmission_type", 255)?;
+        // CiA 301 §7.5.2.35/36: 241..=251 are reserved; RPDOs know no 252/253 (RTR-only).
+        for (key, t, rx) in [
+            ("tpdo_transmission_type", tpdo_type, false),
+            ("rpdo_transmission_type", rpdo_type, true),
+        ] {
+            if (241..=251).contains(&t) || (rx && (252..=253).contains(&t)) {
+                return Err(s.error(
+                    key,
+                    format!("transmission type {t} is reserved (CiA 301 §7.5.2.35/36)"),
+                ));
+            }
+        }
+        let sdo_timeout_ms: u64 = s.get_or("sdo_timeout_ms", 1000)?;
+        if sdo_timeout_ms == 0 {
+            return Err(s.error("sdo_timeout_ms", "`sdo_timeout_ms` must be greater than 0"));
+        }
+        let layout = Layout {
+            options,
+            domain_size,
+            rpdos,
+            tpdos,
+            rpdo_type,
+            tpdo_type,
+        };
+        let desc = description(&layout).map_err(|e| {
+            s.error(
+                "node_id",
+                format!("the device's dictionary is invalid: {e}"),
+            )
+        })?;
+        let config = DeviceConfig {
+            sdo_timeout: Duration::from_millis(sdo_timeout_ms),
+            ..DeviceConfig::new(node_id)
+        };
+        let mut device =
+            Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
+        if let Some(dir) = &env.state_dir {
+            let dir = dir.join(&s.device().name);
+            let storage = FileStorage::new(&dir).map_err(|e| {
+                s.error(
+                    "name",
+                    format!("cannot keep stored parameters in {}: {e}", dir.display()),
+                )
+            })?;
+            device.set_storage(Box::new(storage));
+        }
+        let node = Cia301Node {
+            device,
+            heartbeat_ms,
+            emcy_code: 0,
+            syncs: 0,
+        };
+        Ok((Box::new(node), PortConfig::default()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Registry, Scenario};
+    use cantwin_canopen::nmt::State;
+
+    fn scenario(extra: &str) -> String {
+        format!(
+            "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+             [[device]]\nname = \"dev\"\nkind = \"cia301\"\nbus = \"can0\"\n{extra}\n\
+             [[device]]\nname = \"peer\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x7FF\nperiod_ms = 1000\ncount = 0\n"
+        )
+    }
+
+    fn error_of(extra: &str) -> String {
+        match Scenario::parse(&scenario(extra), "t.toml")
+            .unwrap()
+            .build(&Registry::builtin(), &BuildEnv::default())
+        {
+            Ok(_) => panic!("{extra:?} was accepted"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn node_id_out_of_range_names_the_key() {
+        let e = error_of("node_id = 0");
+        assert!(e.contains("node_id") && e.contains("1–127"), "{e}");
+        let e = error_of("node_id = 128");
+        assert!(e.contains("node_id"), "{e}");
+        let e = error_of("heartbeat_ms = 100");
+        assert!(e.contains("needs `node_id`"), "{e}");
+    }
+
+    #[test]
+    fn unknown_key_and_bad_values_are_reported() {
+        let e = error_of("node_id = 5\nheartbeat = 100");
+        assert!(e.contains("unknown key `heartbeat`"), "{e}");
+        let e = error_of("node_id = 5\ndomain_size = 999999999");
+        assert!(e.contains("domain_size"), "{e}");
+        let e = error_of("node_id = 5\ntpdo_transmission_type = 245");
+        assert!(e.contains("reserved"), "{e}");
+        let e = error_of("node_id = 5\nrpdos = 9");
+        assert!(e.contains("rpdos"), "{e}");
+    }
+
+    /// The boot-up message (CiA 301 §7.2.8.3.2.1: COB-ID 0x700 + node-ID, one byte 0) at
+    /// power-up, then heartbeats every `heartbeat_ms` with state 127 (pre-operational).
+    #[test]
+    fn boot_up_then_heartbeat_every_heartbeat_ms() {
+        let text = scenario("node_id = 5\nheartbeat_ms = 100\ndomain_size = 16");
+        let mut built = Scenario::parse(&text, "t.toml")
+            .unwrap()
+            .build(&Registry::builtin(), &BuildEnv::default())
+            .unwrap();
+        let bus = built.bus("can0").unwrap();
+        built.sim.run_for(Duration::from_millis(350));
+        let frames = built.sim.bus(bus).unwrap().stats().frames();
+        // Boot-up at 0, heartbeats at 100, 200 and 300 ms.
+        assert_eq!(frames, 4);
+        let port = built.device("dev").unwrap().port;
+        let node = built.sim.node::<Cia301Node>(port).unwrap();
+        assert_eq!(node.device().state(), State::PreOperational);
+        assert_eq!(node.device().node_id(), 5);
+    }
+
+    #[test]
+    fn domain_default_pattern_and_identity_from_settings() {
+        let text = scenario(
+            "node_id = 5\ndomain_size = 300\nvendor_id = 0x1234\nproduct_code = 7\ndevice_name = \"a rather long device name\"",
+        );
+        let built = Scenario::parse(&text, "t.toml")
+            .unwrap()
+            .build(&Registry::builtin(), &BuildEnv::default())
+            .unwrap();
+        let port = built.device("dev").unwrap().port;
+        let node = built.sim.node::<Cia301Node>(port).unwrap();
+        let od = node.device().od();
+        let Value::Domain(bytes) = od.get(DOMAIN_INDEX, 0).unwrap() else {
+            panic!("0x2000 is not a DOMAIN");
+        };
+        assert_eq!(bytes.len(), 300);
+        assert_eq!(bytes[250], 250);
+        assert_eq!(bytes[251], 0);
+        assert_eq!(od.get(0x1018, 1).unwrap(), Value::Unsigned32(0x1234));
+        assert_eq!(od.get(0x1018, 2).unwrap(), Value::Unsigned32(7));
+        assert_eq!(
+            od.get(0x1008, 0).unwrap(),
+            Value::VisibleString("a rather long device name".into())
+        );
+        // TPDO1 maps inputs 1 and 2, RPDO2 outputs 3 and 4, 16 bits each.
+        assert_eq!(od.get(0x1A00, 1).unwrap(), Value::Unsigned32(0x2100_0110));
+        assert_eq!(od.get(0x1A00, 2).unwrap(), Value::Unsigned32(0x2100_0210));
+        assert_eq!(od.get(0x1601, 1).unwrap(), Value::Unsigned32(0x2200_0310));
+        assert_eq!(od.get(0x1800, 2).unwrap(), Value::Unsigned8(1));
+    }
+}
