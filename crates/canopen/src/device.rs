@@ -24,7 +24,8 @@
 //!   again; recovery from bus-off raises 0x8140, cleared when the next frame of the device
 //!   is confirmed sent ([`Node::on_sent`]) — the bus works again.
 //! * **Stopped**: only NMT, node guarding and heartbeat; EMCYs queued at the transition are
-//!   dropped (errors are still recorded in 0x1001/0x1003), SDO transfers end silently.
+//!   dropped (errors are still recorded in 0x1001/0x1003), SDO transfers end silently. The
+//!   EMCY of an error whose 0x1029 reaction stops the device is sent before it stops.
 
 use crate::abort::AbortCode;
 use crate::emcy;
@@ -628,8 +629,10 @@ impl<H> Core<H> {
         self.reset_communication(now, out);
     }
 
-    /// A communication error: 0x1029 sub 1.
-    fn communication_error(&mut self, now: Instant) {
+    /// A communication error: 0x1029 sub 1. The EMCY reporting the error goes out before
+    /// the state changes, so that a master learns why the device stopped.
+    fn communication_error(&mut self, now: Instant, out: &mut Outbox) {
+        self.send_emcys(now, out);
         if let Some(to) = self.reaction.apply(self.state) {
             self.enter(to, now);
         }
@@ -670,12 +673,12 @@ impl<H> Core<H> {
         for node in lost[..n_lost].iter().copied().chain(more) {
             self.push_event(Event::HeartbeatLost { node });
             self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [node, 0, 0, 0, 0]);
-            self.communication_error(now);
+            self.communication_error(now, out);
         }
         if self.guarding.on_tick(now) {
             self.push_event(Event::LifeGuardingLost);
             self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [0; 5]);
-            self.communication_error(now);
+            self.communication_error(now, out);
         }
         if self.heartbeat.poll(now) {
             out.push(ErrorControl::heartbeat(self.config.node_id, self.state.wire()).encode());
@@ -693,6 +696,10 @@ impl<H> Core<H> {
             p.on_tick(now, &self.od, out);
         }
         self.pdo_events();
+        self.send_emcys(now, out);
+    }
+
+    fn send_emcys(&mut self, now: Instant, out: &mut Outbox) {
         if self.state.allows(Service::Emcy) {
             while let Some(e) = self.emcy.poll(now) {
                 out.push(e.encode(self.emcy.cob_id().can_id()));
@@ -838,7 +845,7 @@ impl<H> Core<H> {
         }
     }
 
-    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant) {
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
         self.now = now;
         match event {
             ControllerEvent::ErrorPassive => {
@@ -851,7 +858,7 @@ impl<H> Core<H> {
             }
             ControllerEvent::BusOff => {
                 self.push_event(Event::BusOff);
-                self.communication_error(now);
+                self.communication_error(now, out);
             }
             ControllerEvent::BusOffRecovered => {
                 self.error_passive = false;
@@ -1158,7 +1165,7 @@ impl<H: OdHooks> Node for Device<H> {
     }
 
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
-        self.core.on_controller_event(event, now);
+        self.core.on_controller_event(event, now, out);
         self.after(now, out);
     }
 }

@@ -16,7 +16,7 @@
 //! | 0x1014 | COB-ID EMCY | 0x80 + node-ID |
 //! | 0x1015 | inhibit time EMCY (100 µs) | 0 |
 //! | 0x1016 | consumer heartbeat time, [`Cia301Options::heartbeat_consumers`] entries | 0 |
-//! | 0x1017 | producer heartbeat time (ms) | 0 |
+//! | 0x1017 | producer heartbeat time (ms) | [`Cia301Options::heartbeat_time`] |
 //! | 0x1018 | identity | options |
 //! | 0x1019 | synchronous counter overflow value | 0 |
 //! | 0x1028 | emergency consumer, [`Cia301Options::emcy_consumers`] entries | 0x80000000 |
@@ -57,6 +57,8 @@ pub struct Cia301Options {
     pub extra_sdo_servers: u8,
     /// Whether 0x1010/0x1011 exist (the device has parameter storage).
     pub storage: bool,
+    /// The default of 0x1017, producer heartbeat time in ms.
+    pub heartbeat_time: u16,
 }
 
 impl Default for Cia301Options {
@@ -75,6 +77,7 @@ impl Default for Cia301Options {
             emcy_consumers: 0,
             extra_sdo_servers: 0,
             storage: true,
+            heartbeat_time: 0,
         }
     }
 }
@@ -188,7 +191,8 @@ pub fn cia301_defaults(builder: OdBuilder, o: &Cia301Options) -> OdBuilder {
     b = b
         .var(
             0x1017,
-            SubObject::new("Producer heartbeat time", DataType::Unsigned16, Access::Rw),
+            SubObject::new("Producer heartbeat time", DataType::Unsigned16, Access::Rw)
+                .default(Value::Unsigned16(o.heartbeat_time)),
         )
         .record(
             0x1018,
