@@ -128,7 +128,7 @@ impl Format {
 }
 
 /// The input of a [`CaptureReader`]: the bytes read to detect the format, then the rest.
-pub type Prefixed<R> = io::Chain<Cursor<Vec<u8>>, R>;
+type Prefixed<R> = io::Chain<Cursor<Vec<u8>>, R>;
 
 #[derive(Debug)]
 enum Inner<R: BufRead> {

@@ -352,7 +352,7 @@ impl<R: Read> PcapngReader<R> {
             })?,
             None => 0,
         };
-        let Some(packet) = self.buf.get(data.0..data.0 + data.1) else {
+        let Some(packet) = self.buf.get(data.0..data.0.saturating_add(data.1)) else {
             return Err(self.malformed(at, "packet data overruns its block".into()));
         };
         match socketcan::decode(packet) {
