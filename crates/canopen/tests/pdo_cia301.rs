@@ -521,3 +521,29 @@ fn cia301_7_3_5_predefined_connection_set_cob_ids() {
         ["185#00", "285#00", "385#00", "485#00"]
     );
 }
+
+#[test]
+fn cia301_7_5_2_36_an_invalid_stored_mapping_leaves_only_that_pdo_off() {
+    use cantwin_canopen::od::{ObjectDictionary, OdBuilder};
+    use cantwin_canopen::pdo::{PdoEngine, PdoError};
+    use std::sync::Arc;
+    // TPDO1 maps an object that does not exist; TPDO2 is fine.
+    let b = PdoObjects::new(0, 2)
+        .tpdo(0, 1, &[0x7000_0008])
+        .tpdo(1, 1, &[IN8])
+        .add_to(pdo_harness::app(OdBuilder::new()));
+    let mut od = ObjectDictionary::new(Arc::new(b.build().unwrap()), pdo_harness::NODE);
+    let err = PdoError::Mapping {
+        index: 0x1A00,
+        code: AbortCode::NO_OBJECT,
+    };
+    assert_eq!(PdoEngine::new(&od).err(), Some(err));
+    let (mut pdo, result) = PdoEngine::load(&od);
+    assert_eq!(result, Err(err));
+    assert!(!pdo.tpdo_active(0));
+    assert!(pdo.tpdo_active(1));
+    pdo.set_operational(true, Instant::ZERO);
+    let mut out = cantwin_can::Outbox::new();
+    pdo.on_sync(None, ms(1), &mut od, &mut out);
+    assert_eq!(out.frames(), [Frame::std(0x285, &[0]).unwrap()]);
+}

@@ -370,8 +370,16 @@ fn load_plan(
 impl PdoEngine {
     /// An engine for the PDO objects of `od`, not yet OPERATIONAL. Dummy mapping is
     /// supported. Errors name the first PDO whose configuration cannot run; see
-    /// [`PdoEngine::configure`].
+    /// [`PdoEngine::load`] for an engine that runs the others anyway.
     pub fn new(od: &ObjectDictionary) -> Result<Self, PdoError> {
+        let (engine, result) = Self::load(od);
+        result.map(|()| engine)
+    }
+
+    /// An engine for the PDO objects of `od` that runs every PDO whose configuration is
+    /// valid, together with the first configuration error, if any (as a real device boots
+    /// with a bad stored mapping and leaves that PDO off).
+    pub fn load(od: &ObjectDictionary) -> (Self, Result<(), PdoError>) {
         let mut engine = PdoEngine {
             desc: Arc::clone(od.description()),
             rpdos: Vec::new(),
@@ -386,8 +394,8 @@ impl PdoEngine {
             dummy_mapping: true,
             events: VecDeque::new(),
         };
-        engine.configure(od, Instant::ZERO)?;
-        Ok(engine)
+        let result = engine.configure(od, Instant::ZERO);
+        (engine, result)
     }
 
     /// Whether dummy entries (0x0001..=0x0007) may be mapped into RPDOs. Takes effect for
@@ -412,11 +420,11 @@ impl PdoEngine {
         self.sync_rx_pending = Vec::with_capacity(self.rpdos.len());
         let mut first = Ok(());
         for n in 0..self.rpdos.len() {
-            let r = self.load(od, Direction::Rx, n, now);
+            let r = self.load_pdo(od, Direction::Rx, n, now);
             first = first.and(r);
         }
         for n in 0..self.tpdos.len() {
-            let r = self.load(od, Direction::Tx, n, now);
+            let r = self.load_pdo(od, Direction::Tx, n, now);
             first = first.and(r);
         }
         self.reindex();
@@ -424,7 +432,7 @@ impl PdoEngine {
     }
 
     /// Reads one PDO's objects into its slot and restarts it.
-    fn load(
+    fn load_pdo(
         &mut self,
         od: &ObjectDictionary,
         dir: Direction,
@@ -978,7 +986,7 @@ impl PdoEngine {
             return;
         }
         // Validation ran before the write, so the reloaded PDO is runnable or invalid.
-        let _ = self.load(od, dir, n, now);
+        let _ = self.load_pdo(od, dir, n, now);
         self.reindex();
     }
 
