@@ -648,13 +648,23 @@ fn cia301_7_5_2_33_cob_id_valid_bit_and_extended_frames() {
 }
 
 #[test]
-fn cia301_7_2_4_frames_shorter_than_8_bytes_and_remote_frames_are_ignored() {
+fn cia301_7_2_4_short_requests_are_zero_padded_and_remote_frames_ignored() {
     let mut h = Harness::new();
-    let short = cantwin_can::Frame::std(RX, &[0x40, 0x00, 0x10, 0x00]).unwrap();
+    let short = cantwin_can::Frame::std(RX, &[0x40, 0x00, 0x10]).unwrap();
     assert!(
         h.server
             .on_frame(&short, Instant::ZERO, &mut h.access, &mut h.out)
     );
+    assert_eq!(
+        h.drain(),
+        [[0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00]]
+    );
+    let empty = cantwin_can::Frame::std(RX, &[]).unwrap();
+    assert!(
+        h.server
+            .on_frame(&empty, Instant::ZERO, &mut h.access, &mut h.out)
+    );
+    assert_eq!(h.drain(), [abort(0, 0, AbortCode::INVALID_COMMAND)]);
     let remote = cantwin_can::Frame::remote(Id::standard(RX).unwrap(), 8).unwrap();
     assert!(
         !h.server

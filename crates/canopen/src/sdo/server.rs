@@ -7,12 +7,20 @@
 //! transferred: uploads read the value segment by segment from the device and downloads
 //! stream into it ([`ObjectAccess::write_begin`] …). The expedited path does not allocate.
 //!
-//! Decisions where CiA 301 leaves room, all as CANopenNode v4 does:
+//! Decisions where CiA 301 leaves room:
 //! * A frame whose command specifier is not the next step of the transfer in progress
 //!   (including a new initiate) aborts that transfer with 0x05040001 and is not served;
 //!   the client starts again. An abort from the client ends the transfer silently.
-//! * Frames with fewer than 8 data bytes and remote frames are not SDO requests (CiA 301
-//!   §7.2.4.3: the SDO data field is 8 bytes) and are ignored.
+//! * A toggle bit that did not alternate aborts with 0x05030000 (as CANopenNode does;
+//!   lely-core ignores the segment and lets the transfer time out).
+//! * CiA 301 §7.2.4.3 gives every SDO frame 8 data bytes; a request with fewer is padded
+//!   with zeros (some clients send short frames; lely-core does the same), a request with
+//!   none is answered with 0x05040001, and remote frames are ignored.
+//!
+//! On a new initiate during a transfer, implementations differ: CANopenNode v4 and
+//! lely-core abort the running transfer with 0x05040001 (the frame is judged against the
+//! state the transfer is in), python-canopen's server starts the new transfer and drops
+//! the old one silently. We do what the two embedded stacks do.
 //! * An expedited download without indicated size writes the type's size if it is below
 //!   4 bytes, else 4 bytes.
 //! * Block download: a segment out of sequence is ignored; at the end of the block (or at
@@ -208,8 +216,17 @@ impl SdoServer {
         if frame.is_remote() || Some(frame.id()) != self.rx_id() {
             return false;
         }
-        if let Ok(data) = <&[u8; 8]>::try_from(frame.data_bytes()) {
-            self.on_request(data, now, access, out);
+        let bytes = frame.data_bytes();
+        if bytes.is_empty() {
+            // No command specifier at all.
+            if self.state == State::Idle {
+                self.mux = Mux::default();
+            }
+            self.abort(AbortCode::INVALID_COMMAND, access, out);
+        } else {
+            let mut data = [0u8; 8];
+            data[..bytes.len()].copy_from_slice(bytes);
+            self.on_request(&data, now, access, out);
         }
         true
     }
