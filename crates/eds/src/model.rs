@@ -305,8 +305,8 @@ impl Entry {
 pub struct Object {
     /// The object section's keys.
     pub entry: Entry,
-    /// `SubNumber` as stated (written back as stated; when `None` and the object has
-    /// sub-objects, the writer states their number). [`crate::Eds::check`] compares it.
+    /// `SubNumber` as stated, and written back as stated ([`crate::from_od`] states it for
+    /// every ARRAY and RECORD). [`crate::Eds::check`] compares it with the sub-objects.
     pub sub_number: Option<u8>,
     /// `CompactSubObj` as stated. The sub-objects it defines are expanded into
     /// [`Object::subs`]; the writer compacts them again when they still have the shape

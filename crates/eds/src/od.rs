@@ -65,7 +65,9 @@ pub enum ConvertError {
 fn to_value(ty: DataType, v: &EdsValue, node_id: Option<u8>) -> Option<Value> {
     match v {
         EdsValue::Integer(x) => Value::from_integer(ty, *x).ok(),
-        EdsValue::NodeId(off) => Value::from_integer(ty, off + i128::from(node_id?)).ok(),
+        EdsValue::NodeId(off) => {
+            Value::from_integer(ty, off.checked_add(i128::from(node_id?))?).ok()
+        }
         EdsValue::Real32(x) if ty == DataType::Real32 => Some(Value::Real32(*x)),
         EdsValue::Real64(x) if ty == DataType::Real64 => Some(Value::Real64(*x)),
         EdsValue::Text(s) if ty == DataType::VisibleString => Some(Value::VisibleString(s.clone())),

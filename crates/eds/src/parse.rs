@@ -67,8 +67,12 @@ fn classify(name: &str) -> Kind {
     let Some(index) = hex4(head) else {
         return Kind::Other;
     };
-    if tail.len() > 3 && tail[..3].eq_ignore_ascii_case("sub") {
-        let s = &tail[3..];
+    if let Some(s) = tail
+        .get(..3)
+        .filter(|p| p.eq_ignore_ascii_case("sub"))
+        .and_then(|_| tail.get(3..))
+        .filter(|s| !s.is_empty())
+    {
         if s.len() <= 2 && s.bytes().all(|b| b.is_ascii_hexdigit()) {
             if let Ok(sub) = u8::from_str_radix(s, 16) {
                 return Kind::Sub(index, sub);
@@ -318,11 +322,22 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
     let mut eds = Eds::default();
     let mut subs: Vec<(u16, u8, &RawSection)> = Vec::new();
     let mut helpers: Vec<(u8, u16, &RawSection)> = Vec::new();
+    let mut commissioning_line = None;
     for sec in &sections {
         match classify(&sec.name) {
             Kind::FileInfo => eds.file_info = FileInfo::from_raw(sec)?,
             Kind::DeviceInfo => eds.device_info = DeviceInfo::from_raw(sec)?,
-            Kind::Commissioning => eds.commissioning = Some(DeviceCommissioning::from_raw(sec)?),
+            Kind::Commissioning => {
+                // Both spellings in one file would be two commissioning sections.
+                if let Some(first) = commissioning_line {
+                    return Err(
+                        ParseError::at(sec.line, ParseErrorKind::DuplicateSection(first))
+                            .in_section(&sec.name),
+                    );
+                }
+                commissioning_line = Some(sec.line);
+                eds.commissioning = Some(DeviceCommissioning::from_raw(sec)?);
+            }
             Kind::DummyUsage => {
                 let mut map = BTreeMap::new();
                 for e in &sec.entries {
@@ -405,7 +420,15 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
         }
     }
     // Sub-object sections may come before their object section; attach them afterwards.
+    let mut sub_lines: BTreeMap<(u16, u8), usize> = BTreeMap::new();
     for (index, sub, sec) in subs {
+        // `[1000sub1]` and `[1000sub01]` name the same sub-object.
+        if let Some(first) = sub_lines.insert((index, sub), sec.line) {
+            return Err(
+                ParseError::at(sec.line, ParseErrorKind::DuplicateSection(first))
+                    .in_section(&sec.name),
+            );
+        }
         let Some(obj) = eds.objects.get_mut(&index) else {
             return Err(
                 ParseError::at(sec.line, ParseErrorKind::NoObject(index)).in_section(&sec.name)

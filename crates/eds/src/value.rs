@@ -186,11 +186,11 @@ impl EdsValue {
     }
 
     /// The integer the value stands for on a device with this node-ID (`$NODEID` replaced);
-    /// `None` for non-integers.
+    /// `None` for non-integers (and for a sum past the `i128` range).
     pub fn evaluate(&self, node_id: u8) -> Option<i128> {
         match self {
             EdsValue::Integer(v) => Some(*v),
-            EdsValue::NodeId(off) => Some(off + i128::from(node_id)),
+            EdsValue::NodeId(off) => off.checked_add(i128::from(node_id)),
             _ => None,
         }
     }
@@ -212,6 +212,9 @@ impl EdsValue {
             EdsValue::NodeId(0) => "$NODEID".to_owned(),
             EdsValue::NodeId(off) if *off > 0 => format!("$NODEID+0x{off:X}"),
             EdsValue::NodeId(off) => format!("{off}+$NODEID"),
+            // A NaN keeps its payload and sign only as a bit pattern.
+            EdsValue::Real32(v) if v.is_nan() => format!("0x{:08X}", v.to_bits()),
+            EdsValue::Real64(v) if v.is_nan() => format!("0x{:016X}", v.to_bits()),
             EdsValue::Real32(v) => v.to_string(),
             EdsValue::Real64(v) => v.to_string(),
             EdsValue::Text(s) | EdsValue::Raw(s) => s.clone(),

@@ -248,10 +248,12 @@ fn write_object(out: &mut Out, index: u16, o: &Object) {
         }
         return;
     }
-    let sub_number = match (o.sub_number, o.subs.len()) {
+    // `SubNumber` is written as stated; only a compact object that can no longer be written
+    // compactly gets one computed, as CiA 306 §4.6.3 requires it of expanded ARRAYs.
+    let sub_number = match (o.sub_number, o.compact_sub_obj) {
         (Some(n), _) => Some(n),
-        (None, 0) => None,
-        (None, len) => Some(u8::try_from(len).unwrap_or(u8::MAX)),
+        (None, Some(_)) => Some(u8::try_from(o.subs.len()).unwrap_or(u8::MAX)),
+        (None, None) => None,
     };
     out.section(
         &format!("{index:04X}"),
