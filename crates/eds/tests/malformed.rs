@@ -13,13 +13,15 @@ fn invalid(value: &str, expected: &str) -> ParseErrorKind {
 }
 
 /// (file, line, section, key, kind)
-fn cases() -> Vec<(
+type Case = (
     String,
     usize,
     Option<&'static str>,
     Option<&'static str>,
     ParseErrorKind,
-)> {
+);
+
+fn cases() -> Vec<Case> {
     vec![
         ("FileName=x\n[FileInfo]\n".into(), 1, None, None, ParseErrorKind::OutsideSection),
         ("[FileInfo]\n[DeviceInfo\n".into(), 2, None, None, ParseErrorKind::BadHeader),
