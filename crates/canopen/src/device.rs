@@ -26,6 +26,33 @@
 //! * **Stopped**: only NMT, node guarding and heartbeat; EMCYs queued at the transition are
 //!   dropped (errors are still recorded in 0x1001/0x1003), SDO transfers end silently. The
 //!   EMCY of an error whose 0x1029 reaction stops the device is sent before it stops.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use cantwin_can::{Frame, Instant, Node, Outbox};
+//! use cantwin_canopen::device::{Device, DeviceConfig};
+//! use cantwin_canopen::nmt::State;
+//! use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
+//! use cantwin_canopen::od::OdBuilder;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let options = Cia301Options { heartbeat_time: 100, ..Cia301Options::default() };
+//! let desc = cia301_defaults(OdBuilder::new(), &options).build()?;
+//! let mut dev = Device::new(Arc::new(desc), DeviceConfig::new(5))?;
+//! let mut out = Outbox::new();
+//! dev.on_power_up(Instant::ZERO, &mut out);
+//! assert_eq!(out.frames(), [Frame::std(0x705, &[0x00])?]); // boot-up
+//! out.clear();
+//! // NMT "start remote node 5" at 1 ms.
+//! dev.on_frame(&Frame::std(0x000, &[0x01, 0x05])?, Instant::from_nanos(1_000_000), &mut out);
+//! assert_eq!(dev.state(), State::Operational);
+//! // The first heartbeat is due one period after the boot-up.
+//! assert_eq!(dev.next_deadline(), Some(Instant::from_nanos(100_000_000)));
+//! dev.on_tick(Instant::from_nanos(100_000_000), &mut out);
+//! assert_eq!(out.frames(), [Frame::std(0x705, &[0x05])?]);
+//! # Ok(())
+//! # }
+//! ```
 
 use crate::abort::AbortCode;
 use crate::emcy;
