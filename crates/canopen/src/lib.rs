@@ -33,6 +33,7 @@ pub mod emcy;
 pub mod error_behaviour;
 pub mod guarding;
 pub mod heartbeat;
+pub mod master;
 pub mod nmt;
 pub mod sync;
 pub mod storage;
