@@ -439,6 +439,35 @@ pub enum Message {
     Other(Frame),
 }
 
+impl Message {
+    /// The SDO request of an [`Message::SdoRequest`], decoded with the SDO codec
+    /// ([`crate::sdo::wire::Request`]). Block download segments carry no command specifier
+    /// and decode only with the state of the transfer, so they come out as whatever their
+    /// first byte resembles; `None` for other messages and frames shorter than 8 bytes.
+    pub fn sdo_request(
+        &self,
+    ) -> Option<Result<crate::sdo::wire::Request, crate::sdo::wire::WireError>> {
+        match self {
+            Message::SdoRequest { data, len: 8, .. } => {
+                Some(crate::sdo::wire::Request::decode(data))
+            }
+            _ => None,
+        }
+    }
+
+    /// The SDO response of an [`Message::SdoResponse`], decoded with the SDO codec.
+    pub fn sdo_response(
+        &self,
+    ) -> Option<Result<crate::sdo::wire::Response, crate::sdo::wire::WireError>> {
+        match self {
+            Message::SdoResponse { data, len: 8, .. } => {
+                Some(crate::sdo::wire::Response::decode(data))
+            }
+            _ => None,
+        }
+    }
+}
+
 /// Classifies a frame by the pre-defined connection set and decodes it.
 pub fn decode(frame: &Frame) -> Message {
     let Id::Standard(sid) = frame.id() else {
@@ -656,6 +685,17 @@ mod tests {
             d("585#4300100092010000"),
             Message::SdoResponse { node: 5, .. }
         ));
+        let req = d("605#4000100000000000").sdo_request();
+        assert!(matches!(
+            req,
+            Some(Ok(crate::sdo::wire::Request::InitiateUpload { .. }))
+        ));
+        assert!(d("605#40").sdo_request().is_none());
+        assert!(matches!(
+            d("585#4300100092010000").sdo_response(),
+            Some(Ok(_))
+        ));
+        assert!(d("585#4300100092010000").sdo_request().is_none());
         assert!(matches!(d("7E5#"), Message::Other(_)));
         assert!(matches!(d("180#"), Message::Other(_)));
     }

@@ -712,3 +712,25 @@ fn cia301_7_5_2_33_additional_sdo_server_with_configured_cob_ids() {
     h.rx(ms(4), "605#4018100100000000");
     assert_eq!(h.take(), at_ms(&[(4, "585#431810015A000005")]));
 }
+
+// ------------------------------------------------------------- Footprint
+
+#[test]
+fn default_device_fits_in_8_kib_beside_its_shared_description() {
+    use cantwin_canopen::device::Device;
+    use cantwin_canopen::objects::cia301_defaults;
+    use cantwin_canopen::od::OdBuilder;
+    use std::sync::Arc;
+    let desc = Arc::new(
+        cia301_defaults(OdBuilder::new(), &Cia301Options::default())
+            .build()
+            .unwrap(),
+    );
+    let mut dev = Device::new(Arc::clone(&desc), DeviceConfig::new(1)).unwrap();
+    let mut out = cantwin_can::Outbox::new();
+    dev.on_power_up(ms(0), &mut out);
+    let total = core::mem::size_of::<Device>() + dev.heap_bytes();
+    assert!(total <= 8 * 1024, "{total} bytes");
+    // The description is shared, not copied.
+    assert!(Arc::ptr_eq(dev.od().description(), &desc));
+}
