@@ -17,33 +17,29 @@ fn node(rpdos: u16, tpdos: u16) -> (ObjectDictionary, PdoEngine) {
     let mut objects = PdoObjects::new(rpdos, tpdos).max_entries(4);
     for n in 0..tpdos {
         let m: Vec<u32> = (0..4u32)
-            .map(|k| 0x6000_0010 | (u32::from(n) * 4 + k + 1) << 8)
+            .map(|k| 0x6000_0010 | ((u32::from(n) * 4 + k) % 224 + 1) << 8)
             .collect();
         objects = objects.tpdo(n, 1, &m);
     }
     for n in 0..rpdos {
         let m: Vec<u32> = (0..4u32)
-            .map(|k| 0x6200_0010 | (u32::from(n) * 4 + k + 1) << 8)
+            .map(|k| 0x6200_0010 | ((u32::from(n) * 4 + k) % 116 + 1) << 8)
             .collect();
         objects = objects.rpdo(n, 255, &m);
     }
     b = objects.add_to(b);
     let mut od = ObjectDictionary::new(Arc::new(b.build().unwrap()), 1);
-    // PDOs beyond the fourth have no default identifier: give them free ones.
+    // PDOs beyond the fourth have no default identifier: give them 29-bit ones.
     let mut pdo = PdoEngine::new(&od).unwrap();
     for n in 4..tpdos {
-        od.set_raw(
-            od.locate(0x1800 + n, 1).unwrap(),
-            &(0x1C0 + u32::from(n)).to_le_bytes(),
-        )
-        .unwrap();
+        let cob = 0x2000_0000 | u32::from(n);
+        od.set_raw(od.locate(0x1800 + n, 1).unwrap(), &cob.to_le_bytes())
+            .unwrap();
     }
     for n in 4..rpdos {
-        od.set_raw(
-            od.locate(0x1400 + n, 1).unwrap(),
-            &(0x240 + u32::from(n)).to_le_bytes(),
-        )
-        .unwrap();
+        let cob = 0x2001_0000 | u32::from(n);
+        od.set_raw(od.locate(0x1400 + n, 1).unwrap(), &cob.to_le_bytes())
+            .unwrap();
     }
     pdo.configure(&od, Instant::ZERO).unwrap();
     pdo.set_operational(true, Instant::ZERO);
@@ -54,6 +50,7 @@ fn sync_cycle(c: &mut Criterion) {
     for (name, rpdos, tpdos) in [
         ("4_tpdo_8_bytes", 0, 4),
         ("tm3bcco_29_rpdo_56_tpdo", 29, 56),
+        ("512_rpdo_512_tpdo", 512, 512),
     ] {
         let (mut od, mut pdo) = node(rpdos, tpdos);
         let mut out = Outbox::new();

@@ -439,7 +439,9 @@ fn cia301_7_2_2_2_rpdo_too_long_is_processed_emcy_8220() {
 fn cia301_7_5_2_35_rpdo_deadline_monitoring_emcy_8250() {
     let mut h = rpdo1(255, &[OUT16]);
     h.write_u16(0x1400, 5, 50, Instant::ZERO).unwrap();
-    // Not armed before the first PDO.
+    // Not armed before the first PDO, nor by one of the wrong length.
+    assert_eq!(h.pdo.next_deadline(), None);
+    h.frame(Frame::std(0x205, &[0]).unwrap(), ms(5));
     assert_eq!(h.pdo.next_deadline(), None);
     let pdo = Frame::std(0x205, &[0, 0]).unwrap();
     h.frame(pdo, ms(10));
@@ -507,6 +509,27 @@ fn cia301_7_3_2_2_pdos_run_only_in_operational() {
 }
 
 #[test]
+fn cia301_7_3_2_2_leaving_operational_stops_event_timers_and_deadlines() {
+    let mut h = Harness::new(
+        PdoObjects::new(1, 1)
+            .rpdo(0, 255, &[OUT16])
+            .tpdo(0, 255, &[IN16]),
+    )
+    .operational(Instant::ZERO);
+    h.write_u16(0x1800, 5, 10, Instant::ZERO).unwrap();
+    h.write_u16(0x1400, 5, 10, Instant::ZERO).unwrap();
+    h.frame(Frame::std(0x205, &[1, 0]).unwrap(), ms(1));
+    assert_eq!(h.pdo.next_deadline(), Some(ms(10)));
+    h.pdo.set_operational(false, ms(2));
+    assert_eq!(h.pdo.next_deadline(), None);
+    assert!(h.tick(ms(20)).is_empty());
+    h.pdo.mark_changed(0x6000, 0);
+    assert!(h.tick(ms(21)).is_empty());
+    h.events();
+    assert!(h.events().is_empty());
+}
+
+#[test]
 fn cia301_7_3_5_predefined_connection_set_cob_ids() {
     let mut h = Harness::new(
         PdoObjects::new(4, 4)
@@ -546,4 +569,34 @@ fn cia301_7_5_2_36_an_invalid_stored_mapping_leaves_only_that_pdo_off() {
     let mut out = cantwin_can::Outbox::new();
     pdo.on_sync(None, ms(1), &mut od, &mut out);
     assert_eq!(out.frames(), [Frame::std(0x285, &[0]).unwrap()]);
+}
+
+#[test]
+fn cia301_7_4_8_engine_runs_512_rpdos_and_512_tpdos() {
+    let mut objects = PdoObjects::new(512, 512).max_entries(2);
+    for n in 0..512 {
+        objects = objects.tpdo(n, 1, &[IN8]).rpdo(n, 255, &[OUT8]);
+    }
+    let mut h = Harness::new(objects).operational(Instant::ZERO);
+    // Beyond the pre-defined connection set, give every PDO a 29-bit identifier.
+    for n in 4..512u16 {
+        let t = Instant::ZERO;
+        h.write_u32(0x1800 + n, 1, 0xA000_0000 | u32::from(n), t)
+            .unwrap();
+        h.write_u32(0x1800 + n, 1, 0x2000_0000 | u32::from(n), t)
+            .unwrap();
+        h.write_u32(0x1400 + n, 1, 0xA001_0000 | u32::from(n), t)
+            .unwrap();
+        h.write_u32(0x1400 + n, 1, 0x2001_0000 | u32::from(n), t)
+            .unwrap();
+    }
+    assert_eq!((h.pdo.rpdo_slots(), h.pdo.tpdo_slots()), (512, 512));
+    assert!((0..512).all(|n| h.pdo.rpdo_active(n) && h.pdo.tpdo_active(n)));
+    let sent = h.sync(None, ms(1));
+    assert_eq!(sent.len(), 512);
+    assert_eq!(sent[511], "000001FF#00");
+    let id = cantwin_can::Id::extended(0x0001_01FF).unwrap();
+    h.frame(Frame::data(id, &[0x42]).unwrap(), ms(2));
+    assert_eq!(h.events(), [PdoEvent::Received { rpdo: 511 }]);
+    assert_eq!(h.od.get(0x6201, 0).unwrap(), Value::Unsigned8(0x42));
 }

@@ -636,7 +636,7 @@ impl PdoEngine {
         }
     }
 
-    /// Packs TPDO slot `n` and queues it.
+    /// Packs a TPDO (or takes the data sampled for it) and queues it.
     #[inline]
     fn transmit(
         t: &mut Tpdo,
