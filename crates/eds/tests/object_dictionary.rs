@@ -1,0 +1,239 @@
+//! Between EDS/DCF files and the object dictionary: a device's EDS is generated from its
+//! dictionary in the form python-canopen's importer reads, and EDS/DCF files load back.
+#![allow(clippy::unwrap_used)]
+
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::od::{
+    Access, DataType, ObjectDictionary, OdBuilder, OdDescription, SubObject, Value,
+};
+use cantwin_eds::{
+    ConvertError, DeviceInfo, EdsValue, FileInfo, apply_parameter_values, from_od, parse,
+    parse_bytes, to_od, write,
+};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+fn u32_ro(name: &str, v: u32) -> SubObject {
+    SubObject::new(name, DataType::Unsigned32, Access::Ro).default(Value::Unsigned32(v))
+}
+
+fn device() -> OdDescription {
+    OdBuilder::new()
+        .var(0x1000, u32_ro("Device type", 0x000F_0191))
+        .var(
+            0x1001,
+            SubObject::new("Error register", DataType::Unsigned8, Access::Ro).mappable(),
+        )
+        .var(
+            0x1008,
+            SubObject::new(
+                "Manufacturer device name",
+                DataType::VisibleString,
+                Access::Const,
+            )
+            .default(Value::VisibleString("TM3 coupler".into())),
+        )
+        .var(
+            0x1014,
+            SubObject::new("COB-ID EMCY", DataType::Unsigned32, Access::Ro)
+                .default_node_id_plus(Value::Unsigned32(0x80)),
+        )
+        .record(
+            0x1018,
+            "Identity object",
+            [
+                (1, u32_ro("Vendor-ID", 0x0000_005A)),
+                (2, u32_ro("Product code", 0x0000_1234)),
+                (3, u32_ro("Revision number", 0x0001_0002)),
+            ],
+        )
+        .var(
+            0x1021,
+            SubObject::new("Store EDS", DataType::Domain, Access::Ro)
+                .default(Value::Domain(vec![0x5B, 0x5D])),
+        )
+        .var(
+            0x2000,
+            SubObject::new("Speed limit", DataType::Integer16, Access::Rw)
+                .default(Value::Integer16(-100))
+                .limits(Value::Integer16(-3000), Value::Integer16(3000)),
+        )
+        .flags(0x1)
+        .var(
+            0x2001,
+            SubObject::new("Gain", DataType::Real32, Access::Rww)
+                .default(Value::Real32(0.25))
+                .mappable(),
+        )
+        .array_of(
+            0x6000,
+            "Read input 8-bit",
+            2,
+            SubObject::new("Input", DataType::Unsigned8, Access::Ro).mappable(),
+        )
+        .compact()
+        .build()
+        .unwrap()
+}
+
+fn info() -> DeviceInfo {
+    let mut d = DeviceInfo {
+        vendor_name: Some("cantwin".into()),
+        product_name: Some("Test device".into()),
+        granularity: Some(8),
+        nr_of_rx_pdo: Some(0),
+        nr_of_tx_pdo: Some(0),
+        ..DeviceInfo::default()
+    };
+    d.set_baud_rates(&[125, 250, 500]);
+    d
+}
+
+#[test]
+fn generated_eds_has_the_form_python_canopen_imports() {
+    let eds = from_od(&device(), info(), FileInfo::default());
+    let text = write(&eds);
+    for fragment in [
+        "[DeviceInfo]\nVendorName=cantwin\nVendorNumber=0x0000005A\nProductName=Test device\nProductNumber=0x00001234\nRevisionNumber=0x00010002\nBaudRate_10=0\nBaudRate_20=0\nBaudRate_50=0\nBaudRate_125=1\nBaudRate_250=1\nBaudRate_500=1\nBaudRate_800=0\nBaudRate_1000=0\nGranularity=8\n",
+        "[MandatoryObjects]\nSupportedObjects=3\n1=0x1000\n2=0x1001\n3=0x1018\n",
+        "[OptionalObjects]\nSupportedObjects=4\n1=0x1008\n2=0x1014\n3=0x1021\n4=0x6000\n",
+        "[ManufacturerObjects]\nSupportedObjects=2\n1=0x2000\n2=0x2001\n",
+        "[1000]\nParameterName=Device type\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0xF0191\nPDOMapping=0\n",
+        "[1001]\nParameterName=Error register\nObjectType=0x7\nDataType=0x0005\nAccessType=ro\nDefaultValue=0x0\nPDOMapping=1\n",
+        "[1008]\nParameterName=Manufacturer device name\nObjectType=0x7\nDataType=0x0009\nAccessType=const\nDefaultValue=TM3 coupler\n",
+        "DefaultValue=$NODEID+0x80\n",
+        "[1018]\nParameterName=Identity object\nObjectType=0x9\nSubNumber=0x4\n",
+        "[1018sub0]\nParameterName=Highest sub-index supported\nObjectType=0x7\nDataType=0x0005\nAccessType=const\nDefaultValue=0x3\nPDOMapping=0\n",
+        "[1018sub1]\nParameterName=Vendor-ID\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0x5A\nPDOMapping=0\n",
+        "[1021]\nParameterName=Store EDS\nObjectType=0x7\nDataType=0x000F\nAccessType=ro\nDefaultValue=5B5D\n",
+        "[2000]\nParameterName=Speed limit\nObjectType=0x7\nDataType=0x0003\nAccessType=rw\nDefaultValue=-100\nPDOMapping=0\nLowLimit=-3000\nHighLimit=3000\nObjFlags=0x1\n",
+        "DataType=0x0008\nAccessType=rww\nDefaultValue=0.25\nPDOMapping=1\n",
+        "[6000]\nParameterName=Read input 8-bit\nObjectType=0x8\nCompactSubObj=0x2\nDataType=0x0005\nAccessType=ro\nDefaultValue=0x0\nPDOMapping=1\n",
+        "[6000Name]\nNrOfEntries=2\n1=Input 1\n2=Input 2\n",
+    ] {
+        assert!(text.contains(fragment), "missing:\n{fragment}\nin:\n{text}");
+    }
+    // python-canopen reads integers with int(x, 0), which refuses leading-zero decimals.
+    for line in text.lines() {
+        if let Some((_, v)) = line.split_once('=') {
+            let v = v.trim_start_matches('-');
+            let octal_looking =
+                v.len() > 1 && v.starts_with('0') && v.bytes().all(|b| b.is_ascii_digit());
+            assert!(!octal_looking, "{line}");
+        }
+    }
+    assert!(eds.check().is_ok(), "{}", eds.check());
+    assert_eq!(parse(&text).unwrap(), eds);
+}
+
+#[test]
+fn generated_eds_loads_back_into_the_same_dictionary() {
+    let desc = device();
+    let eds = parse(&write(&from_od(&desc, info(), FileInfo::default()))).unwrap();
+    let back = to_od(&eds).unwrap();
+    assert_eq!(back.len(), desc.len());
+    for (a, b) in desc.objects().zip(back.objects()) {
+        assert_eq!(a.index(), b.index());
+        assert_eq!(a.name(), b.name());
+        assert_eq!(a.code(), b.code());
+        assert_eq!(a.flags(), b.flags());
+        assert_eq!(a.compact_sub_obj(), b.compact_sub_obj());
+        // A compact array's sub-index 0 is CiA 306's "NrOfObjects"; the rest is identical.
+        let skip = usize::from(a.compact_sub_obj());
+        // An absent default is the type's zero, which the EDS states explicitly.
+        let norm = |(s, d): (u8, &SubObject)| {
+            let mut d = d.clone();
+            d.default = Some(d.default.unwrap_or_else(|| Value::zero(d.data_type)));
+            (s, d)
+        };
+        let sa: Vec<_> = a.subs().skip(skip).map(norm).collect();
+        let sb: Vec<_> = b.subs().skip(skip).map(norm).collect();
+        assert_eq!(sa, sb, "{:#06X}", a.index());
+    }
+}
+
+fn corpus(name: &str) -> cantwin_eds::Eds {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/corpus")
+        .join(name);
+    parse_bytes(&std::fs::read(p).unwrap()).unwrap()
+}
+
+#[test]
+fn corpus_drive_becomes_a_working_dictionary() {
+    let desc = Arc::new(to_od(&corpus("drive.eds")).unwrap());
+    let mut od = ObjectDictionary::new(desc, 5);
+    assert_eq!(od.get(0x1200, 1), Ok(Value::Unsigned32(0x605)));
+    assert_eq!(od.get(0x1200, 2), Ok(Value::Unsigned32(0x585)));
+    assert_eq!(od.get(0x2001, 0), Ok(Value::Integer32(-150)));
+    assert_eq!(od.get(0x2000, 1), Ok(Value::Real32(12.5)));
+    assert_eq!(od.get(0x2002, 0), Ok(Value::Boolean(true)));
+    assert_eq!(
+        od.get(0x1008, 0),
+        Ok(Value::VisibleString("Drive V1 (400 V)".into()))
+    );
+    // Pole pairs: 1..=32.
+    assert_eq!(
+        od.download(0x2000, 2, &[40]),
+        Err(AbortCode::VALUE_TOO_HIGH)
+    );
+    assert_eq!(od.download(0x2000, 2, &[0]), Err(AbortCode::VALUE_TOO_LOW));
+    assert_eq!(od.download(0x2000, 2, &[4]), Ok(()));
+    assert_eq!(od.download(0x1018, 1, &[0; 4]), Err(AbortCode::READ_ONLY));
+}
+
+#[test]
+fn cia306_5_dcf_parameter_values_configure_the_device() {
+    let dcf = corpus("configured.dcf");
+    let desc = Arc::new(to_od(&dcf).unwrap());
+    let node = dcf.commissioning.as_ref().unwrap().node_id.unwrap();
+    let mut od = ObjectDictionary::new(desc, node);
+    assert_eq!(od.get(0x1017, 0), Ok(Value::Unsigned16(0)));
+    assert_eq!(apply_parameter_values(&dcf, &mut od), Ok(6));
+    assert_eq!(od.get(0x1017, 0), Ok(Value::Unsigned16(500)));
+    assert_eq!(od.get(0x1800, 1), Ok(Value::Unsigned32(0x185)));
+    assert_eq!(od.get(0x1800, 2), Ok(Value::Unsigned8(1)));
+    assert_eq!(od.get(0x6000, 2), Ok(Value::Unsigned8(0x0F)));
+    assert_eq!(od.get(0x6000, 1), Ok(Value::Unsigned8(0)));
+}
+
+#[test]
+fn corpus_compact_arrays_stay_compact_in_the_dictionary() {
+    let desc = to_od(&corpus("io_module.eds")).unwrap();
+    let o = desc.object(0x6000).unwrap();
+    assert!(o.compact_sub_obj());
+    assert_eq!(o.sub_number(), 3);
+    assert_eq!(desc.get(0x6000, 2).unwrap().name, "Inputs 9-16");
+    assert!(desc.get(0x6000, 2).unwrap().pdo_mappable);
+    assert_eq!(desc.object(0x2000).unwrap().flags(), 1);
+    // The DEFTYPE object of the quirks file is a type definition, not a value.
+    let q = to_od(&corpus("quirks.eds")).unwrap();
+    assert!(q.object(0x0002).is_none());
+    assert!(q.object(0x1000).is_some());
+}
+
+#[test]
+fn conversion_errors_name_the_entry() {
+    let mut eds = corpus("drive.eds");
+    eds.objects
+        .get_mut(&0x6048)
+        .unwrap()
+        .subs
+        .get_mut(&2)
+        .unwrap()
+        .access_type = None;
+    assert_eq!(
+        to_od(&eds).err(),
+        Some(ConvertError::Access {
+            index: 0x6048,
+            sub: 2
+        })
+    );
+    let mut eds = corpus("drive.eds");
+    eds.objects.get_mut(&0x2002).unwrap().entry.default_value = Some(EdsValue::Integer(2));
+    let e = to_od(&eds).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "0x2002:0: DefaultValue \"2\" does not fit the data type"
+    );
+}
