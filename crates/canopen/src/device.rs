@@ -349,6 +349,23 @@ impl<H: OdHooks> Device<H> {
         self.core.pdo.as_mut()
     }
 
+    /// The device detected a serious error of the kind 0x1029 sub-index `sub` configures
+    /// (1 communication error, 2.. device- or profile-specific): applies the reaction
+    /// stored there (§7.5.2.32). Returns the state entered, if it changed. A missing
+    /// sub-index or a reserved value leaves the state alone.
+    pub fn error_detected(&mut self, sub: u8, now: Instant, out: &mut Outbox) -> Option<State> {
+        let reaction = self
+            .core
+            .u32(0x1029, sub)
+            .and_then(|v| Reaction::from_u8(v as u8))?;
+        self.core.now = now;
+        self.core.send_emcys(now, out);
+        let to = reaction.apply(self.core.state)?;
+        self.core.enter(to, now);
+        self.after(now, out);
+        Some(to)
+    }
+
     /// The error register (0x1001).
     pub fn error_register(&self) -> u8 {
         self.core.emcy.register()
@@ -793,7 +810,9 @@ impl<H> Core<H> {
             return true;
         }
         if id == self.sync.id() && !frame.is_remote() {
-            if self.state.allows(Service::Sync) {
+            // A SYNC producer is the only one on its network (§7.2.5): a frame on its own
+            // SYNC identifier is its own echo, already handled when it was produced.
+            if self.state.allows(Service::Sync) && !self.sync.is_producer() {
                 match self.sync.on_receive(frame, now) {
                     Ok(counter) => {
                         self.push_event(Event::Sync { counter });

@@ -734,3 +734,52 @@ fn default_device_fits_in_8_kib_beside_its_shared_description() {
     // The description is shared, not copied.
     assert!(Arc::ptr_eq(dev.od().description(), &desc));
 }
+
+#[test]
+fn cia301_7_2_5_sync_counter_restarts_at_1_after_stopped() {
+    let mut h = Harness::booted();
+    h.write(ms(0), 0x1019, 0, &[10]).unwrap();
+    h.write(ms(0), 0x1006, 0, &u32le(10_000)).unwrap();
+    h.write(ms(0), 0x1005, 0, &u32le(0x4000_0080)).unwrap();
+    h.rx(ms(25), "000#0205");
+    h.rx(ms(41), "000#8005");
+    // The producer's own SYNC coming back (self-reception) is not a second SYNC.
+    h.rx(ms(51), "080#01");
+    h.run_until(ms(62));
+    assert_eq!(
+        h.take(),
+        at_ms(&[
+            (10, "080#01"),
+            (20, "080#02"),
+            (51, "080#01"),
+            (61, "080#02")
+        ])
+    );
+    let syncs = h
+        .events()
+        .into_iter()
+        .filter(|e| matches!(e, Event::Sync { .. }))
+        .count();
+    assert_eq!(syncs, 4);
+}
+
+#[test]
+fn cia301_7_5_2_32_device_specific_error_applies_its_sub_index() {
+    let mut h = Harness::booted();
+    h.rx(ms(1), "000#0105");
+    let mut out = cantwin_can::Outbox::new();
+    // 0x1029 sub 1 = 0: pre-operational from operational.
+    assert_eq!(
+        h.dev.error_detected(1, ms(2), &mut out),
+        Some(State::PreOperational)
+    );
+    assert_eq!(h.dev.error_detected(1, ms(3), &mut out), None);
+    // The test dictionary has no sub-index 2.
+    assert_eq!(h.dev.error_detected(2, ms(3), &mut out), None);
+    h.write(ms(4), 0x1029, 1, &[2]).unwrap();
+    assert_eq!(
+        h.dev.error_detected(1, ms(5), &mut out),
+        Some(State::Stopped)
+    );
+    assert!(out.is_empty());
+}
