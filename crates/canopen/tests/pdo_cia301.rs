@@ -569,6 +569,23 @@ fn cia301_7_5_2_36_an_invalid_stored_mapping_leaves_only_that_pdo_off() {
     let mut out = cantwin_can::Outbox::new();
     pdo.on_sync(None, ms(1), &mut od, &mut out);
     assert_eq!(out.frames(), [Frame::std(0x285, &[0]).unwrap()]);
+    // It cannot be validated again until the mapping is repaired.
+    let mut h = Harness {
+        od,
+        pdo,
+        out: cantwin_can::Outbox::new(),
+    };
+    let t = Instant::ZERO;
+    h.write_u32(0x1800, 1, 0x8000_0185, t).unwrap();
+    assert_eq!(
+        h.write_u32(0x1800, 1, 0x185, t),
+        Err(AbortCode::PARAMETER_INCOMPATIBLE)
+    );
+    h.write_u8(0x1A00, 0, 0, t).unwrap();
+    h.write_u32(0x1A00, 1, IN8, t).unwrap();
+    h.write_u8(0x1A00, 0, 1, t).unwrap();
+    h.write_u32(0x1800, 1, 0x185, t).unwrap();
+    assert_eq!(h.sync(None, ms(2)), ["185#00", "285#00"]);
 }
 
 #[test]

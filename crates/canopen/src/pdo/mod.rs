@@ -35,7 +35,9 @@
 //!   the PDO is invalid, and its entries only while sub-index 0 is 0; otherwise the write
 //!   is refused with 0x06010000 "unsupported access to an object" (the code CANopenNode 1.x
 //!   and its Go port give; CANopenNode 4 answers 0x06090030). Entries are checked when
-//!   written and again, with the total length, when sub-index 0 enables them.
+//!   written and again, with the total length, when sub-index 0 enables them. A PDO whose
+//!   stored mapping is invalid (see [`PdoEngine::load`]) cannot be made valid until the
+//!   mapping is repaired (0x06040043).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -893,6 +895,15 @@ impl PdoEngine {
                         let new = CobId(v);
                         if !new.is_valid() {
                             return Ok(());
+                        }
+                        // A PDO whose stored mapping is invalid cannot be made valid until the
+                        // mapping is repaired.
+                        let mapped = match dir {
+                            Direction::Rx => self.rpdos.get(n).map(|r| r.plan.is_some()),
+                            Direction::Tx => self.tpdos.get(n).map(|t| t.plan.is_some()),
+                        };
+                        if mapped == Some(false) {
+                            return Err(AbortCode::PARAMETER_INCOMPATIBLE);
                         }
                         // §7.5.2.35: the identifier of a valid PDO cannot change; set bit 31
                         // first.
