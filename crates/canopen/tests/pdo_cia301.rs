@@ -617,3 +617,33 @@ fn cia301_7_4_8_engine_runs_512_rpdos_and_512_tpdos() {
     assert_eq!(h.events(), [PdoEvent::Received { rpdo: 511 }]);
     assert_eq!(h.od.get(0x6201, 0).unwrap(), Value::Unsigned8(0x42));
 }
+
+#[test]
+fn cia301_7_2_2_4_synchronous_cyclic_and_acyclic_tpdos_ignore_rtr() {
+    for ttype in [0, 1] {
+        let mut h = tpdo1(ttype, &[IN16]);
+        let rtr = Frame::remote(Id::standard(0x185).unwrap(), 2).unwrap();
+        assert!(h.frame(rtr, ms(1)).is_empty());
+        assert!(h.pdo.on_frame(&rtr, ms(1), &mut h.od, &mut h.out));
+    }
+}
+
+#[test]
+fn cia301_7_2_2_4_rpdo_on_a_29_bit_cob_id_and_foreign_frames() {
+    let mut h = rpdo1(255, &[OUT8]);
+    let t = Instant::ZERO;
+    h.write_u32(0x1400, 1, 0x8000_0205, t).unwrap();
+    h.write_u32(0x1400, 1, 0x2000_0205, t).unwrap();
+    // The 11-bit frame with the same number is not this PDO any more.
+    let mut out = cantwin_can::Outbox::new();
+    let std = Frame::std(0x205, &[9]).unwrap();
+    assert!(!h.pdo.on_frame(&std, ms(1), &mut h.od, &mut out));
+    let ext = Frame::data(Id::extended(0x205).unwrap(), &[9]).unwrap();
+    // A remote frame on an RPDO's identifier is no PDO data.
+    let rtr = Frame::remote(Id::extended(0x205).unwrap(), 1).unwrap();
+    assert!(!h.pdo.on_frame(&rtr, ms(1), &mut h.od, &mut out));
+    assert!(h.pdo.on_frame(&ext, ms(2), &mut h.od, &mut out));
+    assert!(out.is_empty());
+    assert_eq!(h.od.get(0x6201, 0).unwrap(), Value::Unsigned8(9));
+    assert_eq!(h.events(), [PdoEvent::Received { rpdo: 0 }]);
+}
