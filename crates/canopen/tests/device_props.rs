@@ -109,3 +109,35 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// `wire::decode` classifies any frame without panicking, and every typed message it
+    /// returns encodes back to the same frame.
+    #[test]
+    fn wire_decode_never_panics_and_round_trips(f in any_frame()) {
+        use cantwin_canopen::wire::{self, ErrorControl, Message};
+        match wire::decode(&f) {
+            Message::Nmt(cmd) => prop_assert_eq!(cmd.encode(), f),
+            Message::Sync(s) => prop_assert_eq!(s.encode(f.id()), f),
+            Message::Emcy { emcy, .. } => prop_assert_eq!(emcy.encode(f.id()), f),
+            Message::Time(t) => {
+                // The 4 reserved bits are not kept; everything else is.
+                prop_assert_eq!(wire::Time::decode(&t.encode(f.id())).unwrap(), t);
+            }
+            Message::ErrorControl(m @ ErrorControl::State { .. }) => {
+                prop_assert_eq!(m.encode(), f)
+            }
+            Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
+                prop_assert!(f.is_remote());
+                prop_assert_eq!(u32::from(node) + 0x700, f.id().as_raw());
+            }
+            Message::Pdo { frame, .. } => prop_assert_eq!(frame, f),
+            Message::SdoRequest { data, len, .. } | Message::SdoResponse { data, len, .. } => {
+                prop_assert_eq!(&data[..usize::from(len)], f.data_bytes());
+            }
+            Message::Malformed { frame, .. } | Message::Other(frame) => prop_assert_eq!(frame, f),
+        }
+    }
+}
