@@ -222,6 +222,18 @@ impl Eds {
             }
         }
         if let Some(d) = &self.dummy_usage {
+            // CiA 306 §4.4 lists Dummy0001..Dummy0007; python-canopen reads all seven keys
+            // whenever the section exists and fails on a missing one.
+            for t in 1u16..=7 {
+                if !d.contains_key(&t) {
+                    r.push(
+                        Severity::Warning,
+                        "DummyUsage",
+                        Some(&format!("Dummy{t:04X}")),
+                        "missing; some readers require all of Dummy0001..Dummy0007".to_owned(),
+                    );
+                }
+            }
             for t in d.keys() {
                 if DataType::from_index(*t).is_none() {
                     r.push(

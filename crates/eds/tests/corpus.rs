@@ -291,6 +291,7 @@ fn cia306_check_reports_errors_and_warnings() {
     e.access_type = None;
     eds.objects.get_mut(&0x6042).unwrap().entry.data_type = Some(0x0300);
     eds.optional_objects.push(0x2001);
+    eds.dummy_usage.as_mut().unwrap().remove(&3);
     let r = eds.check();
     let errors: Vec<String> = r.errors().map(ToString::to_string).collect();
     assert!(
@@ -330,6 +331,13 @@ fn cia306_check_reports_errors_and_warnings() {
         "{r}"
     );
     let warnings: Vec<String> = r.warnings().map(ToString::to_string).collect();
+    assert!(
+        warnings.contains(
+            &"warning: [DummyUsage] Dummy0003: missing; some readers require all of Dummy0001..Dummy0007"
+                .to_string()
+        ),
+        "{r}"
+    );
     assert!(
         warnings.contains(
             &"warning: [OptionalObjects] 11: 0x2001 belongs in another list (CiA 306 §4.5)"
