@@ -235,8 +235,6 @@ struct ObjectEntry {
     hooked: bool,
     first: u32,
     count: u16,
-    /// Sub-indices are exactly 0..count, so the sub-index is the offset.
-    dense: bool,
 }
 
 /// An identifier of one sub-object within an [`OdDescription`], valid for every
@@ -475,6 +473,10 @@ impl OdBuilder {
         let mut desc = OdDescription {
             objects: Vec::new(),
             subs: Vec::new(),
+            page_of: Box::new([0; 256]),
+            pages: Vec::new(),
+            spans: Vec::new(),
+            hot: Vec::new(),
             fixed_len: 0,
             var_count: 0,
         };
@@ -506,18 +508,36 @@ impl OdBuilder {
                         Slot::Var(desc.var_count as u32 - 1)
                     }
                 };
+                desc.hot.push(Hot {
+                    slot,
+                    access: d.access,
+                    sub,
+                });
                 desc.subs.push(SubEntry { sub, desc: d, slot });
             }
+            let hooked = self.hooks.iter().any(|r| r.contains(&o.index));
+            let hi = usize::from(o.index >> 8);
+            if desc.page_of[hi] == 0 {
+                desc.pages.push([0; 256]);
+                desc.page_of[hi] = desc.pages.len() as u16;
+            }
+            let page = usize::from(desc.page_of[hi]) - 1;
+            desc.pages[page][usize::from(o.index & 0xFF)] = desc.spans.len() as u16 + 1;
+            desc.spans.push(Span {
+                first,
+                count,
+                dense,
+                hooked,
+            });
             desc.objects.push(ObjectEntry {
                 index: o.index,
-                hooked: self.hooks.iter().any(|r| r.contains(&o.index)),
+                hooked,
                 name: o.name,
                 code: o.code,
                 flags: o.flags,
                 compact: o.compact,
                 first,
                 count,
-                dense,
             });
         }
         Ok(desc)
@@ -560,8 +580,35 @@ fn check_sub(index: u16, sub: u8, d: &SubObject) -> Result<(), OdBuildError> {
 pub struct OdDescription {
     objects: Vec<ObjectEntry>,
     subs: Vec<SubEntry>,
+    /// The hot path is kept apart from the descriptive (cold) data, so a lookup touches a
+    /// few cache lines only: the index table, the objects' sub-index spans, and per
+    /// sub-object the storage slot, access and sub-index.
+    /// Two-level index → object table: the high byte of the index selects a page (0: none,
+    /// else page number + 1), the low byte an object in it (0: none, else position + 1).
+    /// Two dependent loads instead of a binary search; a page is 512 bytes and a typical
+    /// device uses fewer than 16 of them.
+    page_of: Box<[u16; 256]>,
+    pages: Vec<[u16; 256]>,
+    spans: Vec<Span>,
+    hot: Vec<Hot>,
     fixed_len: usize,
     var_count: usize,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    first: u32,
+    count: u16,
+    /// Sub-indices are exactly 0..count, so the sub-index is the offset.
+    dense: bool,
+    hooked: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Hot {
+    slot: Slot,
+    access: Access,
+    sub: u8,
 }
 
 impl OdDescription {
@@ -598,11 +645,8 @@ impl OdDescription {
     /// sub-index does not (CiA 301 table 22).
     #[inline]
     pub fn locate(&self, index: u16, sub: u8) -> Result<EntryId, AbortCode> {
-        let oi = self
-            .objects
-            .binary_search_by_key(&index, |o| o.index)
-            .map_err(|_| AbortCode::NO_OBJECT)?;
-        let o = &self.objects[oi];
+        let oi = self.position(index).ok_or(AbortCode::NO_OBJECT)?;
+        let o = self.spans[oi];
         let first = o.first as usize;
         if o.dense {
             if u16::from(sub) < o.count {
@@ -610,23 +654,40 @@ impl OdDescription {
             }
             return Err(AbortCode::NO_SUB_INDEX);
         }
-        self.subs[first..first + usize::from(o.count)]
+        self.hot[first..first + usize::from(o.count)]
             .binary_search_by_key(&sub, |s| s.sub)
             .map(|i| EntryId((first + i) as u32))
             .map_err(|_| AbortCode::NO_SUB_INDEX)
     }
 
+    /// The position of object `index` in index order.
+    #[inline]
+    fn position(&self, index: u16) -> Option<usize> {
+        let page = usize::from(self.page_of[usize::from(index >> 8)]).checked_sub(1)?;
+        let slot = self.pages.get(page)?[usize::from(index & 0xFF)];
+        usize::from(slot).checked_sub(1)
+    }
+
     /// Whether reads and writes of `index` go through device hooks.
     #[inline]
     pub fn is_hooked(&self, index: u16) -> bool {
-        self.objects
-            .binary_search_by_key(&index, |o| o.index)
-            .is_ok_and(|i| self.objects[i].hooked)
+        self.position(index).is_some_and(|i| self.spans[i].hooked)
     }
 
     /// The description of a located sub-object.
     pub fn sub_object(&self, id: EntryId) -> &SubObject {
         &self.subs[id.0 as usize].desc
+    }
+
+    /// The access type of a located sub-object (from the hot table).
+    #[inline]
+    pub fn access(&self, id: EntryId) -> Access {
+        self.hot[id.0 as usize].access
+    }
+
+    #[inline]
+    fn slot(&self, id: EntryId) -> Slot {
+        self.hot[id.0 as usize].slot
     }
 
     /// The description of the sub-object at `index`/`sub`.
@@ -727,10 +788,15 @@ impl ObjectDictionary {
         self.desc.sub_object(id)
     }
 
+    #[inline]
+    pub(crate) fn desc_access(&self, id: EntryId) -> Access {
+        self.desc.access(id)
+    }
+
     /// The encoded bytes of a value.
     #[inline]
     pub fn raw(&self, id: EntryId) -> &[u8] {
-        match self.desc.subs[id.0 as usize].slot {
+        match self.desc.slot(id) {
             Slot::Fixed { offset, len } => {
                 let o = offset as usize;
                 &self.fixed[o..o + usize::from(len)]

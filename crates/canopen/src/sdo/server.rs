@@ -217,7 +217,9 @@ impl SdoServer {
             return false;
         }
         let bytes = frame.data_bytes();
-        if bytes.is_empty() {
+        if let Ok(data) = <&[u8; 8]>::try_from(bytes) {
+            self.on_request(data, now, access, out);
+        } else if bytes.is_empty() {
             // No command specifier at all.
             if self.state == State::Idle {
                 self.mux = Mux::default();
@@ -256,6 +258,19 @@ impl SdoServer {
         {
             self.deadline = now.checked_add(self.timeout);
             self.block_segment(BlockSegment::decode(b), tx, access, out);
+            return;
+        }
+        if b[0] == 0x40 && self.state == State::Idle {
+            // Fast path for the most frequent request, initiate upload (§7.2.4.3.6): the
+            // same as the general path below, without building the typed request.
+            self.mux = Mux::new(u16::from_le_bytes([b[1], b[2]]), b[3]);
+            match self.start_upload(self.mux, tx, access, out) {
+                Err(code) => self.abort(code, access, out),
+                Ok(()) if self.state != State::Idle => {
+                    self.deadline = now.checked_add(self.timeout);
+                }
+                Ok(()) => {}
+            }
             return;
         }
         let req = match Request::decode(b) {
@@ -298,6 +313,7 @@ impl SdoServer {
         }
     }
 
+    #[inline]
     fn send(out: &mut Outbox, tx: Id, r: Response) {
         out.push(Frame::data_array(tx, r.encode()));
     }
@@ -432,6 +448,7 @@ impl SdoServer {
     }
 
     /// Initiate upload response: expedited up to 4 bytes, otherwise segmented with size.
+    #[inline]
     fn start_upload(
         &mut self,
         mux: Mux,
@@ -439,22 +456,24 @@ impl SdoServer {
         access: &mut dyn ObjectAccess,
         out: &mut Outbox,
     ) -> Result<(), AbortCode> {
-        let mut data = [0u8; 4];
-        let info = access.read(mux.index, mux.sub, 0, &mut data)?;
+        // The value is read straight into the response frame (bytes 4..8).
+        let mut b = [0u8; 8];
+        let info = access.read(mux.index, mux.sub, 0, &mut b[4..])?;
+        if (1..=4).contains(&info.size) {
+            // Expedited, size indicated: scs = 2, n = 4 - size, e = 1, s = 1.
+            b[0] = 0x43 | ((4 - info.size as u8) << 2);
+            b[1..3].copy_from_slice(&mux.index.to_le_bytes());
+            b[3] = mux.sub;
+            out.push(Frame::data_array(tx, b));
+            return Ok(());
+        }
         let size = u32::try_from(info.size).map_err(|_| AbortCode::LENGTH_TOO_HIGH)?;
-        let init = if (1..=4).contains(&info.size) {
-            Initiate::Expedited {
-                data,
-                len: Some(info.size as u8),
-            }
-        } else {
-            self.state = State::Upload {
-                toggle: false,
-                size,
-                offset: 0,
-            };
-            Initiate::Segmented { size: Some(size) }
+        self.state = State::Upload {
+            toggle: false,
+            size,
+            offset: 0,
         };
+        let init = Initiate::Segmented { size: Some(size) };
         Self::send(out, tx, Response::InitiateUpload { mux, init });
         Ok(())
     }

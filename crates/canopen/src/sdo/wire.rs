@@ -23,6 +23,7 @@ impl Mux {
         Mux { index, sub }
     }
 
+    #[inline]
     fn decode(b: &[u8; 8]) -> Self {
         Mux {
             index: u16::from_le_bytes([b[1], b[2]]),
@@ -30,6 +31,7 @@ impl Mux {
         }
     }
 
+    #[inline]
     fn encode(self, b: &mut [u8; 8]) {
         let i = self.index.to_le_bytes();
         b[1] = i[0];
@@ -240,6 +242,7 @@ impl BlockSegment {
     }
 
     /// Encodes a block segment.
+    #[inline]
     pub fn encode(&self) -> [u8; 8] {
         let mut b = [0u8; 8];
         b[0] = (u8::from(self.last) << 7) | (self.seqno & 0x7F);
@@ -248,10 +251,12 @@ impl BlockSegment {
     }
 }
 
+#[inline]
 fn u32_at(b: &[u8; 8]) -> u32 {
     u32::from_le_bytes([b[4], b[5], b[6], b[7]])
 }
 
+#[inline]
 fn put_u32(b: &mut [u8; 8], v: u32) {
     b[4..].copy_from_slice(&v.to_le_bytes());
 }
@@ -263,6 +268,7 @@ fn seg_data(b: &[u8; 8]) -> [u8; 7] {
 }
 
 /// Decodes the `x n e s` bits and bytes 4..8 of an initiate frame.
+#[inline]
 fn decode_initiate(b: &[u8; 8]) -> Initiate {
     let (e, s, n) = (b[0] & 0x02 != 0, b[0] & 0x01 != 0, (b[0] >> 2) & 0x03);
     if e {
@@ -277,6 +283,7 @@ fn decode_initiate(b: &[u8; 8]) -> Initiate {
     }
 }
 
+#[inline]
 fn encode_initiate(init: Initiate, b: &mut [u8; 8]) {
     match init {
         Initiate::Expedited { data, len } => {
@@ -297,6 +304,7 @@ fn encode_initiate(init: Initiate, b: &mut [u8; 8]) {
 
 impl Request {
     /// Decodes a client request (not a block segment).
+    #[inline]
     pub fn decode(b: &[u8; 8]) -> Result<Request, WireError> {
         let cmd = b[0];
         Ok(match cmd >> 5 {
@@ -353,6 +361,7 @@ impl Request {
     }
 
     /// Encodes the request (reserved bits and bytes zero).
+    #[inline]
     pub fn encode(&self) -> [u8; 8] {
         let mut b = [0u8; 8];
         match *self {
@@ -417,6 +426,7 @@ impl Request {
 
 impl Response {
     /// Decodes a server response (not a block segment).
+    #[inline]
     pub fn decode(b: &[u8; 8]) -> Result<Response, WireError> {
         let cmd = b[0];
         Ok(match cmd >> 5 {
@@ -472,6 +482,7 @@ impl Response {
     }
 
     /// Encodes the response (reserved bits and bytes zero).
+    #[inline]
     pub fn encode(&self) -> [u8; 8] {
         let mut b = [0u8; 8];
         match *self {
