@@ -278,6 +278,14 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
             }
         },
     };
+    if e.parameter_name.contains(';') {
+        r.push(
+            Severity::Warning,
+            sec,
+            Some("ParameterName"),
+            "contains `;`, which some INI readers take for an inline comment".to_owned(),
+        );
+    }
     if needs_type && e.access_type.is_none() {
         r.push(
             Severity::Error,
@@ -299,15 +307,24 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
                 format!("{x} is outside the range of {ty}"),
             );
         }
-        if let (Some(ty), EdsValue::NodeId(_)) = (ty, v)
-            && integer_range(ty).is_none()
-        {
-            r.push(
-                Severity::Error,
-                sec,
-                Some(key),
-                format!("$NODEID on a value of type {ty}"),
-            );
+        if let (Some(ty), EdsValue::NodeId(off)) = (ty, v) {
+            match integer_range(ty) {
+                None => r.push(
+                    Severity::Error,
+                    sec,
+                    Some(key),
+                    format!("$NODEID on a value of type {ty}"),
+                ),
+                // CiA 301 §7.2.2: node-IDs are 1..=127; the value must fit for each of them.
+                Some((lo, hi)) if off.saturating_add(1) < lo || off.saturating_add(127) > hi => r
+                    .push(
+                        Severity::Error,
+                        sec,
+                        Some(key),
+                        format!("$NODEID+{off} leaves the range of {ty} for some node-ID 1..=127"),
+                    ),
+                Some(_) => {}
+            }
         }
         if let EdsValue::Raw(s) = v
             && s.is_empty()

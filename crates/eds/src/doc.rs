@@ -42,7 +42,7 @@ fn table_row(md: &mut String, cells: &[&str]) {
     md.push('\n');
 }
 
-fn row(md: &mut String, index: &str, sub: &str, code: &str, e: &Entry) {
+fn row(md: &mut String, dcf: bool, index: &str, sub: &str, code: &str, e: &Entry) {
     let dt = e.data_type;
     let v =
         |x: &Option<crate::EdsValue>| x.as_ref().map(|x| cell(&x.to_text(dt))).unwrap_or_default();
@@ -55,20 +55,18 @@ fn row(md: &mut String, index: &str, sub: &str, code: &str, e: &Entry) {
     } else {
         ""
     };
-    table_row(
-        md,
-        &[
-            index,
-            sub,
-            &cell(&e.parameter_name),
-            code,
-            &type_name(dt),
-            e.access_type.map(|a| a.eds_name()).unwrap_or_default(),
-            pdo,
-            &v(&e.default_value),
-            &limits,
-        ],
-    );
+    let name = cell(&e.parameter_name);
+    let ty = type_name(dt);
+    let access = e.access_type.map(|a| a.eds_name()).unwrap_or_default();
+    let default = v(&e.default_value);
+    let mut cells = vec![index, sub, &name, code, &ty, access, pdo, &default, &limits];
+    let value = v(&e.parameter_value);
+    let denotation = cell(e.denotation.as_deref().unwrap_or(""));
+    if dcf {
+        cells.push(&value);
+        cells.push(&denotation);
+    }
+    table_row(md, &cells);
 }
 
 /// Renders the device's documentation as Markdown.
@@ -108,28 +106,42 @@ pub fn render_markdown(eds: &Eds) -> String {
             .map(|v| if v { "yes" } else { "no" }.to_owned()),
     );
     info("EDS file", eds.file_info.file_name.clone());
+    if let Some(c) = &eds.commissioning {
+        info("Node-ID", c.node_id.map(|v| v.to_string()));
+        info("Node name", c.node_name.clone());
+        info("Bit rate", c.baudrate.map(|v| format!("{v} kbit/s")));
+        info("Network", c.network_name.clone());
+    }
     if let Some(lines) = &eds.comments {
         let _ = writeln!(md, "\n{}", lines.join("\n"));
     }
     let _ = writeln!(md, "\n## Object dictionary\n");
-    let _ = writeln!(
-        md,
-        "| Index | Sub | Name | Object | Type | Access | PDO | Default | Limits |"
-    );
-    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|");
+    let dcf = eds.is_dcf();
+    let mut head = vec![
+        "Index", "Sub", "Name", "Object", "Type", "Access", "PDO", "Default", "Limits",
+    ];
+    if dcf {
+        head.extend(["Value", "Denotation"]);
+    }
+    table_row(&mut md, &head);
+    let rule = vec!["---"; head.len()];
+    md.push('|');
+    md.push_str(&rule.join("|"));
+    md.push_str("|\n");
     for (&index, o) in &eds.objects {
         let idx = format!("{index:#06X}");
         let code = code_name(o.object_code());
         if o.subs.is_empty() {
-            row(&mut md, &idx, "", &code, &o.entry);
+            row(&mut md, dcf, &idx, "", &code, &o.entry);
         } else {
-            let _ = writeln!(
-                md,
-                "| {idx} | | **{}** | {code} | | | | | |",
-                cell(&o.entry.parameter_name)
-            );
+            let name = format!("**{}**", cell(&o.entry.parameter_name));
+            let mut cells = vec![idx.as_str(), "", &name, &code, "", "", "", "", ""];
+            if dcf {
+                cells.extend(["", ""]);
+            }
+            table_row(&mut md, &cells);
             for (sub, e) in &o.subs {
-                row(&mut md, "", &sub.to_string(), "", e);
+                row(&mut md, dcf, "", &sub.to_string(), "", e);
             }
         }
     }

@@ -363,3 +363,41 @@ fn markdown_doc_lists_every_object() {
     let severity_order = Severity::Warning < Severity::Error;
     assert!(severity_order);
 }
+
+#[test]
+fn markdown_doc_of_a_dcf_shows_configured_values_and_commissioning() {
+    let md = render_markdown(&load("configured.dcf"));
+    assert!(md.contains("| Node-ID | 5 |"));
+    assert!(md.contains("| Bit rate | 250 kbit/s |"));
+    assert!(md.contains(
+        "| Index | Sub | Name | Object | Type | Access | PDO | Default | Limits | Value | Denotation |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+    ));
+    assert!(md.contains(
+        "| 0x1017 | | Producer heartbeat time | VAR | UNSIGNED16 | rw | | 0x0 | | 0x1F4 | Heartbeat to the PLC |"
+    ));
+    assert!(
+        md.contains("| | 2 | Inputs 9-16 | | UNSIGNED8 | ro | yes | 0x0 | | 0xF | Light curtain |")
+    );
+}
+
+#[test]
+fn cia306_check_nodeid_values_must_fit_every_node_id() {
+    let mut eds = load("drive.eds");
+    let e = eds
+        .objects
+        .get_mut(&0x6048)
+        .unwrap()
+        .subs
+        .get_mut(&2)
+        .unwrap();
+    // UNSIGNED16: 0xFFF0 + 127 overflows.
+    e.default_value = Some(EdsValue::NodeId(0xFFF0));
+    let r = eds.check();
+    let errors: Vec<String> = r.errors().map(ToString::to_string).collect();
+    assert_eq!(
+        errors,
+        [
+            "error: [6048sub2] DefaultValue: $NODEID+65520 leaves the range of UNSIGNED16 for some node-ID 1..=127"
+        ]
+    );
+}
