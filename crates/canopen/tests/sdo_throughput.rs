@@ -163,6 +163,70 @@ impl Node for SegmentedClient {
     }
 }
 
+/// A client uploading by block transfer, acknowledging every block as it completes.
+struct BlockUploadClient {
+    data: Vec<u8>,
+    /// 0: waiting for the initiate response; 1: receiving segments; 2: waiting for the end.
+    phase: u8,
+    seq: u8,
+}
+
+impl Node for BlockUploadClient {
+    fn on_power_up(&mut self, _: Instant, out: &mut Outbox) {
+        let r = Request::BlockUploadInitiate {
+            mux: MUX,
+            crc: true,
+            blksize: 127,
+            pst: 0,
+        };
+        out.push(req(r.encode()));
+    }
+    fn on_frame(&mut self, frame: &Frame, _: Instant, out: &mut Outbox) {
+        let Ok(b) = <[u8; 8]>::try_from(frame.data_bytes()) else {
+            return;
+        };
+        match self.phase {
+            0 => {
+                assert!(matches!(
+                    Response::decode(&b),
+                    Ok(Response::BlockUploadInitiate { .. })
+                ));
+                self.phase = 1;
+                out.push(req(Request::BlockUploadStart.encode()));
+            }
+            1 => {
+                let seg = BlockSegment::decode(&b);
+                assert_eq!(seg.seqno, self.seq + 1);
+                self.seq = seg.seqno;
+                self.data.extend_from_slice(&seg.data);
+                if seg.last || seg.seqno == 127 {
+                    let ack = Request::BlockUploadAck {
+                        ackseq: seg.seqno,
+                        blksize: 127,
+                    };
+                    out.push(req(ack.encode()));
+                    self.seq = 0;
+                    if seg.last {
+                        self.phase = 2;
+                    }
+                }
+            }
+            _ => {
+                let Ok(Response::BlockUploadEnd { unused, crc }) = Response::decode(&b) else {
+                    panic!("unexpected {b:02X?}")
+                };
+                self.data.truncate(self.data.len() - usize::from(unused));
+                assert_eq!(crc, Crc16::of(&self.data));
+                out.push(req(Request::BlockUploadEnd.encode()));
+            }
+        }
+    }
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
 struct Run {
     /// (id, bits on the bus including intermission) of every frame, in order.
     frames: Vec<(u16, u32, [u8; 8])>,
@@ -172,12 +236,22 @@ struct Run {
 }
 
 fn run<C: Node + Send + 'static>(client: C) -> Run {
+    run_with(client, None)
+}
+
+fn run_with<C: Node + Send + 'static>(client: C, stored: Option<&[u8]>) -> Run {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
-    let server = Server {
+    let mut server = Server {
         sdo: SdoServer::for_node(NODE),
         od: ObjectDictionary::new(Arc::new(description()), NODE),
     };
+    if let Some(data) = stored {
+        server
+            .od
+            .set(0x2003, 0, &Value::Domain(data.to_vec()))
+            .unwrap();
+    }
     let port = PortConfig::default()
         .with_queue_depth(128)
         .with_order(TxOrder::Fifo);
@@ -276,4 +350,36 @@ fn cia301_7_2_4_3_4_segmented_download_of_100000_bytes_reaches_95_percent_of_the
         "segmented download at {:.2} % of the request/response limit",
         ratio * 100.0
     );
+}
+
+#[test]
+fn cia301_7_2_4_3_12_block_upload_of_100000_bytes_reaches_95_percent_of_the_bus_limit() {
+    let data = pattern(SIZE);
+    let r = run_with(
+        BlockUploadClient {
+            data: Vec::new(),
+            phase: 0,
+            seq: 0,
+        },
+        Some(&data),
+    );
+    let all_bits: u64 = r.frames.iter().map(|f| u64::from(f.1)).sum();
+    assert_eq!(r.elapsed_ns, all_bits * BIT_NS);
+    let n_segments = SIZE.div_ceil(7);
+    let tx: Vec<_> = r.frames.iter().filter(|f| f.0 == TX).collect();
+    // Initiate response, the segments, the end request.
+    assert_eq!(tx.len(), 1 + n_segments + 1);
+    let limit_bits: u64 = tx[1..=n_segments].iter().map(|f| u64::from(f.1)).sum();
+    let ratio = limit_bits as f64 / all_bits as f64;
+    eprintln!(
+        "block upload: {all_bits} bit times, {:.2} % of the bus limit",
+        ratio * 100.0
+    );
+    assert!(
+        ratio >= 0.95,
+        "block upload at {:.2} % of the bus limit",
+        ratio * 100.0
+    );
+    // The last frame is the client's end response.
+    assert_eq!(r.frames.last().unwrap().2, [0xA1, 0, 0, 0, 0, 0, 0, 0]);
 }
