@@ -104,6 +104,31 @@ enum State {
 }
 
 /// One SDO server channel.
+///
+/// ```
+/// use std::sync::Arc;
+/// use cantwin_can::{Frame, Id, Instant, Outbox};
+/// use cantwin_canopen::od::{Access, DataType, ObjectDictionary, OdBuilder, SubObject, Value};
+/// use cantwin_canopen::sdo::SdoServer;
+///
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let desc = OdBuilder::new()
+///     .var(0x1000, SubObject::new("Device type", DataType::Unsigned32, Access::Ro)
+///         .default(Value::Unsigned32(0x0004_0191)))
+///     .build()?;
+/// let mut od = ObjectDictionary::new(Arc::new(desc), 5);
+/// let mut server = SdoServer::for_node(5);
+/// let mut out = Outbox::new();
+/// // Upload 0x1000:00 from node 5 (request on 0x605, answer on 0x585).
+/// let request = Frame::data_array(Id::standard(0x605)?, [0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0]);
+/// assert!(server.on_frame(&request, Instant::ZERO, &mut od, &mut out));
+/// assert_eq!(
+///     out.frames(),
+///     [Frame::data_array(Id::standard(0x585)?, [0x43, 0x00, 0x10, 0x00, 0x91, 0x01, 0x04, 0x00])]
+/// );
+/// # Ok(())
+/// # }
+/// ```
 #[derive(Debug, Clone)]
 pub struct SdoServer {
     rx: Option<Id>,
