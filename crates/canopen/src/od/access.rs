@@ -62,17 +62,7 @@ fn read_from(raw: &[u8], offset: usize, buf: &mut [u8]) -> ReadInfo {
     let size = raw.len();
     let start = offset.min(size);
     let copied = (size - start).min(buf.len());
-    let (dst, src) = (&mut buf[..copied], &raw[start..start + copied]);
-    // Small copies of a constant size compile to single moves (no call to memcpy, and the
-    // SDO server's wide load of the bytes just written forwards from the store).
-    match copied {
-        1 => dst[0] = src[0],
-        2 => dst[..2].copy_from_slice(&src[..2]),
-        4 => dst[..4].copy_from_slice(&src[..4]),
-        7 => dst[..7].copy_from_slice(&src[..7]),
-        8 => dst[..8].copy_from_slice(&src[..8]),
-        _ => dst.copy_from_slice(src),
-    }
+    super::copy_small(&mut buf[..copied], &raw[start..start + copied]);
     ReadInfo { size, copied }
 }
 

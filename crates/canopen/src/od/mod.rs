@@ -512,6 +512,9 @@ impl OdBuilder {
                     slot,
                     access: d.access,
                     sub,
+                    checked: d.data_type == DataType::Boolean
+                        || d.low_limit.is_some()
+                        || d.high_limit.is_some(),
                 });
                 desc.subs.push(SubEntry { sub, desc: d, slot });
             }
@@ -609,6 +612,8 @@ struct Hot {
     slot: Slot,
     access: Access,
     sub: u8,
+    /// Downloads need a value check (BOOLEAN, or limits).
+    checked: bool,
 }
 
 impl OdDescription {
@@ -871,10 +876,31 @@ impl ObjectDictionary {
 
     /// An SDO-style download into the stored value, with all checks of
     /// [`Self::check_download`].
+    #[inline]
     pub fn download(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
         let id = self.locate(index, sub)?;
-        self.check_download(id, data)?;
-        self.set_raw(id, data)
+        let hot = self.desc.hot[id.0 as usize];
+        let Slot::Fixed { offset, len } = hot.slot else {
+            self.check_download(id, data)?;
+            return self.set_raw(id, data);
+        };
+        // Fixed-size values: the same checks as `check_download`, from the hot table.
+        if !hot.access.writable() {
+            return Err(AbortCode::READ_ONLY);
+        }
+        let len = usize::from(len);
+        if data.len() > len {
+            return Err(AbortCode::LENGTH_TOO_HIGH);
+        }
+        if data.len() < len {
+            return Err(AbortCode::LENGTH_TOO_LOW);
+        }
+        if hot.checked {
+            check_value(self.sub_object(id), data)?;
+        }
+        let o = offset as usize;
+        copy_small(&mut self.fixed[o..o + len], data);
+        Ok(())
     }
 
     /// Sets the largest segmented or block download this device buffers (default
@@ -964,6 +990,21 @@ impl ObjectDictionary {
             + self.vars.capacity() * core::mem::size_of::<Vec<u8>>()
             + self.vars.iter().map(Vec::capacity).sum::<usize>()
             + self.staging.capacity()
+    }
+}
+
+/// Copies `src` into `dst` (same length). Small copies of a constant size compile to
+/// single moves: no call to memcpy, and a wide load of the bytes just written forwards
+/// from the store.
+#[inline]
+pub(crate) fn copy_small(dst: &mut [u8], src: &[u8]) {
+    match src.len() {
+        1 => dst[0] = src[0],
+        2 => dst[..2].copy_from_slice(&src[..2]),
+        4 => dst[..4].copy_from_slice(&src[..4]),
+        7 => dst[..7].copy_from_slice(&src[..7]),
+        8 => dst[..8].copy_from_slice(&src[..8]),
+        _ => dst.copy_from_slice(src),
     }
 }
 
