@@ -42,6 +42,7 @@ impl Registry {
         let mut r = Registry::new();
         r.register(Box::new(crate::kinds::generator::Generator));
         r.register(Box::new(crate::kinds::cia301::Cia301));
+        r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
         r
     }
 

@@ -2,3 +2,4 @@
 
 pub mod cia301;
 pub mod generator;
+pub mod opendrive;

@@ -1,0 +1,255 @@
+//! `kind = "opendrive"`: a TDE MACNO OPEN DRIVE with application 003 "Sensorless via CAN
+//! bus" (CAL CMS messages 0–2), with its motor.
+//!
+//! Keys (all optional):
+//!
+//! | key | default | meaning |
+//! |---|---|---|
+//! | `params` | — | inline table of parameters and connections stored in flash, in the manual's units: `{ P21 = 1.5, C48 = 1, P180 = 440 }` |
+//! | `dip_s1` | false | DIP switch S1 at power-up; `true` is a 0 → 1 change: the defaults are loaded (but not the reserved values) and CAN is ignored |
+//! | `inputs` | `[]` | logic inputs 1–8 that are on, e.g. `[4]` (input 4 is start with C04 = 0) |
+//! | `reference_hz` | 0 | the terminal frequency reference |
+//! | `load_torque_pct` | 0 | load torque, % of the motor's rated torque |
+//! | `ambient_c` | 40 | ambient temperature around the heatsink |
+//! | `motor_rated_frequency_hz` | 50 | motor rated frequency (base of P63, P68) |
+//! | `motor_rated_power_kw` | 4 | motor rated power |
+//! | `motor_magnetising_current_pct` | 35 | magnetising current, % of rated current |
+//! | `motor_starting_time_s` | 0.5 | mechanical starting time (inertia) |
+//! | `motor_friction_torque_pct` | 2 | friction torque |
+//! | `motor_thermal_time_constant_s` | 120 | I²t time constant |
+//! | `software_version` | 0x0300 | read through message 2 mux 0x34 |
+//! | `physics_period_ms` | 1 | the physics step |
+//!
+//! The bus must run at the bit rate of C48 (default 1 = 500 kbit/s).
+
+use std::collections::BTreeMap;
+
+use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_can::Duration;
+use cantwin_opendrive::params::{self, ParId};
+use cantwin_opendrive::{DriveData, MotorData, OpenDrive, bit_rate_of_c48};
+
+use crate::build::BuildEnv;
+use crate::error::ScenarioError;
+use crate::model::BusSpec;
+use crate::registry::{DeviceKind, Settings};
+
+/// The OPEN DRIVE kind.
+pub struct OpenDriveKind;
+
+fn positive(s: &Settings<'_>, key: &str, default: f64) -> Result<f64, ScenarioError> {
+    let v: f64 = s.get_or(key, default)?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(s.error(key, format!("`{key}` must be a positive number")))
+    }
+}
+
+fn non_negative(s: &Settings<'_>, key: &str, default: f64) -> Result<f64, ScenarioError> {
+    let v: f64 = s.get_or(key, default)?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(s.error(key, format!("`{key}` must be zero or a positive number")))
+    }
+}
+
+impl DeviceKind for OpenDriveKind {
+    fn name(&self) -> &'static str {
+        "opendrive"
+    }
+
+    fn summary(&self) -> &'static str {
+        "TDE MACNO OPEN DRIVE, application 003: CAL CMS messages 0-2 (P180-P187), V/f drive and motor"
+    }
+
+    fn build(
+        &self,
+        s: &Settings<'_>,
+        bus: &BusSpec,
+        _env: &BuildEnv,
+    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+        let defaults = MotorData::default();
+        let motor = MotorData {
+            rated_frequency_hz: positive(
+                s,
+                "motor_rated_frequency_hz",
+                defaults.rated_frequency_hz,
+            )?,
+            rated_power_kw: positive(s, "motor_rated_power_kw", defaults.rated_power_kw)?,
+            magnetising_current_pct: non_negative(
+                s,
+                "motor_magnetising_current_pct",
+                defaults.magnetising_current_pct,
+            )?,
+            starting_time_s: positive(s, "motor_starting_time_s", defaults.starting_time_s)?,
+            friction_torque_pct: non_negative(
+                s,
+                "motor_friction_torque_pct",
+                defaults.friction_torque_pct,
+            )?,
+            thermal_time_constant_s: positive(
+                s,
+                "motor_thermal_time_constant_s",
+                defaults.thermal_time_constant_s,
+            )?,
+        };
+        let hardware = DriveData {
+            software_version: s
+                .get_or("software_version", DriveData::default().software_version)?,
+            ..DriveData::default()
+        };
+        let period_ms = positive(s, "physics_period_ms", 1.0)?;
+        let mut node = OpenDrive::new(motor, hardware)
+            .with_physics_period(Duration::from_secs_f64(period_ms / 1e3));
+
+        let table: BTreeMap<String, f64> = s.get_or("params", BTreeMap::new())?;
+        for (name, value) in &table {
+            let id: ParId = name
+                .parse()
+                .map_err(|e: params::ParamError| s.error("params", e.to_string()))?;
+            let def = params::def(id).ok_or_else(|| s.error("params", format!("no {name}")))?;
+            let internal = (value * 10f64.powi(i32::from(def.decimals))).round();
+            if !internal.is_finite() || internal.abs() > f64::from(i32::MAX) {
+                return Err(s.error("params", format!("{name} = {value} is not a number")));
+            }
+            node.set_stored_param(id, internal as i32).map_err(|_| {
+                let scale = 10f64.powi(i32::from(def.decimals));
+                s.error(
+                    "params",
+                    format!(
+                        "{name} = {value} is outside {}..={} {}",
+                        f64::from(def.min) / scale,
+                        f64::from(def.max) / scale,
+                        def.unit
+                    ),
+                )
+            })?;
+        }
+        let c48 = node.drive().saved_param(params::C48);
+        if bit_rate_of_c48(c48) != Some(bus.bit_rate) {
+            return Err(s.error(
+                "params",
+                format!(
+                    "the drive's C48 = {c48} runs at {:?}, but bus {:?} runs at {:?}",
+                    node.bit_rate(),
+                    bus.name,
+                    bus.bit_rate
+                ),
+            ));
+        }
+
+        let inputs: Vec<u8> = s.get_or("inputs", Vec::new())?;
+        let reference = non_negative(s, "reference_hz", 0.0)?;
+        let load = non_negative(s, "load_torque_pct", 0.0)?;
+        let ambient: f64 = s.get_or("ambient_c", 40.0)?;
+        let dip_s1: bool = s.get_or("dip_s1", false)?;
+        let drive = node.drive_mut();
+        for n in inputs {
+            if !(1..=8).contains(&n) {
+                return Err(s.error("inputs", format!("logic input {n} is not one of 1-8")));
+            }
+            drive.set_input(n, true);
+        }
+        drive.set_analog_reference_hz(reference);
+        drive.set_load_torque_pct(load);
+        drive.set_ambient_c(ambient);
+        drive.set_dip_s1(dip_s1);
+        Ok((Box::new(node), PortConfig::default()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use cantwin_bus::Recorder;
+    use cantwin_can::{Frame, Instant};
+    use cantwin_opendrive::OpenDrive;
+
+    use crate::{Registry, Scenario};
+
+    const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"opendrive\"\nbus = \"can0\"\n";
+
+    fn error_of(extra: &str, bit_rate: &str) -> String {
+        let text = DEVICE.replace("500k", bit_rate) + extra;
+        let scenario = Scenario::parse(&text, "t.toml").unwrap();
+        match scenario.build(&Registry::builtin(), &Default::default()) {
+            Ok(_) => panic!("built: {extra}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    #[test]
+    fn the_shipped_scenario_answers_message_0_and_runs() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../scenarios/opendrive.toml"
+        );
+        let text = std::fs::read_to_string(path).unwrap();
+        let scenario = Scenario::parse(&text, path).unwrap();
+        let mut built = scenario
+            .build(&Registry::builtin(), &Default::default())
+            .unwrap();
+        let bus = built.bus("can0").unwrap();
+        let drive = built.device("drive").unwrap().port;
+        let listener = built.device("listener").unwrap().port;
+        let tap = built.sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+        let start = Frame::std(440, &[0x00, 0xA8, 0x88, 0x13]).unwrap();
+        built.sim.transmit(listener, start).unwrap();
+        built.sim.run_until(Instant::from_nanos(4_000_000_000));
+        let frames: Vec<String> = built
+            .sim
+            .bus(bus)
+            .unwrap()
+            .tap::<Recorder>(tap)
+            .unwrap()
+            .frames()
+            .map(|f| f.frame.to_string())
+            .collect();
+        assert_eq!(frames, ["1B8#00A88813", "1B7#00A98813"]);
+        let node = built.sim.node::<OpenDrive>(drive).unwrap();
+        assert!((node.drive().output_hz() - 50.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn settings_reach_the_drive() {
+        let text = DEVICE.to_string()
+            + "params = { P21 = 1.5, P180 = 256 }\ninputs = [4]\nreference_hz = 20.0\ndip_s1 = false\n";
+        let scenario = Scenario::parse(&text, "t.toml").unwrap();
+        let built = scenario
+            .build(&Registry::builtin(), &Default::default())
+            .unwrap();
+        let port = built.device("drive").unwrap().port;
+        let node = built.sim.node::<OpenDrive>(port).unwrap();
+        use cantwin_opendrive::params::{P21, P180};
+        assert_eq!(node.drive().param(P21), 150);
+        assert_eq!(node.drive().param(P180), 256);
+        assert!(node.drive().input(4));
+        assert_eq!(node.drive().reference_hz(), 20.0);
+    }
+
+    #[test]
+    fn bad_settings_are_reported_with_their_key() {
+        let e = error_of("params = { P21 = 300.0 }\n", "500k");
+        assert!(
+            e.contains("params") && e.contains("P21 = 300 is outside 0.01..=199.99"),
+            "{e}"
+        );
+        let e = error_of("params = { P99 = 1 }\n", "500k");
+        assert!(e.contains("no parameter or connection P99"), "{e}");
+        let e = error_of("", "125k");
+        assert!(e.contains("C48 = 1"), "{e}");
+        let e = error_of("inputs = [9]\n", "500k");
+        assert!(e.contains("logic input 9"), "{e}");
+        let e = error_of("load_torque = 3\n", "500k");
+        assert!(e.contains("unknown key `load_torque`"), "{e}");
+        // C48 = 3 is 125 kbit/s.
+        let text = DEVICE.replace("500k", "125k") + "params = { C48 = 3 }\n";
+        let scenario = Scenario::parse(&text, "t.toml").unwrap();
+        assert!(
+            scenario
+                .build(&Registry::builtin(), &Default::default())
+                .is_ok()
+        );
+    }
+}
