@@ -2,6 +2,7 @@
 //! number of everything so that later errors can point at it.
 
 use crate::error::{ParseError, ParseErrorKind};
+use std::collections::HashMap;
 
 /// One `key=value` line.
 #[derive(Debug, Clone)]
@@ -41,6 +42,7 @@ impl RawSection {
 pub(crate) fn tokenize(text: &str) -> Result<Vec<RawSection>, ParseError> {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut sections: Vec<RawSection> = Vec::new();
+    let mut seen: HashMap<String, usize> = HashMap::new();
     for (i, raw) in text.split('\n').enumerate() {
         let line = i + 1;
         let l = raw.trim();
@@ -55,12 +57,13 @@ pub(crate) fn tokenize(text: &str) -> Result<Vec<RawSection>, ParseError> {
             if name.is_empty() || name.contains(['[', ']']) {
                 return Err(ParseError::at(line, ParseErrorKind::BadHeader));
             }
-            if let Some(first) = sections.iter().find(|s| s.name.eq_ignore_ascii_case(name)) {
+            // Keyed by the lower-case name: a large EDS has thousands of sections.
+            if let Some(&first) = seen.get(&name.to_ascii_lowercase()) {
                 return Err(
-                    ParseError::at(line, ParseErrorKind::DuplicateSection(first.line))
-                        .in_section(name),
+                    ParseError::at(line, ParseErrorKind::DuplicateSection(first)).in_section(name),
                 );
             }
+            seen.insert(name.to_ascii_lowercase(), line);
             sections.push(RawSection {
                 name: name.to_owned(),
                 line,
