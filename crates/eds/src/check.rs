@@ -1,4 +1,4 @@
-//! Consistency checks of a parsed file (CiA 306 §4.5, §4.6): what a tool should refuse
+//! Consistency checks of a parsed file (CiA 306 object lists and object descriptions): what a tool should refuse
 //! (errors) and what it should point out (warnings).
 
 use crate::model::{Eds, Entry, ObjectList};
@@ -101,7 +101,7 @@ impl Eds {
                     Severity::Error,
                     &format!("{m:04X}"),
                     None,
-                    format!("mandatory object {m:#06X} is missing (CiA 301 §7.4)"),
+                    format!("mandatory object {m:#06X} is missing (CiA 301 object dictionary)"),
                 );
             }
         }
@@ -138,7 +138,7 @@ impl Eds {
                         Severity::Warning,
                         name,
                         Some(&key),
-                        format!("{index:#06X} belongs in another list (CiA 306 §4.5)"),
+                        format!("{index:#06X} belongs in another list (CiA 306 object lists)"),
                     );
                 }
                 if list[..i].contains(index) {
@@ -217,12 +217,12 @@ impl Eds {
                     Severity::Warning,
                     &format!("{index:04X}sub0"),
                     Some("DataType"),
-                    "sub-index 0 of an ARRAY or RECORD is UNSIGNED8 (CiA 301 §7.4.3)".to_owned(),
+                    "sub-index 0 of an ARRAY or RECORD is UNSIGNED8 (CiA 301)".to_owned(),
                 );
             }
         }
         if let Some(d) = &self.dummy_usage {
-            // CiA 306 §4.4 lists Dummy0001..Dummy0007; python-canopen reads all seven keys
+            // CiA 306 dummy usage lists Dummy0001..Dummy0007; python-canopen reads all seven keys
             // whenever the section exists and fails on a missing one.
             for t in 1u16..=7 {
                 if !d.contains_key(&t) {
@@ -315,7 +315,7 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
                     Some(key),
                     format!("$NODEID on a value of type {ty}"),
                 ),
-                // CiA 301 §7.2.2: node-IDs are 1..=127; the value must fit for each of them.
+                // CiA 301: node-IDs are 1..=127; the value must fit for each of them.
                 Some((lo, hi)) if off.saturating_add(1) < lo || off.saturating_add(127) > hi => r
                     .push(
                         Severity::Error,

@@ -1,4 +1,4 @@
-//! The INI layer of CiA 306 (§4.1): sections, `key=value` lines and comments, with the line
+//! The INI layer of CiA 306 (basic structure): sections, `key=value` lines and comments, with the line
 //! number of everything so that later errors can point at it.
 
 use crate::error::{ParseError, ParseErrorKind};
@@ -21,7 +21,7 @@ pub(crate) struct RawSection {
 }
 
 impl RawSection {
-    /// The entry whose key matches `key` case-insensitively (CiA 306 §4.1: key names are not
+    /// The entry whose key matches `key` case-insensitively (CiA 306 basic structure: key names are not
     /// case-sensitive).
     pub fn get(&self, key: &str) -> Option<&RawEntry> {
         self.entries
@@ -32,7 +32,7 @@ impl RawSection {
 
 /// Splits a file into sections.
 ///
-/// * A line whose first non-blank character is `;` is a comment (CiA 306 §4.1); a `;` later
+/// * A line whose first non-blank character is `;` is a comment (CiA 306 basic structure); a `;` later
 ///   in a line is part of the value.
 /// * Leading and trailing white space of names, keys and values is not significant.
 /// * A line before the first section, a line without `=`, an empty key, a duplicate section or

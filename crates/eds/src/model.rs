@@ -113,7 +113,7 @@ macro_rules! keyed_section {
 }
 
 keyed_section! {
-    /// `[FileInfo]` (CiA 306 §4.2), with `LastEDS` of a DCF.
+    /// `[FileInfo]` (CiA 306 file information), with `LastEDS` of a DCF.
     FileInfo {
         /// `FileName`.
         file_name: String = "FileName",
@@ -143,7 +143,7 @@ keyed_section! {
 }
 
 keyed_section! {
-    /// `[DeviceInfo]` (CiA 306 §4.3): identity, supported bit rates and capabilities.
+    /// `[DeviceInfo]` (CiA 306 general device information): identity, supported bit rates and capabilities.
     DeviceInfo {
         /// `VendorName`.
         vendor_name: String = "VendorName",
@@ -194,6 +194,21 @@ keyed_section! {
     }
 }
 
+impl FileInfo {
+    /// The `[FileInfo]` of a newly generated file: `FileName`, `FileVersion=1`,
+    /// `FileRevision=0`, `EDSVersion=4.0`. Dates and authors are left to the caller (this crate
+    /// reads no clock).
+    pub fn new(file_name: impl Into<String>) -> Self {
+        FileInfo {
+            file_name: Some(file_name.into()),
+            file_version: Some(1),
+            file_revision: Some(0),
+            eds_version: Some("4.0".to_owned()),
+            ..FileInfo::default()
+        }
+    }
+}
+
 impl DeviceInfo {
     /// The bit rates (kbit/s) marked `BaudRate_x=1`, ascending.
     pub fn baud_rates(&self) -> Vec<u32> {
@@ -228,7 +243,7 @@ impl DeviceInfo {
 }
 
 keyed_section! {
-    /// `[DeviceComissioning]` of a DCF (CiA 306 §5.2; the standard spells the section name
+    /// `[DeviceComissioning]` of a DCF (CiA 306 DCF; the standard spells the section name
     /// with one `m`, and that is how it is written; `DeviceCommissioning` is read too).
     DeviceCommissioning {
         /// `NodeID`.
@@ -249,7 +264,7 @@ keyed_section! {
 }
 
 /// The keys of one object section (`[1000]`) or sub-object section (`[1018sub1]`)
-/// (CiA 306 §4.6.3), except `SubNumber` and `CompactSubObj` which belong to [`Object`].
+/// (CiA 306 object descriptions), except `SubNumber` and `CompactSubObj` which belong to [`Object`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Entry {
     /// `ParameterName`.
@@ -294,7 +309,7 @@ impl Entry {
         }
     }
 
-    /// The object code: `ObjectType`, or VAR when absent (CiA 306 §4.6.3).
+    /// The object code: `ObjectType`, or VAR when absent (CiA 306 object descriptions).
     pub fn object_code(&self) -> u8 {
         self.object_type.unwrap_or(crate::VAR)
     }
@@ -405,7 +420,7 @@ impl Eds {
         }
     }
 
-    /// The list (mandatory, optional, manufacturer) CiA 306 §4.5 puts `index` in.
+    /// The list (mandatory, optional, manufacturer) CiA 306 object lists put `index` in.
     pub fn list_for(index: u16) -> ObjectList {
         match index {
             0x1000 | 0x1001 | 0x1018 => ObjectList::Mandatory,
@@ -414,7 +429,7 @@ impl Eds {
         }
     }
 
-    /// Rebuilds the three object lists from [`Eds::objects`] (CiA 306 §4.5), in index order.
+    /// Rebuilds the three object lists from [`Eds::objects`] (CiA 306 object lists), in index order.
     pub fn rebuild_lists(&mut self) {
         self.mandatory_objects.clear();
         self.optional_objects.clear();
@@ -429,7 +444,7 @@ impl Eds {
     }
 }
 
-/// The three object lists of CiA 306 §4.5.
+/// The three object lists of CiA 306.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ObjectList {
     /// `[MandatoryObjects]`: 0x1000, 0x1001, 0x1018.

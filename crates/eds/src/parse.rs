@@ -1,4 +1,4 @@
-//! From INI sections to the typed model (CiA 306 §4 for EDS, §5 for DCF).
+//! From INI sections to the typed model (CiA 306 EDS, with the DCF additions).
 
 use crate::error::{ParseError, ParseErrorKind};
 use crate::ini::{RawEntry, RawSection, tokenize};
@@ -239,7 +239,7 @@ fn parse_entry(sec: &RawSection) -> Result<(Entry, Option<u8>, Option<u8>), Pars
     Ok((entry, sub_number, compact))
 }
 
-/// The sub-objects `CompactSubObj=n` stands for (CiA 306 §4.6.4): sub-index 0 "NrOfObjects"
+/// The sub-objects `CompactSubObj=n` stands for (CiA 306 compact storage): sub-index 0 "NrOfObjects"
 /// (UNSIGNED8, ro, default n) and sub-indices 1..=n with the object's type, access, PDO
 /// mapping, limits, default and flags, named from `[xxxxName]` or else the object's name
 /// followed by the sub-index, with DCF values and denotations from `[xxxxValue]` and

@@ -1,5 +1,5 @@
 //! Values of `DefaultValue`, `ParameterValue`, `LowLimit` and `HighLimit`, parsed according
-//! to the entry's `DataType` (CiA 306 §4.6.3), with `$NODEID` kept symbolic.
+//! to the entry's `DataType` (CiA 306 object descriptions), with `$NODEID` kept symbolic.
 
 use cantwin_canopen::od::DataType;
 use core::fmt;
@@ -13,7 +13,7 @@ pub enum EdsValue {
     /// An integer (BOOLEAN and the INTEGERn/UNSIGNEDn types). Signed types given in hex as a
     /// two's-complement bit pattern (`0xFF` for INTEGER8) are stored as the negative number.
     Integer(i128),
-    /// `$NODEID+offset` (CiA 306 §4.6.3: the node-ID is added when the value is used); the
+    /// `$NODEID+offset` (CiA 306 object descriptions: the node-ID is added when the value is used); the
     /// forms `$NODEID`, `$NODEID+n` and `n+$NODEID` are accepted.
     NodeId(i128),
     /// REAL32 as a decimal number (a `0x` bit pattern is accepted on input).
@@ -44,7 +44,7 @@ impl PartialEq for EdsValue {
     }
 }
 
-/// Parses an integer the way CiA 306 §4.1 writes numbers: decimal, hexadecimal with a `0x`
+/// Parses an integer the way CiA 306 writes numbers: decimal, hexadecimal with a `0x`
 /// prefix, octal with a leading `0`, optionally signed.
 pub fn parse_integer(text: &str) -> Option<i128> {
     let t = text.trim();
@@ -163,6 +163,9 @@ impl EdsValue {
                         .map_err(|_| "a REAL64 number")
                 }
             }
+            // Some tools write BOOLEAN values as words.
+            DataType::Boolean if t.eq_ignore_ascii_case("true") => Ok(EdsValue::Integer(1)),
+            DataType::Boolean if t.eq_ignore_ascii_case("false") => Ok(EdsValue::Integer(0)),
             _ => {
                 if let Some(expr) = parse_node_id_expr(t) {
                     return expr
@@ -297,6 +300,8 @@ mod tests {
             EdsValue::parse(Some(0x40), "xyz"),
             Ok(EdsValue::Raw("xyz".into()))
         );
+        assert_eq!(EdsValue::parse(Some(1), "TRUE"), Ok(EdsValue::Integer(1)));
+        assert_eq!(EdsValue::parse(Some(1), "false"), Ok(EdsValue::Integer(0)));
         assert!(EdsValue::parse(Some(7), "12z").is_err());
         assert!(EdsValue::parse(Some(10), "0A1").is_err());
         assert!(EdsValue::parse(Some(8), "one").is_err());

@@ -249,7 +249,7 @@ fn write_object(out: &mut Out, index: u16, o: &Object) {
         return;
     }
     // `SubNumber` is written as stated; only a compact object that can no longer be written
-    // compactly gets one computed, as CiA 306 §4.6.3 requires it of expanded ARRAYs.
+    // compactly gets one computed, as CiA 306 object descriptions require it of expanded ARRAYs.
     let sub_number = match (o.sub_number, o.compact_sub_obj) {
         (Some(n), _) => Some(n),
         (None, Some(_)) => Some(u8::try_from(o.subs.len()).unwrap_or(u8::MAX)),

@@ -296,7 +296,8 @@ fn cia306_check_reports_errors_and_warnings() {
     let errors: Vec<String> = r.errors().map(ToString::to_string).collect();
     assert!(
         errors.contains(
-            &"error: [1001]: mandatory object 0x1001 is missing (CiA 301 §7.4)".to_string()
+            &"error: [1001]: mandatory object 0x1001 is missing (CiA 301 object dictionary)"
+                .to_string()
         ),
         "{r}"
     );
@@ -340,7 +341,7 @@ fn cia306_check_reports_errors_and_warnings() {
     );
     assert!(
         warnings.contains(
-            &"warning: [OptionalObjects] 11: 0x2001 belongs in another list (CiA 306 §4.5)"
+            &"warning: [OptionalObjects] 11: 0x2001 belongs in another list (CiA 306 object lists)"
                 .to_string()
         ),
         "{r}"

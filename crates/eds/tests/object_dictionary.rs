@@ -91,9 +91,10 @@ fn info() -> DeviceInfo {
 
 #[test]
 fn generated_eds_has_the_form_python_canopen_imports() {
-    let eds = from_od(&device(), info(), FileInfo::default());
+    let eds = from_od(&device(), info(), FileInfo::new("device.eds"));
     let text = write(&eds);
     for fragment in [
+        "[FileInfo]\nFileName=device.eds\nFileVersion=1\nFileRevision=0\nEDSVersion=4.0\n\n",
         "[DeviceInfo]\nVendorName=cantwin\nVendorNumber=0x0000005A\nProductName=Test device\nProductNumber=0x00001234\nRevisionNumber=0x00010002\nBaudRate_10=0\nBaudRate_20=0\nBaudRate_50=0\nBaudRate_125=1\nBaudRate_250=1\nBaudRate_500=1\nBaudRate_800=0\nBaudRate_1000=0\nGranularity=8\n",
         "[MandatoryObjects]\nSupportedObjects=3\n1=0x1000\n2=0x1001\n3=0x1018\n",
         "[OptionalObjects]\nSupportedObjects=4\n1=0x1008\n2=0x1014\n3=0x1021\n4=0x6000\n",
