@@ -6,7 +6,9 @@
 //!   (manual §1.1, §1.2, §2.3);
 //! * [`model`]: the [`Drive`]: input logic (§2.2), DIP S1 (§2.3), message 0 and message 2
 //!   semantics (§3.1, §3.3), alarms, and physics stepped at a fixed period;
-//! * [`node`]: [`OpenDrive`], the drive on the bus behind a [`cantwin_cal::CmsServer`].
+//! * [`node`]: [`OpenDrive`], the drive on the bus behind a [`cantwin_cal::CmsServer`];
+//! * [`messages`]: the messages' data typed for a master ([`messages::master`] builds a
+//!   [`cantwin_cal::CmsClient`] for the drive's COB-IDs).
 //!
 //! # The messages (manual §3)
 //!
@@ -102,6 +104,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod messages;
 pub mod model;
 pub mod node;
 pub mod params;
