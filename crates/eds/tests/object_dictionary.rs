@@ -238,3 +238,78 @@ fn conversion_errors_name_the_entry() {
         "0x2002:0: DefaultValue \"2\" does not fit the data type"
     );
 }
+
+/// The stack's own CiA 301 communication objects and PDO objects: the EDS of every CANopen
+/// device starts from these.
+fn cia301_device() -> OdDescription {
+    use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
+    use cantwin_canopen::pdo::PdoObjects;
+    let options = Cia301Options {
+        vendor_id: 0x0000_005A,
+        product_code: 0x1234,
+        revision: 0x0001_0000,
+        device_name: "cantwin device".into(),
+        ..Cia301Options::default()
+    };
+    let b = cia301_defaults(OdBuilder::new(), &options);
+    let b = PdoObjects::new(2, 2).tpdo(0, 255, &[0x6000_0108]).add_to(b);
+    b.var(
+        0x6000,
+        SubObject::new("Inputs", DataType::Unsigned8, Access::Ro).mappable(),
+    )
+    .build()
+    .unwrap()
+}
+
+#[test]
+fn cia301_default_dictionary_generates_a_clean_lossless_eds() {
+    let desc = cia301_device();
+    let eds = from_od(&desc, info(), FileInfo::new("cia301.eds"));
+    let report = eds.check();
+    assert!(report.issues.is_empty(), "{report}");
+    let text = write(&eds);
+    let back = parse(&text).unwrap();
+    assert_eq!(back, eds);
+    assert!(text.contains("[1200sub1]\nParameterName="));
+    assert!(text.contains("DefaultValue=$NODEID+0x600\n"));
+    // TPDO1 is mapped, hence valid; RPDO1 is not, hence bit 31 set (CiA 301 PDO COB-ID).
+    assert!(text.contains("DefaultValue=$NODEID+0x180\n"));
+    assert!(text.contains("DefaultValue=$NODEID+0x80000200\n"));
+    assert_eq!(back.device_info.vendor_number, Some(0x5A));
+    let od = to_od(&back).unwrap();
+    assert_eq!(od.len(), desc.len());
+    for (a, b) in desc.objects().zip(od.objects()) {
+        assert_eq!(
+            (a.index(), a.name(), a.code()),
+            (b.index(), b.name(), b.code())
+        );
+        let skip = usize::from(a.compact_sub_obj());
+        let norm = |(s, d): (u8, &SubObject)| {
+            let mut d = d.clone();
+            d.default = Some(d.default.unwrap_or_else(|| Value::zero(d.data_type)));
+            d.max_len = None;
+            (s, d)
+        };
+        let sa: Vec<_> = a.subs().skip(skip).map(norm).collect();
+        let sb: Vec<_> = b.subs().skip(skip).map(norm).collect();
+        assert_eq!(sa, sb, "{:#06X}", a.index());
+    }
+    // The same device at node 0x22 gets the same COB-IDs from either dictionary.
+    let from_eds = ObjectDictionary::new(Arc::new(od), 0x22);
+    let original = ObjectDictionary::new(Arc::new(desc), 0x22);
+    for (index, sub) in [
+        (0x1014, 0),
+        (0x1200, 1),
+        (0x1200, 2),
+        (0x1800, 1),
+        (0x1400, 1),
+    ] {
+        assert_eq!(
+            from_eds.get(index, sub),
+            original.get(index, sub),
+            "{index:#06X}:{sub}"
+        );
+    }
+    assert_eq!(from_eds.get(0x1800, 1), Ok(Value::Unsigned32(0x1A2)));
+    assert_eq!(from_eds.get(0x1400, 1), Ok(Value::Unsigned32(0x8000_0222)));
+}
