@@ -7,6 +7,7 @@
 
 use cantwin_can::{Duration, Instant};
 
+use crate::messages::{Code, CommandByte};
 use crate::params::{self, C32, C35, C40, C47, C50, C52, P21, P22, P23, P24, P61, P63, P68};
 use crate::params::{P66, P70, P72, P73, P94, ParId, ParamError, Params};
 
@@ -748,26 +749,19 @@ impl Drive {
         if u32::from(reference) > self.fmax_centi() {
             return Err(ERR_VALUE);
         }
-        let code = |shift: u8| match (cmd >> shift) & 0b11 {
-            0b01 => Some(false),
-            0b10 => Some(true),
-            _ => None,
+        let codes = CommandByte::decode(cmd);
+        let apply = |bit: &mut bool, code: Code| match code {
+            Code::Set => *bit = true,
+            Code::Reset => *bit = false,
+            Code::NoChange => {}
         };
         let c = &mut self.commands;
-        if let Some(v) = code(6) {
-            c.reference_remote = v;
-        }
-        if let Some(v) = code(4) {
-            c.command_remote = v;
-        }
+        apply(&mut c.reference_remote, codes.reference_remote);
+        apply(&mut c.command_remote, codes.command_remote);
         if c.command_remote {
             // CAN-Start and CAN-Reverse are valid only with "comando Remote" set.
-            if let Some(v) = code(2) {
-                c.can_start = v;
-            }
-            if let Some(v) = code(0) {
-                c.can_reverse = v;
-            }
+            apply(&mut c.can_start, codes.can_start);
+            apply(&mut c.can_reverse, codes.can_reverse);
         } else {
             // Back to the terminals: a later switch to remote must not restart the motor.
             c.can_start = false;
