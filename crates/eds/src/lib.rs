@@ -11,8 +11,8 @@
 //! * [`Eds::check`] reports errors and warnings ([`Report`]).
 //! * [`render_markdown`] documents a device.
 //! * [`from_od`] makes the EDS of a device from its object dictionary; [`to_od`] builds an
-//!   object dictionary description from an EDS and [`apply_parameter_values`] loads a DCF's
-//!   configured values into a device.
+//!   object dictionary description from an EDS, [`to_dcf`] writes a configured device's
+//!   values as a DCF and [`apply_parameter_values`] loads a DCF's values into a device.
 //!
 //! Parsing decisions (CiA 306 leaves them open): section and key names are matched without
 //! regard to case; a `;` starts a comment only at the start of a line; a duplicate section,
@@ -72,7 +72,7 @@ pub use error::{ParseError, ParseErrorKind};
 pub use model::{
     DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, ObjectList, Section,
 };
-pub use od::{ConvertError, apply_parameter_values, from_od, to_od};
+pub use od::{ConvertError, apply_parameter_values, from_od, to_dcf, to_od};
 pub use parse::{decode, parse};
 pub use value::{EdsValue, parse_integer, parse_node_id_expr};
 pub use write::write;

@@ -329,3 +329,23 @@ fn compact(obj: &mut Object) {
         obj.subs = expanded;
     }
 }
+
+/// The DCF of a configured device: `eds` (typically from [`from_od`]) with every
+/// sub-object's current value from `od` as its `ParameterValue` and `commissioning` as
+/// `[DeviceComissioning]`. [`apply_parameter_values`] loads it back into a device.
+/// Sub-objects `od` does not have (or whose value it cannot decode) get no `ParameterValue`.
+pub fn to_dcf(eds: &Eds, od: &ObjectDictionary, commissioning: crate::DeviceCommissioning) -> Eds {
+    let mut dcf = eds.clone();
+    for (&index, o) in dcf.objects.iter_mut() {
+        let value = |sub: u8| od.get(index, sub).ok().map(|v| from_value(&v));
+        if o.subs.is_empty() {
+            o.entry.parameter_value = value(0);
+        } else {
+            for (&sub, e) in o.subs.iter_mut() {
+                e.parameter_value = value(sub);
+            }
+        }
+    }
+    dcf.commissioning = Some(commissioning);
+    dcf
+}

@@ -8,7 +8,7 @@ use cantwin_canopen::od::{
 };
 use cantwin_eds::{
     ConvertError, DeviceInfo, EdsValue, FileInfo, apply_parameter_values, from_od, parse,
-    parse_bytes, to_od, write,
+    parse_bytes, to_dcf, to_od, write,
 };
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -312,4 +312,41 @@ fn cia301_default_dictionary_generates_a_clean_lossless_eds() {
     }
     assert_eq!(from_eds.get(0x1800, 1), Ok(Value::Unsigned32(0x1A2)));
     assert_eq!(from_eds.get(0x1400, 1), Ok(Value::Unsigned32(0x8000_0222)));
+}
+
+#[test]
+fn cia306_5_device_values_round_trip_through_a_dcf() {
+    let desc = Arc::new(cia301_device());
+    let mut od = ObjectDictionary::new(Arc::clone(&desc), 0x22);
+    od.set(0x1017, 0, &Value::Unsigned16(250)).unwrap();
+    od.set(0x1800, 2, &Value::Unsigned8(1)).unwrap();
+    od.set(0x1008, 0, &Value::VisibleString("renamed".into()))
+        .unwrap();
+    let eds = from_od(&desc, info(), FileInfo::new("cia301.eds"));
+    let commissioning = cantwin_eds::DeviceCommissioning {
+        node_id: Some(0x22),
+        baudrate: Some(500),
+        ..Default::default()
+    };
+    let text = write(&to_dcf(&eds, &od, commissioning));
+    assert!(text.contains("[DeviceComissioning]\nNodeID=34\nBaudrate=500\n"));
+    assert!(text.contains("ParameterValue=0xFA\n"));
+    // ParameterValue is the device's actual value: the node-ID is already added.
+    assert!(text.contains("DefaultValue=$NODEID+0x600\nPDOMapping=0\nParameterValue=0x622\n"));
+    let dcf = parse(&text).unwrap();
+    assert!(dcf.is_dcf());
+    let mut fresh = ObjectDictionary::new(Arc::clone(&desc), 0x22);
+    let applied = apply_parameter_values(&dcf, &mut fresh).unwrap();
+    let total: usize = desc.objects().map(|o| o.sub_number()).sum();
+    assert_eq!(applied, total);
+    for o in desc.objects() {
+        for (sub, _) in o.subs() {
+            assert_eq!(
+                fresh.get(o.index(), sub),
+                od.get(o.index(), sub),
+                "{:#06X}:{sub}",
+                o.index()
+            );
+        }
+    }
 }
