@@ -1,0 +1,826 @@
+//! The TM3BCCO coupler as a [`Node`]: the CiA 301 device of `cantwin-canopen` on the
+//! dictionary of [`crate::od`], the CiA 401 I/O of the configured modules, and the
+//! manual's diagnostics on top.
+//!
+//! What the coupler adds to the CiA 301 layer (manual: object 1002H, 1003H, 1016H, 1029H):
+//!
+//! * **EMCY contents.** Every EMCY carries 0x1002 in its manufacturer-specific bytes 3–6
+//!   (little-endian, as read by SDO) and the module number in byte 7 (0 = coupler).
+//! * **0x1003** entries hold the EMCY code (bits 0–15), the error register after the error
+//!   (16–23) and the module number (24–31), newest first, 10 entries.
+//! * **Modules.** At power-up each configured position is compared with what is fitted: a
+//!   missing or different module is a configuration error (EMCY 0x7002, status 1), a
+//!   module that does not answer a configuration timeout (0x7001, status 1), an absent
+//!   optional module is status 3 without an error. A module removed or failing at runtime
+//!   is a runtime error (0x7003, status 2); its inputs freeze and its outputs are off.
+//!   Module errors last until the next power-up and are raised again after every reset
+//!   communication. Module errors set error register bit 7 (manual: 1001H, "problems of
+//!   the bus coupler").
+//! * **Failure state ("safe positions", CiA 401 error mode/value).** Entered on heartbeat
+//!   or guarding loss (0x8130), bus-off, RPDO deadline (0x8250), SYNC timeout (0xF001) and
+//!   an internal communication error (0x1000). Left when the device enters OPERATIONAL,
+//!   or, while OPERATIONAL, at the first RPDO received once none of those causes is active.
+//! * **0x1029** applies to SYNC timeout and RPDO deadline too (manual: 1029H lists SYNC
+//!   timeout and PDO event time errors besides bus-off and error control).
+//! * **SYNC timeout.** With 0x1006 ≠ 0, the watchdog is armed by the first SYNC and fires
+//!   when no SYNC came for 1.5 cycle periods; the next SYNC clears 0xF001.
+//! * **Queues.** The firmware's receive queue (capacity and service time in
+//!   [`CouplerConfig`]) overflows under overload: the frame is lost and 0x6101 raised until
+//!   the queue is empty again. A frame the controller's transmit queue dropped raises
+//!   0x6102, cleared by the next frame sent.
+//! * **Rotary switches.** Moving them after power-up raises 0xFF03 (the node-ID changes at
+//!   the next power-up); moving them back clears it.
+//! * **Not configured.** A coupler without configuration (bus status 3) entering
+//!   OPERATIONAL raises 0xFF04.
+//! * **Analog interrupts.** Entering OPERATIONAL with analog inputs while 0x6423 is FALSE
+//!   raises 0x0080 (TPDOs of analog inputs will only be sent by timer or SYNC); setting
+//!   0x6423 to TRUE clears it.
+//! * **Downloads the manual restricts** are refused with 0x06090030: 0x1006 outside 0 and
+//!   10 000..=10 000 000 µs in 1 ms steps, 29-bit identifiers where "not supported" (0x1005,
+//!   0x1014, TPDOs), TPDO bit 30, RPDO transmission types 241–254, TPDO transmission types
+//!   241–254 (manual: transmission type tables). Checked on expedited downloads.
+
+use crate::diag::{self, Status};
+use crate::island::{Island, MAX_MODULES};
+use crate::od;
+use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
+use cantwin_canopen::nmt::State;
+use cantwin_canopen::od::{OdBuildError, OdDescription, Value};
+use cantwin_canopen::pdo::PdoEvent;
+use cantwin_cia401::inputs::{self, AnalogTriggers};
+use cantwin_cia401::{objects as cia401, outputs};
+use std::sync::Arc;
+
+/// How the coupler is set up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CouplerConfig {
+    /// The rotary switches' node-ID at power-up, 1..=127.
+    pub node_id: u8,
+    /// The configured modules.
+    pub island: Island,
+    /// Whether the coupler holds a configuration (bus status 3 otherwise).
+    pub configured: bool,
+    /// Frames the firmware's receive queue holds.
+    pub rx_queue_capacity: u32,
+    /// Time the firmware takes per received frame.
+    pub rx_service_time: Duration,
+}
+
+impl CouplerConfig {
+    /// A configured coupler at `node_id` carrying `island`, with a 64-frame receive queue
+    /// served at 50 µs a frame.
+    pub fn new(node_id: u8, island: Island) -> Self {
+        CouplerConfig {
+            node_id,
+            island,
+            configured: true,
+            rx_queue_capacity: 64,
+            rx_service_time: Duration::from_micros(50),
+        }
+    }
+}
+
+/// Why a coupler cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum CouplerError {
+    /// The dictionary could not be built.
+    #[error("object dictionary: {0}")]
+    Od(#[from] OdBuildError),
+    /// The node-ID is outside 1..=127.
+    #[error(transparent)]
+    Device(#[from] DeviceError),
+}
+
+/// A wrong channel or module number in an I/O call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum IoError {
+    /// No module at that position (1-based).
+    #[error("no module {0}")]
+    NoModule(usize),
+    /// The module has no such channel of that kind.
+    #[error("module {module} has no channel {channel} of that kind")]
+    NoChannel {
+        /// The module (1-based).
+        module: usize,
+        /// The channel (0-based).
+        channel: u8,
+    },
+}
+
+/// What is physically fitted at a module position.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fitted {
+    /// The module of this reference, working.
+    Module(&'static crate::catalogue::ModuleSpec),
+    /// Nothing.
+    Empty,
+    /// A module that does not answer on the expansion bus.
+    Unresponsive,
+}
+
+/// The TM3 CANopen bus coupler. See the [module documentation](self).
+pub struct Tm3Coupler {
+    device: Device,
+    desc: Arc<OdDescription>,
+    config: CouplerConfig,
+    fitted: Vec<Fitted>,
+    status: Vec<Status>,
+    /// Physical digital inputs per module, bit n = channel n.
+    di: Vec<u32>,
+    triggers: AnalogTriggers,
+    failure: bool,
+    internal_error: bool,
+    switch: u8,
+    history: Vec<u32>,
+    /// The module each active code was raised for.
+    emcy_module: Vec<(u16, u8)>,
+    sync_seen: Option<Instant>,
+    sync_timed_out: bool,
+    rx_level: u64,
+    rx_last: Instant,
+    scratch: Outbox,
+    now: Instant,
+}
+
+impl core::fmt::Debug for Tm3Coupler {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Tm3Coupler")
+            .field("node_id", &self.device.node_id())
+            .field("state", &self.device.state())
+            .field("status", &self.status)
+            .finish_non_exhaustive()
+    }
+}
+
+fn device_config(node_id: u8) -> DeviceConfig {
+    DeviceConfig {
+        // Manual 1005H: bit 30 "device creates SYNC" is not supported.
+        sync_producer: false,
+        time_producer: false,
+        ..DeviceConfig::new(node_id)
+    }
+}
+
+impl Tm3Coupler {
+    /// A coupler with every configured module fitted. It is unpowered until
+    /// [`Node::on_power_up`].
+    pub fn new(config: CouplerConfig) -> Result<Self, CouplerError> {
+        let desc = Arc::new(od::description(&config.island)?);
+        let device = Device::new(desc.clone(), device_config(config.node_id))?;
+        let n = config.island.modules().len();
+        let fitted = config
+            .island
+            .modules()
+            .iter()
+            .map(|m| Fitted::Module(m.spec))
+            .collect();
+        Ok(Tm3Coupler {
+            device,
+            desc,
+            fitted,
+            status: vec![Status::Ok; n],
+            di: vec![0; n],
+            triggers: AnalogTriggers::new(config.island.layout().analog_inputs),
+            failure: false,
+            internal_error: false,
+            switch: config.node_id,
+            history: Vec::new(),
+            emcy_module: Vec::new(),
+            sync_seen: None,
+            sync_timed_out: false,
+            rx_level: 0,
+            rx_last: Instant::ZERO,
+            scratch: Outbox::new(),
+            now: Instant::ZERO,
+            config,
+        })
+    }
+
+    /// The CiA 301 device inside.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The CiA 301 device inside, mutably.
+    pub fn device_mut(&mut self) -> &mut Device {
+        &mut self.device
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &CouplerConfig {
+        &self.config
+    }
+
+    /// The dictionary description (for EDS generation).
+    pub fn description(&self) -> &Arc<OdDescription> {
+        &self.desc
+    }
+
+    /// The NMT state.
+    pub fn state(&self) -> State {
+        self.device.state()
+    }
+
+    /// Whether the outputs are in their failure state (safe positions).
+    pub fn in_failure_state(&self) -> bool {
+        self.failure
+    }
+
+    /// The status of module `module` (1-based) as in 0x1002.
+    pub fn module_status(&self, module: usize) -> Option<Status> {
+        module
+            .checked_sub(1)
+            .and_then(|i| self.status.get(i))
+            .copied()
+    }
+
+    /// The bus status, bits 30–31 of 0x1002.
+    pub fn bus_status(&self) -> Status {
+        if !self.config.configured {
+            Status::NotConfigured
+        } else if self.internal_error || self.status.contains(&Status::RuntimeError) {
+            Status::RuntimeError
+        } else if self.status.contains(&Status::ConfigurationError) {
+            Status::ConfigurationError
+        } else {
+            Status::Ok
+        }
+    }
+
+    /// 0x1002.
+    pub fn manufacturer_status(&self) -> u32 {
+        diag::manufacturer_status(&self.status, self.bus_status())
+    }
+
+    /// The life time factor advice for the current 0x100C/0x100D.
+    pub fn life_time_warning(&self) -> Option<diag::LifeTimeWarning> {
+        let od = self.device.od();
+        diag::check_life_time(
+            od.get_unsigned(0x100C, 0).unwrap_or(0) as u16,
+            od.get_unsigned(0x100D, 0).unwrap_or(0) as u8,
+        )
+    }
+
+    fn slot(
+        &self,
+        module: usize,
+    ) -> Result<(usize, &'static crate::catalogue::ModuleSpec), IoError> {
+        let i = module.checked_sub(1).ok_or(IoError::NoModule(module))?;
+        let m = self
+            .config
+            .island
+            .modules()
+            .get(i)
+            .ok_or(IoError::NoModule(module))?;
+        Ok((i, m.spec))
+    }
+
+    fn working(&self, i: usize) -> bool {
+        matches!(self.fitted.get(i), Some(Fitted::Module(_)))
+            && self.status.get(i) == Some(&Status::Ok)
+    }
+
+    /// Sets digital input `channel` (0-based) of module `module` (1-based). The new state
+    /// reaches 0x6000 only while the module works; a change selected by 0x6005–0x6008
+    /// makes the event-driven TPDOs mapping the byte due.
+    pub fn set_digital_input(
+        &mut self,
+        module: usize,
+        channel: u8,
+        on: bool,
+    ) -> Result<(), IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.digital_inputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        let bit = 1u32 << channel;
+        if on {
+            self.di[i] |= bit;
+        } else {
+            self.di[i] &= !bit;
+        }
+        if self.working(i) {
+            self.apply_digital_inputs(i);
+        }
+        Ok(())
+    }
+
+    fn apply_digital_inputs(&mut self, i: usize) {
+        let (Some(o), Some(m)) = (
+            self.config.island.offsets(i),
+            self.config.island.modules().get(i),
+        ) else {
+            return;
+        };
+        for b in 0..m.spec.input_bytes() {
+            let sub = o.input_byte + b + 1;
+            let byte = (self.di[i] >> (8 * b)) as u8;
+            if inputs::set_digital_input_byte(self.device.od_mut(), sub, byte)
+                && let Some(p) = self.device.pdo_mut()
+            {
+                p.mark_changed(cia401::READ_INPUT_8, sub);
+            }
+        }
+    }
+
+    /// Sets analog input `channel` (0-based) of module `module` (1-based) to `value`
+    /// (raw 16-bit). A 0x6421 trigger that fires makes the event-driven TPDOs mapping the
+    /// channel due.
+    pub fn set_analog_input(
+        &mut self,
+        module: usize,
+        channel: u8,
+        value: i16,
+    ) -> Result<(), IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.analog_inputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        if !self.working(i) {
+            return Ok(());
+        }
+        let sub = self
+            .config
+            .island
+            .offsets(i)
+            .map_or(1, |o| o.analog_input + channel + 1);
+        if self.triggers.set_input(self.device.od_mut(), sub, value) != 0
+            && let Some(p) = self.device.pdo_mut()
+        {
+            p.mark_changed(cia401::READ_ANALOG_INPUT_16, sub);
+        }
+        Ok(())
+    }
+
+    /// The physical state of digital output `channel` (0-based) of module `module`.
+    pub fn digital_output(&self, module: usize, channel: u8) -> Result<bool, IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.digital_outputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        if !self.working(i) {
+            return Ok(false);
+        }
+        let o = self.config.island.offsets(i).unwrap_or_default();
+        let sub = o.output_byte + channel / 8 + 1;
+        let byte = outputs::digital_output_byte(self.device.od(), sub, self.failure);
+        Ok(byte >> (channel % 8) & 1 != 0)
+    }
+
+    /// The physical value of analog output `channel` (0-based) of module `module`.
+    pub fn analog_output(&self, module: usize, channel: u8) -> Result<i16, IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.analog_outputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        if !self.working(i) {
+            return Ok(0);
+        }
+        let o = self.config.island.offsets(i).unwrap_or_default();
+        Ok(outputs::analog_output(
+            self.device.od(),
+            o.analog_output + channel + 1,
+            self.failure,
+        ))
+    }
+
+    /// Fits `what` at module position `module` (1-based). Takes effect at the next
+    /// power-up, except removing a working module, which is a runtime error at once.
+    pub fn fit(
+        &mut self,
+        module: usize,
+        what: Fitted,
+        now: Instant,
+        out: &mut Outbox,
+    ) -> Result<(), IoError> {
+        let (i, _) = self.slot(module)?;
+        let was_working = self.working(i) && self.state() != State::Initialising;
+        self.fitted[i] = what;
+        if was_working
+            && !matches!(what, Fitted::Module(s) if Some(s) == self.config.island.modules().get(i).map(|m| m.spec))
+        {
+            self.status[i] = Status::RuntimeError;
+            self.run(now, out, |c, _| c.raise(diag::RUNTIME_ERROR, (i + 1) as u8));
+        }
+        Ok(())
+    }
+
+    /// An internal communication error on the expansion bus starts (`true`, EMCY 0x1000,
+    /// failure state) or ends (`false`).
+    pub fn set_internal_error(&mut self, on: bool, now: Instant, out: &mut Outbox) {
+        if on == self.internal_error {
+            return;
+        }
+        self.internal_error = on;
+        self.run(now, out, |c, _| {
+            if on {
+                c.failure = true;
+                c.raise(diag::GENERIC_ERROR, 0);
+            } else {
+                c.device.emcy().clear(diag::GENERIC_ERROR);
+            }
+        });
+    }
+
+    /// The rotary switches are turned to `node_id`. The node-ID is read at power-up only;
+    /// a position different from the one at power-up raises 0xFF03.
+    pub fn set_rotary_switch(&mut self, node_id: u8, now: Instant, out: &mut Outbox) {
+        self.switch = node_id;
+        let changed = node_id != self.device.node_id();
+        self.run(now, out, |c, _| {
+            if changed {
+                c.raise(diag::ROTARY_SWITCH_CHANGED, 0);
+            } else {
+                c.device.emcy().clear(diag::ROTARY_SWITCH_CHANGED);
+            }
+        });
+    }
+
+    /// Raises `code` for `module` (0 = coupler): through the CiA 301 layer if newly
+    /// active there, else (the same code for another module) as an EMCY of its own.
+    fn raise(&mut self, code: u16, module: u8) {
+        if matches!(code, 0x7000..=0x7FFF) {
+            self.device.emcy().set_register_bits(0x80, true);
+        }
+        self.emcy_module.retain(|&(c, _)| c != code);
+        self.emcy_module.push((code, module));
+        if !self.device.emcy().raise(code, [0; 5]) {
+            let register = self.device.error_register();
+            self.push_history(diag::history_entry(code, register, module));
+            if self.state().allows_emcy() {
+                let mut data = [0u8; 8];
+                data[..2].copy_from_slice(&code.to_le_bytes());
+                data[2] = register;
+                if let Some(id) = self.emcy_id() {
+                    self.scratch.push(Frame::data_array(id, data));
+                }
+            }
+        } else {
+            let register = self.device.error_register();
+            self.push_history(diag::history_entry(code, register, module));
+        }
+    }
+
+    fn push_history(&mut self, entry: u32) {
+        self.history.insert(0, entry);
+        self.history.truncate(usize::from(od::ERROR_HISTORY));
+    }
+
+    fn emcy_id(&self) -> Option<Id> {
+        let v = self.device.od().get_unsigned(0x1014, 0)? as u32;
+        if v & (1 << 31) != 0 {
+            return None;
+        }
+        Id::standard((v & 0x7FF) as u16).ok()
+    }
+
+    fn module_check(&mut self) {
+        for (i, m) in self.config.island.modules().iter().enumerate() {
+            self.status[i] = match self.fitted[i] {
+                Fitted::Module(s) if s == m.spec => Status::Ok,
+                Fitted::Empty if m.optional => Status::NotConfigured,
+                Fitted::Empty | Fitted::Module(_) | Fitted::Unresponsive => {
+                    Status::ConfigurationError
+                }
+            };
+        }
+    }
+
+    fn raise_module_errors(&mut self) {
+        for i in 0..self.status.len().min(MAX_MODULES) {
+            let code = match (self.status[i], self.fitted[i]) {
+                (Status::ConfigurationError, Fitted::Unresponsive) => diag::CONFIGURATION_TIMEOUT,
+                (Status::ConfigurationError, _) => diag::CONFIGURATION_ERROR,
+                (Status::RuntimeError, _) => diag::RUNTIME_ERROR,
+                _ => continue,
+            };
+            self.raise(code, (i + 1) as u8);
+        }
+        if self.internal_error {
+            self.raise(diag::GENERIC_ERROR, 0);
+        }
+        if self.switch != self.device.node_id() {
+            self.raise(diag::ROTARY_SWITCH_CHANGED, 0);
+        }
+    }
+
+    /// Runs `f` on the coupler and then everything that follows a call into the device.
+    fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
+        self.now = now;
+        let before: Vec<bool> = diag::STACK_CODES
+            .iter()
+            .map(|&c| self.device.emcy().is_active(c))
+            .collect();
+        let mut scratch = Outbox::new();
+        f(self, &mut scratch);
+        for (k, &code) in diag::STACK_CODES.iter().enumerate() {
+            if !before[k] && self.device.emcy().is_active(code) {
+                let register = self.device.error_register();
+                self.emcy_module.retain(|&(c, _)| c != code);
+                self.push_history(diag::history_entry(code, register, 0));
+                if code == diag::RPDO_TIMEOUT {
+                    self.failure = true;
+                    self.device.error_detected(1, now, &mut scratch);
+                }
+            }
+        }
+        self.events(now, &mut scratch);
+        // Flush EMCYs raised above.
+        self.device.on_tick(now, &mut scratch);
+        self.mirror();
+        // EMCYs the coupler built itself (a code already active for another module).
+        for f in self.scratch.drain() {
+            scratch.push(f);
+        }
+        let status = self.manufacturer_status().to_le_bytes();
+        let emcy = self.emcy_id();
+        for mut f in scratch.drain() {
+            if Some(f.id()) == emcy && f.len() == 8 && !f.is_remote() {
+                let mut d = [0u8; 8];
+                d.copy_from_slice(f.data_bytes());
+                let code = u16::from_le_bytes([d[0], d[1]]);
+                d[3..7].copy_from_slice(&status);
+                d[7] = self
+                    .emcy_module
+                    .iter()
+                    .find(|&&(c, _)| c == code && code != 0)
+                    .map_or(0, |&(_, m)| m);
+                f = Frame::data_array(f.id(), d);
+            }
+            out.push(f);
+        }
+    }
+
+    fn events(&mut self, now: Instant, out: &mut Outbox) {
+        while let Some(e) = self.device.poll_event() {
+            match e {
+                Event::ResetCommunication => {
+                    self.history.clear();
+                    self.emcy_module.clear();
+                    self.sync_seen = None;
+                    self.sync_timed_out = false;
+                    self.raise_module_errors();
+                }
+                Event::ResetApplication => {
+                    self.triggers.reset();
+                    for i in 0..self.di.len() {
+                        if self.working(i) {
+                            self.apply_digital_inputs(i);
+                        }
+                    }
+                }
+                Event::StateChanged {
+                    to: State::Operational,
+                    ..
+                } => {
+                    self.failure = self.internal_error;
+                    if !self.config.configured {
+                        self.raise(diag::NOT_CONFIGURED_IN_OP, 0);
+                    }
+                    let ai = self.config.island.layout().analog_inputs > 0;
+                    let enabled = matches!(
+                        self.device
+                            .od()
+                            .get(cia401::ANALOG_GLOBAL_INTERRUPT_ENABLE, 0),
+                        Ok(Value::Boolean(true))
+                    );
+                    if ai && !enabled {
+                        self.raise(diag::ANALOG_DISABLE, 0);
+                    }
+                }
+                Event::HeartbeatLost { .. } | Event::LifeGuardingLost | Event::BusOff => {
+                    self.failure = true;
+                }
+                Event::Sync { .. } => {
+                    self.sync_seen = Some(now);
+                    self.sync_timed_out = false;
+                    self.device.emcy().clear(diag::SYNC_TIMEOUT);
+                }
+                Event::Pdo(PdoEvent::Received { .. })
+                    if self.failure && self.can_leave_failure() =>
+                {
+                    self.failure = false;
+                }
+                _ => {}
+            }
+        }
+        if self.device.emcy().is_active(diag::ANALOG_DISABLE)
+            && matches!(
+                self.device
+                    .od()
+                    .get(cia401::ANALOG_GLOBAL_INTERRUPT_ENABLE, 0),
+                Ok(Value::Boolean(true))
+            )
+        {
+            self.device.emcy().clear(diag::ANALOG_DISABLE);
+        }
+        if let Some(t) = self.sync_deadline()
+            && now >= t
+        {
+            self.sync_timed_out = true;
+            self.raise(diag::SYNC_TIMEOUT, 0);
+            self.failure = true;
+            self.device.error_detected(1, now, out);
+        }
+    }
+
+    fn can_leave_failure(&mut self) -> bool {
+        self.state() == State::Operational
+            && !self.internal_error
+            && ![
+                diag::GUARD_OR_HEARTBEAT,
+                diag::RPDO_TIMEOUT,
+                diag::SYNC_TIMEOUT,
+            ]
+            .iter()
+            .any(|&c| self.device.emcy().is_active(c))
+    }
+
+    fn sync_period(&self) -> Duration {
+        Duration::from_micros(self.device.od().get_unsigned(0x1006, 0).unwrap_or(0))
+    }
+
+    fn sync_deadline(&self) -> Option<Instant> {
+        let period = self.sync_period();
+        if period.is_zero() || !matches!(self.state(), State::PreOperational | State::Operational) {
+            return None;
+        }
+        let last = self.sync_seen?;
+        if self.sync_timed_out {
+            return None;
+        }
+        Some(last + period + Duration::from_nanos(period.as_nanos() / 2))
+    }
+
+    /// Writes 0x1002 and the coupler's form of 0x1003 into the dictionary.
+    fn mirror(&mut self) {
+        let status = self.manufacturer_status();
+        let od = self.device.od_mut();
+        let _ = od.set(0x1002, 0, &Value::Unsigned32(status));
+        // The CiA 301 layer empties 0x1003 when 0 is written to sub 0 (or at a reset).
+        if od.get_unsigned(0x1003, 0) == Some(0) {
+            self.history.clear();
+        }
+        let _ = od.set(0x1003, 0, &Value::Unsigned8(self.history.len() as u8));
+        for k in 0..od::ERROR_HISTORY {
+            let v = self.history.get(usize::from(k)).copied().unwrap_or(0);
+            let _ = od.set(0x1003, k + 1, &Value::Unsigned32(v));
+        }
+    }
+
+    /// The SDO server receive identifiers.
+    fn sdo_rx(&self) -> [(Option<u32>, u32); 2] {
+        let od = self.device.od();
+        let get = |i, s| od.get_unsigned(i, s).map(|v| v as u32);
+        let pair = |i| {
+            let rx = get(i, 1).filter(|v| v & (1 << 31) == 0);
+            let tx = get(i, 2).unwrap_or(1 << 31);
+            (rx, tx)
+        };
+        [pair(0x1200), pair(0x1201)]
+    }
+
+    /// The abort for an expedited download the manual does not allow (see the [module
+    /// documentation](self)), if any.
+    fn refuse(index: u16, sub: u8, v: u32) -> bool {
+        let ttype = v as u8;
+        match (index, sub) {
+            (0x1006, 0) => v != 0 && (!(10_000..=10_000_000).contains(&v) || v % 1000 != 0),
+            (0x1005, 0) | (0x1014, 0) => v & (1 << 29) != 0,
+            (0x1400..=0x141C, 2) => (241..=254).contains(&ttype),
+            (0x1800..=0x1837, 1) => v & (3 << 29) != 0,
+            (0x1800..=0x1837, 2) => (241..=254).contains(&ttype),
+            _ => false,
+        }
+    }
+
+    /// Answers an expedited download the manual refuses; returns whether it did.
+    fn screen_sdo(&mut self, frame: &Frame, out: &mut Outbox) -> bool {
+        let Id::Standard(s) = frame.id() else {
+            return false;
+        };
+        let d = frame.data_bytes();
+        if frame.is_remote() || d.len() != 8 || d[0] & 0xE2 != 0x22 {
+            return false;
+        }
+        let Some(tx) = self
+            .sdo_rx()
+            .into_iter()
+            .find(|(rx, _)| *rx == Some(u32::from(s.as_raw())))
+            .map(|(_, tx)| tx)
+        else {
+            return false;
+        };
+        if self.state() == State::Stopped {
+            return false;
+        }
+        let index = u16::from_le_bytes([d[1], d[2]]);
+        let sub = d[3];
+        let n = if d[0] & 1 != 0 {
+            4 - usize::from(d[0] >> 2 & 3)
+        } else {
+            4
+        };
+        let mut b = [0u8; 4];
+        b[..n].copy_from_slice(&d[4..4 + n]);
+        if !Self::refuse(index, sub, u32::from_le_bytes(b)) {
+            return false;
+        }
+        let Ok(id) = Id::standard((tx & 0x7FF) as u16) else {
+            return false;
+        };
+        let code = AbortCode::INVALID_VALUE.to_u32().to_le_bytes();
+        out.push(Frame::data_array(
+            id,
+            [0x80, d[1], d[2], sub, code[0], code[1], code[2], code[3]],
+        ));
+        true
+    }
+
+    /// The firmware's receive queue takes `frame`; false if it overflowed.
+    fn rx_queue(&mut self, now: Instant) -> bool {
+        let service = self.config.rx_service_time.as_nanos().max(1);
+        let served = now.saturating_duration_since(self.rx_last).as_nanos() / service;
+        if served > 0 {
+            self.rx_level = self.rx_level.saturating_sub(served);
+            self.rx_last += Duration::from_nanos(served * service);
+        }
+        if self.rx_level == 0 {
+            self.rx_last = now;
+            if self.device.emcy().is_active(diag::RX_QUEUE_OVERRUN) {
+                self.device.emcy().clear(diag::RX_QUEUE_OVERRUN);
+            }
+        }
+        if self.rx_level >= u64::from(self.config.rx_queue_capacity) {
+            self.raise(diag::RX_QUEUE_OVERRUN, 0);
+            return false;
+        }
+        self.rx_level += 1;
+        true
+    }
+}
+
+/// Whether EMCY may be sent in a state.
+trait AllowsEmcy {
+    fn allows_emcy(self) -> bool;
+}
+
+impl AllowsEmcy for State {
+    fn allows_emcy(self) -> bool {
+        matches!(self, State::PreOperational | State::Operational)
+    }
+}
+
+impl Node for Tm3Coupler {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        if self.switch != self.device.node_id()
+            && let Ok(d) = Device::new(self.desc.clone(), device_config(self.switch))
+        {
+            self.device = d;
+        }
+        self.internal_error = false;
+        self.failure = false;
+        self.rx_level = 0;
+        self.rx_last = now;
+        self.module_check();
+        self.run(now, out, |c, o| c.device.on_power_up(now, o));
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.run(now, out, |c, o| {
+            if !c.rx_queue(now) || c.screen_sdo(frame, o) {
+                return;
+            }
+            c.device.on_frame(frame, now, o);
+        });
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.run(now, out, |c, o| c.device.on_tick(now, o));
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        match (self.device.next_deadline(), self.sync_deadline()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.run(now, out, |c, o| {
+            c.device.on_sent(frame, now, o);
+            c.device.emcy().clear(diag::TX_QUEUE_OVERRUN);
+        });
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        self.run(now, out, |c, o| {
+            if event == ControllerEvent::TxDropped {
+                c.raise(diag::TX_QUEUE_OVERRUN, 0);
+            }
+            c.device.on_controller_event(event, now, o);
+        });
+    }
+}

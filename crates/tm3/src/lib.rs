@@ -1,0 +1,51 @@
+//! Twin of the Schneider TM3 CANopen bus coupler (TM3BCCO) with its TM3 and TM2
+//! expansion modules.
+//!
+//! * [`catalogue`]: the modules and their channels;
+//! * [`island`]: the configured modules (up to 14) and where their channels sit;
+//! * [`od`]: the object dictionary built from the island — the manual's communication
+//!   objects and the CiA 401 objects of `cantwin-cia401`;
+//! * [`coupler`]: the coupler as a [`cantwin_can::Node`], with inputs settable and outputs
+//!   observable, module faults, failure state and the manual's EMCY codes;
+//! * [`diag`]: the EMCY codes, 0x1002/0x1003 formats and the life time factor advice;
+//! * [`eds`]: the island's EDS.
+//!
+//! ```
+//! use cantwin_can::{Frame, Instant, Node, Outbox};
+//! use cantwin_tm3::coupler::{CouplerConfig, Tm3Coupler};
+//! use cantwin_tm3::island::Island;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let island = Island::from_references(&["TM3DI16", "TM3DQ16T", "TM3AI4"])?;
+//! let mut coupler = Tm3Coupler::new(CouplerConfig::new(3, island))?;
+//! let mut out = Outbox::new();
+//! coupler.on_power_up(Instant::ZERO, &mut out);
+//! assert_eq!(out.frames(), [Frame::std(0x703, &[0x00])?]); // boot-up
+//! out.clear();
+//! // NMT start: the event-driven TPDOs are sent once on entering OPERATIONAL.
+//! let t = Instant::from_nanos(1_000_000);
+//! coupler.on_frame(&Frame::std(0x000, &[0x01, 0x03])?, t, &mut out);
+//! assert_eq!(out.frames()[0], Frame::std(0x183, &[0x00])?);
+//! out.clear();
+//! // Input 0 of module 1 goes high: TPDO1 carries 0x6000 sub 1.
+//! let t = Instant::from_nanos(2_000_000);
+//! coupler.set_digital_input(1, 0, true)?;
+//! coupler.on_tick(t, &mut out);
+//! assert_eq!(out.frames(), [Frame::std(0x183, &[0x01])?]);
+//! // RPDO1 sets output byte 1: outputs 0 and 2 of module 2 switch on.
+//! coupler.on_frame(&Frame::std(0x203, &[0x05])?, t, &mut out);
+//! assert!(coupler.digital_output(2, 2)?);
+//! # Ok(())
+//! # }
+//! ```
+#![forbid(unsafe_code)]
+
+pub mod catalogue;
+pub mod coupler;
+pub mod diag;
+pub mod eds;
+pub mod island;
+pub mod od;
+
+pub use coupler::{CouplerConfig, Tm3Coupler};
+pub use island::Island;
