@@ -177,7 +177,8 @@ keyed_section! {
         simple_boot_up_master: bool = "SimpleBootUpMaster",
         /// `SimpleBootUpSlave`.
         simple_boot_up_slave: bool = "SimpleBootUpSlave",
-        /// `Granularity`: the mapping granularity of PDOs (0: no mapping, 8: byte-wise).
+        /// `Granularity`: the PDO mapping granularity in bits (0: the mapping cannot be
+        /// changed, 8: byte-wise).
         granularity: u8 = "Granularity",
         /// `DynamicChannelsSupported`.
         dynamic_channels_supported: u8 = "DynamicChannelsSupported",

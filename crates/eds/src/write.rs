@@ -93,6 +93,8 @@ fn entry_keys(e: &Entry, sub_number: Option<u8>, compact: Option<u8>) -> Vec<(St
         "SubNumber",
         "CompactSubObj",
     ];
+    // An extra key that a typed field also writes is skipped so that no key appears twice;
+    // `SubNumber`/`CompactSubObj` kept among a sub-object's extra keys are written as found.
     for (k, x) in &e.extra {
         if !TYPED.iter().any(|t| t.eq_ignore_ascii_case(k))
             || (sub_number.is_none() && compact.is_none() && is_sub_only(k))
