@@ -16,7 +16,15 @@
 //!
 //! Parsing decisions (CiA 306 leaves them open): section and key names are matched without
 //! regard to case; a `;` starts a comment only at the start of a line; a duplicate section,
-//! or a duplicate key in a section, is an error naming both lines.
+//! or a duplicate key in a section, is an error naming both lines. Files that are not UTF-8
+//! are read as ISO 8859-1 ([`parse_bytes`]).
+//!
+//! What is written is what python-canopen's importer reads: keys in CiA 306 spelling (its
+//! reader is case-sensitive), `[DeviceComissioning]` with CiA 306's spelling, integers as
+//! `0x` hex or decimal (never a leading-zero octal, which Python's `int(x, 0)` refuses),
+//! `$NODEID+0x..`, OCTET_STRING and DOMAIN values as bare hex digits, and a `[xxxxName]`
+//! section naming every sub-object of a compact array. [`Eds::check`] warns about what that
+//! reader would trip on (a `;` in a value, an incomplete `[DummyUsage]`).
 //!
 //! ```
 //! use cantwin_eds::{EdsValue, parse, write};
