@@ -7,7 +7,7 @@
 //!   `[DeviceComissioning]`), with values typed by their `DataType` and `$NODEID` kept
 //!   symbolic ([`EdsValue::NodeId`]); unknown sections and keys are kept in order. Errors
 //!   name the line, section and key ([`ParseError`]); bad input never panics.
-//! * [`write`] writes the canonical layout; `parse(&write(&m))? == m` for every parsed `m`.
+//! * [`write()`] writes the canonical layout; `parse(&write(&m))? == m` for every parsed `m`.
 //! * [`Eds::check`] reports errors and warnings ([`Report`]).
 //! * [`render_markdown`] documents a device.
 //! * [`from_od`] makes the EDS of a device from its object dictionary; [`to_od`] builds an
