@@ -172,6 +172,14 @@ impl Eds {
                 );
             }
             let composite = code == crate::ARRAY || code == crate::RECORD;
+            if o.compact_sub_obj.is_some() && code != crate::ARRAY {
+                r.push(
+                    Severity::Warning,
+                    &sec,
+                    Some("CompactSubObj"),
+                    "only an ARRAY can be described compactly".to_owned(),
+                );
+            }
             if composite && o.subs.is_empty() {
                 r.push(
                     Severity::Error,
@@ -219,6 +227,28 @@ impl Eds {
                     Some("DataType"),
                     "sub-index 0 of an ARRAY or RECORD is UNSIGNED8 (CiA 301)".to_owned(),
                 );
+            }
+        }
+        for (index, links) in &self.object_links {
+            let sec = format!("{index:04X}ObjectLinks");
+            if !self.objects.contains_key(index) {
+                r.push(
+                    Severity::Warning,
+                    &sec,
+                    None,
+                    format!("links from {index:#06X}, which has no section"),
+                );
+            }
+            for (i, l) in links.iter().enumerate() {
+                if !self.objects.contains_key(l) {
+                    let key = (i + 1).to_string();
+                    r.push(
+                        Severity::Warning,
+                        &sec,
+                        Some(&key),
+                        format!("links to {l:#06X}, which has no section"),
+                    );
+                }
             }
         }
         if let Some(d) = &self.dummy_usage {

@@ -292,6 +292,9 @@ fn cia306_check_reports_errors_and_warnings() {
     eds.objects.get_mut(&0x6042).unwrap().entry.data_type = Some(0x0300);
     eds.optional_objects.push(0x2001);
     eds.dummy_usage.as_mut().unwrap().remove(&3);
+    eds.object_links.insert(0x6040, vec![0x6041, 0x7000]);
+    let acc = eds.objects.get_mut(&0x6048).unwrap();
+    acc.compact_sub_obj = Some(2);
     let r = eds.check();
     let errors: Vec<String> = r.errors().map(ToString::to_string).collect();
     assert!(
@@ -332,6 +335,18 @@ fn cia306_check_reports_errors_and_warnings() {
         "{r}"
     );
     let warnings: Vec<String> = r.warnings().map(ToString::to_string).collect();
+    assert!(
+        warnings.contains(
+            &"warning: [6040ObjectLinks] 2: links to 0x7000, which has no section".to_string()
+        ),
+        "{r}"
+    );
+    assert!(
+        warnings.contains(
+            &"warning: [6048] CompactSubObj: only an ARRAY can be described compactly".to_string()
+        ),
+        "{r}"
+    );
     assert!(
         warnings.contains(
             &"warning: [DummyUsage] Dummy0003: missing; some readers require all of Dummy0001..Dummy0007"
