@@ -109,6 +109,6 @@ pub mod model;
 pub mod node;
 pub mod params;
 
-pub use model::{Alarms, Commands, Drive, DriveData, MotorData};
-pub use node::{MESSAGE_0, MESSAGE_1, MESSAGE_2, OpenDrive, bit_rate_of_c48};
+pub use model::{Alarms, Commands, Drive, DriveData, Flash, FlashError, MotorData};
+pub use node::{FlashStorage, MESSAGE_0, MESSAGE_1, MESSAGE_2, OpenDrive, bit_rate_of_c48};
 pub use params::{ParId, ParamError, Params};

@@ -163,11 +163,74 @@ pub const FN_REVERSE: i32 = 12;
 pub const FN_FIELDBUS: i32 = 14;
 
 /// What survives a power cycle: the flash.
-#[derive(Debug, Clone, PartialEq)]
-struct Flash {
-    params: Params,
-    alarms: Alarms,
-    dip_s1: bool,
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Flash {
+    /// The saved parameters and connections.
+    pub params: Params,
+    /// The alarms active when power was lost (cleared at power-up with C35 = 1).
+    pub alarms: Alarms,
+    /// The position of DIP S1 at the last power-up (to detect its 0 → 1 change).
+    pub dip_s1: bool,
+}
+
+/// A flash image that does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("flash image line {line}: {message}")]
+pub struct FlashError {
+    /// 1-based line.
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl Flash {
+    /// The image as text, one `KEY = value` per line in internal units: what a file keeps
+    /// between runs.
+    pub fn to_text(&self) -> String {
+        let mut t = String::from("# OPEN DRIVE application 003 flash, internal units\n");
+        for (def, value) in self.params.iter() {
+            t.push_str(&format!("{} = {value}\n", def.id));
+        }
+        t.push_str(&format!("alarms = {}\n", self.alarms.0));
+        t.push_str(&format!("dip_s1 = {}\n", u8::from(self.dip_s1)));
+        t
+    }
+
+    /// Parse [`Flash::to_text`]'s format; keys absent keep their defaults.
+    pub fn from_text(text: &str) -> Result<Flash, FlashError> {
+        let mut flash = Flash::default();
+        for (i, raw) in text.lines().enumerate() {
+            let err = |message: String| FlashError {
+                line: i + 1,
+                message,
+            };
+            let line = raw.trim();
+            if line.is_empty() || line.starts_with('#') {
+                continue;
+            }
+            let (key, value) = line
+                .split_once('=')
+                .ok_or_else(|| err(format!("expected KEY = value, got {line:?}")))?;
+            let (key, value) = (key.trim(), value.trim());
+            let number: i64 = value
+                .parse()
+                .map_err(|_| err(format!("{value:?} is not an integer")))?;
+            match key {
+                "alarms" => {
+                    flash.alarms = Alarms(
+                        u16::try_from(number).map_err(|_| err(format!("alarms = {number}")))?,
+                    )
+                }
+                "dip_s1" => flash.dip_s1 = number != 0,
+                _ => {
+                    let id: ParId = key.parse().map_err(|e: ParamError| err(e.to_string()))?;
+                    let v = i32::try_from(number).map_err(|_| err(format!("{key} = {number}")))?;
+                    flash.params.set(id, v).map_err(|e| err(e.to_string()))?;
+                }
+            }
+        }
+        Ok(flash)
+    }
 }
 
 /// The drive model.
@@ -217,11 +280,7 @@ impl Drive {
         Drive {
             motor,
             hw,
-            flash: Flash {
-                params: Params::default(),
-                alarms: Alarms::NONE,
-                dip_s1: false,
-            },
+            flash: Flash::default(),
             params: Params::default(),
             commands: Commands::default(),
             can_reference: 0,
@@ -271,6 +330,17 @@ impl Drive {
     pub fn set_stored_param(&mut self, id: ParId, value: i32) -> Result<(), ParamError> {
         self.params.set(id, value)?;
         self.flash.params.set(id, value)
+    }
+
+    /// The flash.
+    pub fn flash(&self) -> &Flash {
+        &self.flash
+    }
+
+    /// Replace the flash (an image kept between runs); the working values follow at the
+    /// next power-up.
+    pub fn set_flash(&mut self, flash: Flash) {
+        self.flash = flash;
     }
 
     /// Save the working values to flash (C63 = 1, message 2 mux 0x3A).
@@ -891,5 +961,28 @@ mod tests {
         assert_eq!(d.param(P94), 250);
         assert_eq!(d.mux_write(0x18, 1), Ok(1));
         assert_eq!((d.param(C40), d.param(P94)), (1, 10));
+    }
+}
+
+#[cfg(test)]
+mod flash_tests {
+    use super::*;
+    use crate::params::{P21, P180};
+
+    #[test]
+    fn flash_image_round_trip_and_errors() {
+        let mut f = Flash::default();
+        f.params.set(P21, 123).unwrap();
+        f.alarms = Alarms(1 << A3);
+        f.dip_s1 = true;
+        let text = f.to_text();
+        assert!(text.contains("P21 = 123\n") && text.contains("alarms = 8\n"));
+        assert_eq!(Flash::from_text(&text), Ok(f));
+        assert_eq!(Flash::from_text("P180 = 5\n").unwrap().params.get(P180), 5);
+        let e = Flash::from_text("# x\nP180 = 1761\n").unwrap_err();
+        assert_eq!(e.line, 2);
+        assert!(Flash::from_text("P99 = 1").is_err());
+        assert!(Flash::from_text("P21").is_err());
+        assert!(Flash::from_text("P21 = x").is_err());
     }
 }

@@ -6,7 +6,7 @@ use cantwin_cal::{
 };
 use cantwin_can::{BitRate, Duration, Frame, Id, Instant, Node, Outbox};
 
-use crate::model::{Alarms, Drive, DriveData, ERR_UNDEFINED, MotorData};
+use crate::model::{Alarms, Drive, DriveData, ERR_UNDEFINED, Flash, MotorData};
 use crate::params::{C48, P180, P181, P183, P184, P186, P187, ParId, ParamError};
 
 /// Message 0: commands and frequency reference (Read/Write basic variable).
@@ -56,14 +56,34 @@ pub fn cms_objects(p: impl Fn(ParId) -> i32) -> Result<[ServerObject; 3], cantwi
     ])
 }
 
+/// Where the drive's flash goes between runs (a file, for `--state-dir`).
+pub trait FlashStorage: Send {
+    /// Keep this image (see [`Flash::to_text`]); called whenever the flash changed.
+    fn store(&mut self, image: &str) -> Result<(), String>;
+}
+
 /// The twin of an OPEN DRIVE with application 003.
-#[derive(Debug, Clone)]
 pub struct OpenDrive {
     drive: Drive,
     server: Option<CmsServer>,
     period: Duration,
     next_step: Option<Instant>,
     reported: Alarms,
+    storage: Option<Box<dyn FlashStorage>>,
+    stored: Option<Flash>,
+    storage_error: Option<String>,
+}
+
+impl core::fmt::Debug for OpenDrive {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("OpenDrive")
+            .field("drive", &self.drive)
+            .field("server", &self.server)
+            .field("period", &self.period)
+            .field("next_step", &self.next_step)
+            .field("storage", &self.storage.is_some())
+            .finish()
+    }
 }
 
 impl OpenDrive {
@@ -76,6 +96,33 @@ impl OpenDrive {
             period: DEFAULT_PHYSICS_PERIOD,
             next_step: None,
             reported: Alarms::NONE,
+            storage: None,
+            stored: None,
+            storage_error: None,
+        }
+    }
+
+    /// Keep the flash in `storage` from now on (it receives the image whenever it changes,
+    /// starting with the current one at the next callback).
+    pub fn with_storage(mut self, storage: Box<dyn FlashStorage>) -> Self {
+        self.storage = Some(storage);
+        self.stored = None;
+        self
+    }
+
+    /// The last error the storage reported, if any.
+    pub fn storage_error(&self) -> Option<&str> {
+        self.storage_error.as_deref()
+    }
+
+    fn persist(&mut self) {
+        let Some(storage) = &mut self.storage else {
+            return;
+        };
+        if self.stored.as_ref() != Some(self.drive.flash()) {
+            let flash = self.drive.flash().clone();
+            self.storage_error = storage.store(&flash.to_text()).err();
+            self.stored = Some(flash);
         }
     }
 
@@ -177,6 +224,7 @@ impl Node for OpenDrive {
             .and_then(|objs| CmsServer::new(objs.to_vec()).ok());
         self.reported = self.drive.alarms().handled();
         self.next_step = Some(now + self.period);
+        self.persist();
     }
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
@@ -186,6 +234,7 @@ impl Node for OpenDrive {
         if let Some(server) = &mut self.server {
             server.handle(frame, &mut self.drive, now, out);
         }
+        self.persist();
     }
 
     fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
@@ -194,6 +243,7 @@ impl Node for OpenDrive {
             self.notify_changes(out);
             self.next_step = Some(t + self.period);
         }
+        self.persist();
     }
 
     fn next_deadline(&self) -> Option<Instant> {
