@@ -242,10 +242,11 @@ impl Net {
         }
     }
 
-    /// All events until the bus is quiet or `limit` passes.
+    /// All events until the bus is quiet or `limit` from now passes.
     pub fn events(&mut self, limit: Duration) -> Vec<(Instant, MasterEvent)> {
+        let end = self.now() + limit;
         let mut v = Vec::new();
-        while let Some(e) = self.next_event(limit) {
+        while let Some(e) = self.next_event(end.saturating_duration_since(self.now())) {
             v.push(e);
         }
         v
