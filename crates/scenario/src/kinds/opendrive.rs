@@ -21,13 +21,19 @@
 //! | `physics_period_ms` | 1 | the physics step |
 //!
 //! The bus must run at the bit rate of C48 (default 1 = 500 kbit/s).
+//!
+//! With `--state-dir`, the drive's flash (saved parameters, latched alarms, the DIP S1
+//! position of the last power-up) is kept in `STATE_DIR/<device name>/flash.txt`: read when
+//! the scenario is built (the `params` keys are applied on top), written whenever it
+//! changes.
 
 use std::collections::BTreeMap;
+use std::path::PathBuf;
 
 use cantwin_bus::{AnyNode, PortConfig};
 use cantwin_can::Duration;
 use cantwin_opendrive::params::{self, ParId};
-use cantwin_opendrive::{DriveData, MotorData, OpenDrive, bit_rate_of_c48};
+use cantwin_opendrive::{DriveData, Flash, FlashStorage, MotorData, OpenDrive, bit_rate_of_c48};
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
@@ -36,6 +42,15 @@ use crate::registry::{DeviceKind, Settings};
 
 /// The OPEN DRIVE kind.
 pub struct OpenDriveKind;
+
+/// The drive's flash in a file.
+struct FileFlash(PathBuf);
+
+impl FlashStorage for FileFlash {
+    fn store(&mut self, image: &str) -> Result<(), String> {
+        std::fs::write(&self.0, image).map_err(|e| format!("{}: {e}", self.0.display()))
+    }
+}
 
 fn positive(s: &Settings<'_>, key: &str, default: f64) -> Result<f64, ScenarioError> {
     let v: f64 = s.get_or(key, default)?;
@@ -68,7 +83,7 @@ impl DeviceKind for OpenDriveKind {
         &self,
         s: &Settings<'_>,
         bus: &BusSpec,
-        _env: &BuildEnv,
+        env: &BuildEnv,
     ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
         let defaults = MotorData::default();
         let motor = MotorData {
@@ -103,6 +118,27 @@ impl DeviceKind for OpenDriveKind {
         let period_ms = positive(s, "physics_period_ms", 1.0)?;
         let mut node = OpenDrive::new(motor, hardware)
             .with_physics_period(Duration::from_secs_f64(period_ms / 1e3));
+
+        if let Some(dir) = &env.state_dir {
+            let dir = dir.join(&s.device().name);
+            let file = dir.join("flash.txt");
+            let cannot = |e: String| {
+                s.error(
+                    "name",
+                    format!("cannot keep the drive's flash in {}: {e}", file.display()),
+                )
+            };
+            std::fs::create_dir_all(&dir).map_err(|e| cannot(e.to_string()))?;
+            match std::fs::read_to_string(&file) {
+                Ok(text) => {
+                    let flash = Flash::from_text(&text).map_err(|e| cannot(e.to_string()))?;
+                    node.drive_mut().set_flash(flash);
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(cannot(e.to_string())),
+            }
+            node = node.with_storage(Box::new(FileFlash(file)));
+        }
 
         let table: BTreeMap<String, f64> = s.get_or("params", BTreeMap::new())?;
         for (name, value) in &table {
@@ -226,6 +262,41 @@ mod tests {
         assert_eq!(node.drive().param(P180), 256);
         assert!(node.drive().input(4));
         assert_eq!(node.drive().reference_hz(), 20.0);
+    }
+
+    #[test]
+    fn state_dir_keeps_the_saved_parameters_between_runs() {
+        use crate::BuildEnv;
+        use cantwin_opendrive::params::P63;
+        let dir = std::env::temp_dir().join(format!("cantwin-opendrive-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let env = BuildEnv {
+            state_dir: Some(dir.clone()),
+        };
+        let scenario = Scenario::parse(DEVICE, "t.toml").unwrap();
+        let mut built = scenario.build(&Registry::builtin(), &env).unwrap();
+        let port = built.device("drive").unwrap().port;
+        let bus = built.bus("can0").unwrap();
+        // Max frequency 60.00 Hz, then save (message 2 mux 0x00, 0x3A), handed to the
+        // drive as if received.
+        for frame in [[0x00u8, 0x70, 0x17], [0x3A, 0x01, 0x00]] {
+            built
+                .sim
+                .bus_mut(bus)
+                .unwrap()
+                .with_node::<OpenDrive, _>(port, |d, now, out| {
+                    use cantwin_can::Node;
+                    d.on_frame(&Frame::std(1100, &frame).unwrap(), now, out);
+                })
+                .unwrap();
+        }
+        built.sim.run_until(Instant::from_nanos(10_000_000));
+        let text = std::fs::read_to_string(dir.join("drive").join("flash.txt")).unwrap();
+        assert!(text.contains("P63 = 1200"), "{text}");
+        let built = scenario.build(&Registry::builtin(), &env).unwrap();
+        let node = built.sim.node::<OpenDrive>(port).unwrap();
+        assert_eq!(node.drive().saved_param(P63), 1200);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
