@@ -1,0 +1,781 @@
+//! The drive with its EXP-CAN/DN-ADV card, as one [`Node`].
+//!
+//! * **Drive reset** ([`Node::on_power_up`] or [`Adv200::reset_drive`]) latches the fieldbus
+//!   parameters 4000–4012 (§1.2: they act only after a reset), checks them (Opt Bus Fault
+//!   FF01 wrong type, FF02 baud rate None, FF03 address outside 1–127), places the Process
+//!   Data Channel (CANopen) and builds the card's CiA 301 device. With a configuration fault
+//!   FF01–FF03 the card stays off the bus, as the real one does from the factory defaults.
+//!   DeviceNet (PAR 4000 = DeviceNet) is not modelled: the card stays off the bus.
+//! * **SDO** (§1.1 items 10–11, §1.4): requests to 0x600 + node are screened before the CiA
+//!   301 stack sees them. Sub-index 0xFF is refused (0x06090011). Unless
+//!   [`Adv200Config::expedited_only`] is off, a segmented or block request is aborted with
+//!   0x05040001 (command specifier not valid), and an upload of an object longer than 4 bytes
+//!   with 0x06070012. Parameters are served at 0x2000 + PAR sub 1 in both directions: a
+//!   download of 1–4 bytes is accepted for any parameter, an upload returns the parameter's
+//!   size.
+//! * **Runtime faults** raise Opt Bus Fault (EMCY 0xFF11, sub-code in the manufacturer bytes)
+//!   while the drive's enable command is on, or always with `Fieldbus alarm mode` = 1: 0
+//!   bus loss (no SYNC within 1.5 × 0x1006, or enable while not Operational), 8130 guarding
+//!   or heartbeat loss, 8110 receive overrun, FFC5 NMT message of the wrong length, FFC6
+//!   invalid NMT command, FFC7 bus-off.
+//! * **LEDs** (§"Leds", §1.6.2.1): PWR and +5VC on while powered and the card active, OP on in
+//!   Operational, AL on in any other NMT state or with Opt Bus Fault active.
+
+use cantwin_can::{ControllerEvent, Duration, Frame, Instant, Node, Outbox};
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::device::{Device, DeviceConfig, Event};
+use cantwin_canopen::nmt::State;
+use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
+
+use crate::alarms::Alarm;
+use crate::drive::{AlarmEvent, Drive, ProfileCommands};
+use crate::ds402::{Ds402, State as PowerState};
+use crate::od::{Personality, build, value_of};
+use crate::params::{ParamAccess, ParamDb, ParamError, catalog, def, par};
+use crate::pdc::{self, Format, Pdc};
+
+/// How the twin is set up besides its parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Adv200Config {
+    /// Only expedited SDO transfers (§1.1 item 11). `false` lets the CiA 301 stack's segmented
+    /// and block transfers through.
+    pub expedited_only: bool,
+    /// The bit rate of the bus the card is on; a card configured for another rate stays
+    /// silent (it cannot decode the bus). `None`: not checked.
+    pub bus_bit_rate: Option<u32>,
+    /// 0x1018 sub 4.
+    pub serial: u32,
+}
+
+impl Default for Adv200Config {
+    fn default() -> Self {
+        Adv200Config {
+            expedited_only: true,
+            bus_bit_rate: None,
+            serial: 1,
+        }
+    }
+}
+
+/// The card's LEDs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Leds {
+    /// AL (red).
+    pub al: bool,
+    /// OP (green).
+    pub op: bool,
+    /// PWR (green).
+    pub pwr: bool,
+    /// +5VC (green).
+    pub vc5: bool,
+}
+
+/// Validates the DS402 objects the dictionary cannot check alone.
+#[derive(Debug, Clone, Copy, Default)]
+struct Hooks;
+
+impl OdHooks for Hooks {}
+
+struct Card {
+    dev: Device<Hooks>,
+    personality: Personality,
+    pdc: Pdc,
+    ds402: Ds402,
+    last_sync: Option<Instant>,
+    /// Values last written into the dictionary, per catalog entry.
+    pushed: Vec<i64>,
+}
+
+/// The fieldbus parameters latched at the last drive reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+struct Latched {
+    ty: i64,
+    baud: i64,
+    address: i64,
+    ms_enable: bool,
+    alarm_mode: bool,
+}
+
+/// The ADV200 drive with its EXP-CAN/DN-ADV card. See the [module documentation](self).
+pub struct Adv200 {
+    config: Adv200Config,
+    params: ParamDb,
+    drive: Drive,
+    card: Option<Card>,
+    latched: Latched,
+    powered: bool,
+    sticky: Option<Alarm>,
+}
+
+impl core::fmt::Debug for Adv200 {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Adv200")
+            .field("powered", &self.powered)
+            .field("alarms", &self.drive.alarms())
+            .finish_non_exhaustive()
+    }
+}
+
+const BAUDS: [u32; 5] = [0, 125_000, 250_000, 500_000, 1_000_000];
+
+fn raw_i64(od: &ObjectDictionary, index: u16, sub: u8) -> Option<i64> {
+    Some(match od.get(index, sub).ok()? {
+        Value::Integer8(v) => i64::from(v),
+        Value::Integer16(v) => i64::from(v),
+        Value::Integer32(v) => i64::from(v),
+        Value::Unsigned8(v) => i64::from(v),
+        Value::Unsigned16(v) => i64::from(v),
+        Value::Unsigned32(v) => i64::from(v),
+        _ => return None,
+    })
+}
+
+fn sdo_frame(node: u8, data: [u8; 8]) -> Option<Frame> {
+    Frame::std(0x580 + u16::from(node), &data).ok()
+}
+
+fn abort_frame(node: u8, index: u16, sub: u8, code: AbortCode) -> Option<Frame> {
+    let i = index.to_le_bytes();
+    let c = code.to_u32().to_le_bytes();
+    sdo_frame(node, [0x80, i[0], i[1], sub, c[0], c[1], c[2], c[3]])
+}
+
+impl Adv200 {
+    /// A drive with factory parameters, not powered.
+    pub fn new(config: Adv200Config) -> Self {
+        Adv200 {
+            config,
+            params: ParamDb::new(),
+            drive: Drive::new(),
+            card: None,
+            latched: Latched::default(),
+            powered: false,
+            sticky: None,
+        }
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &ParamDb {
+        &self.params
+    }
+
+    /// The value of parameter `par`.
+    pub fn param(&self, par: u16) -> Result<i64, ParamError> {
+        self.params.get(par)
+    }
+
+    /// Writes parameter `par` from the keypad (checked like an SDO write).
+    pub fn set_param(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
+        self.params.set(par, value)
+    }
+
+    /// Writes parameter `par` by enumeration name or number from the keypad.
+    pub fn set_param_str(&mut self, par: u16, value: &str) -> Result<(), ParamError> {
+        let d = def(par).ok_or(ParamError::Missing)?;
+        let v = match d.enum_value(value) {
+            Some(v) => v,
+            None => value.trim().parse().map_err(|_| ParamError::Invalid)?,
+        };
+        self.set_param(par, v)
+    }
+
+    /// The drive model.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// Sets digital input k (1..=8), effective at the next event.
+    pub fn set_digital_input(&mut self, k: u8, on: bool) {
+        self.drive.set_digital_input(k, on);
+    }
+
+    /// Sets analog input k (1..=2) in volts.
+    pub fn set_analog_input(&mut self, k: u8, volts: f64) {
+        self.drive.set_analog_input(k, volts);
+    }
+
+    /// Raises a drive alarm (an outside cause: overvoltage, external fault, …).
+    pub fn raise_alarm(&mut self, alarm: Alarm) {
+        self.drive.raise(alarm);
+    }
+
+    /// Digital output k (1..=4).
+    pub fn digital_output(&self, k: u8) -> bool {
+        Drive::digital_output(&self.params, k)
+    }
+
+    /// The card's NMT state, if it is on the bus.
+    pub fn nmt_state(&self) -> Option<State> {
+        self.card.as_ref().map(|c| c.dev.state())
+    }
+
+    /// The CiA 402 state (DS402 personality).
+    pub fn power_state(&self) -> Option<PowerState> {
+        self.card
+            .as_ref()
+            .filter(|c| c.personality == Personality::Ds402)
+            .map(|c| c.ds402.state())
+    }
+
+    /// The CANopen device of the card, if it is on the bus.
+    pub fn device(&self) -> Option<&Device<impl OdHooks>> {
+        self.card.as_ref().map(|c| &c.dev)
+    }
+
+    /// The PDC layout placed at the last drive reset (CANopen personality).
+    pub fn pdc(&self) -> Option<&Pdc> {
+        self.card
+            .as_ref()
+            .filter(|c| c.personality == Personality::CanOpen)
+            .map(|c| &c.pdc)
+    }
+
+    /// The Opt Bus Fault sub-codes active.
+    pub fn opt_bus_faults(&self) -> Vec<u16> {
+        self.drive
+            .alarms()
+            .iter()
+            .filter_map(|a| match a {
+                Alarm::OptBusFault(s) => Some(*s),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The LEDs.
+    pub fn leds(&self) -> Leds {
+        if !self.powered {
+            return Leds::default();
+        }
+        let fault = !self.opt_bus_faults().is_empty();
+        match &self.card {
+            Some(c) => {
+                let op = c.dev.state() == State::Operational;
+                Leds {
+                    al: fault || !op,
+                    op,
+                    pwr: true,
+                    vc5: true,
+                }
+            }
+            None => Leds {
+                al: fault,
+                op: false,
+                pwr: self.latched.ty != 0,
+                vc5: self.latched.ty != 0,
+            },
+        }
+    }
+
+    /// A drive reset (power cycle of the drive with its parameters kept): latches the
+    /// fieldbus parameters and restarts the card.
+    pub fn reset_drive(&mut self, now: Instant, out: &mut Outbox) {
+        self.powered = true;
+        self.card = None;
+        self.drive.restart();
+        self.sticky = None;
+        let p = &self.params;
+        self.latched = Latched {
+            ty: p.value(par::FIELDBUS_TYPE),
+            baud: p.value(par::FIELDBUS_BAUDRATE),
+            address: p.value(par::FIELDBUS_ADDRESS),
+            ms_enable: p.value(par::FIELDBUS_MS_ENABLE) != 0,
+            alarm_mode: p.value(par::FIELDBUS_ALARM_MODE) != 0,
+        };
+        let _ = self.params.force(par::FIELDBUS_STATE, 0);
+        let personality = match self.latched.ty {
+            1 => Personality::CanOpen,
+            3 => Personality::Ds402,
+            0 | 2 => {
+                self.drive.advance(&mut self.params, now);
+                return;
+            }
+            _ => return self.config_fault(0xFF01, now),
+        };
+        if self.latched.baud == 0 {
+            return self.config_fault(0xFF02, now);
+        }
+        if !(1..=127).contains(&self.latched.address) {
+            return self.config_fault(0xFF03, now);
+        }
+        let bps = BAUDS.get(self.latched.baud as usize).copied().unwrap_or(0);
+        if self.config.bus_bit_rate.is_some_and(|b| b != bps) {
+            self.drive.advance(&mut self.params, now);
+            return;
+        }
+        let (pdc, fault) = if personality == Personality::CanOpen {
+            match pdc::configure(&mut self.params) {
+                Ok(p) => (p, None),
+                Err(e) => (Pdc::default(), Some(e.code())),
+            }
+        } else {
+            (Pdc::default(), None)
+        };
+        let node = self.latched.address as u8;
+        let built = build(personality, &pdc, self.config.serial)
+            .ok()
+            .and_then(|d| {
+                let mut c = DeviceConfig::new(node);
+                c.sync_producer = false;
+                c.time_producer = false;
+                Device::with_hooks(std::sync::Arc::new(d), c, Hooks).ok()
+            });
+        let Some(dev) = built else {
+            return self.config_fault(0xFF04, now);
+        };
+        let mut card = Card {
+            dev,
+            personality,
+            pdc,
+            ds402: Ds402::new(),
+            last_sync: None,
+            pushed: Vec::new(),
+        };
+        card.dev.on_power_up(now, out);
+        card.pushed = catalog()
+            .iter()
+            .map(|d| raw_i64(card.dev.od(), d.sdo_index(), 1).unwrap_or(0))
+            .collect();
+        self.card = Some(card);
+        if let Some(code) = fault {
+            self.sticky = Some(Alarm::OptBusFault(code));
+            self.drive.raise(Alarm::OptBusFault(code));
+        }
+        self.settle(now, out);
+    }
+
+    fn config_fault(&mut self, code: u16, now: Instant) {
+        self.sticky = Some(Alarm::OptBusFault(code));
+        self.drive.raise(Alarm::OptBusFault(code));
+        self.drive.advance(&mut self.params, now);
+    }
+
+    /// A runtime fieldbus fault (only while enabled unless alarm mode is on).
+    fn bus_fault(&mut self, sub: u16) {
+        let enabled = self.drive_enable_cmd();
+        if enabled || self.latched.alarm_mode {
+            self.drive.raise(Alarm::OptBusFault(sub));
+        }
+    }
+
+    fn drive_enable_cmd(&self) -> bool {
+        match self.card.as_ref().map(|c| c.personality) {
+            Some(Personality::Ds402) => self.card.as_ref().is_some_and(|c| c.ds402.power()),
+            _ => {
+                if self.params.value(par::COMMANDS_REMOTE_SEL) == 1 {
+                    let s = self.params.value(par::DIG_ENABLE_SRC) as u16;
+                    s != 0 && self.params.value(s) != 0
+                } else {
+                    self.params.value(par::DIGITAL_INPUT_MON) & 1 != 0
+                }
+            }
+        }
+    }
+
+    /// Runs the drive to `now`, exchanges values with the dictionary and reports alarms.
+    fn settle(&mut self, now: Instant, _out: &mut Outbox) {
+        self.pull();
+        self.profile_in(now);
+        self.drive.advance(&mut self.params, now);
+        let mut not_operational = false;
+        if let Some(c) = &mut self.card {
+            if c.personality == Personality::Ds402 {
+                let fault = !self.drive.alarms().is_empty();
+                let stopped = self.drive.speed() == 0.0;
+                c.ds402.refresh(fault, stopped);
+            }
+            let state = match c.dev.state() {
+                State::Operational => 2,
+                State::PreOperational => 1,
+                _ => 0,
+            };
+            let _ = self.params.force(par::FIELDBUS_STATE, state);
+            not_operational = c.dev.state() != State::Operational;
+        }
+        if not_operational && self.drive_enable_cmd() {
+            self.bus_fault(0);
+        }
+        if let Some(sticky) = self.sticky
+            && !self.drive.alarms().contains(&sticky)
+        {
+            self.drive.raise(sticky);
+        }
+        self.profile_in(now);
+        self.drive.advance(&mut self.params, now);
+        self.report_alarms();
+        self.push();
+    }
+
+    fn report_alarms(&mut self) {
+        while let Some(e) = self.drive.poll_event() {
+            let Some(c) = &mut self.card else { continue };
+            match e {
+                AlarmEvent::Raised(a) => {
+                    c.dev.emcy().raise(a.emcy_code(), a.manufacturer_bytes());
+                }
+                AlarmEvent::Cleared(a) => {
+                    let code = a.emcy_code();
+                    if !self.drive.alarms().iter().any(|b| b.emcy_code() == code) {
+                        c.dev.emcy().clear(code);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Values the bus wrote into the dictionary (RPDOs) go to the parameters.
+    fn pull(&mut self) {
+        let Some(c) = &mut self.card else { return };
+        for (i, d) in catalog().iter().enumerate() {
+            let Some(v) = raw_i64(c.dev.od(), d.sdo_index(), 1) else {
+                continue;
+            };
+            if v == c.pushed[i] {
+                continue;
+            }
+            let m2s = (1..=16u16).find(|n| par::m2s_mon(*n) == d.par);
+            let v = match m2s {
+                Some(n) => {
+                    let f = Format::from_value(self.params.value(par::m2s_sys(n)));
+                    if f.bits() == 16 {
+                        i64::from(v as u16 as i16)
+                    } else {
+                        v
+                    }
+                }
+                None => v,
+            };
+            c.pushed[i] = v;
+            if m2s.is_some() {
+                if self.latched.ms_enable {
+                    let _ = self.params.force(d.par, v);
+                }
+            } else if d.access == ParamAccess::Rw {
+                let _ = self.params.set(d.par, v);
+            }
+        }
+    }
+
+    /// Parameter values go into the dictionary (TPDOs read them there).
+    fn push(&mut self) {
+        let Some(c) = &mut self.card else { return };
+        if c.personality == Personality::CanOpen {
+            for item in c.pdc.s2m.items() {
+                let v = pdc::s2m_value(&self.params, item.channel);
+                let _ = self.params.force(par::s2m_mon(item.channel), v);
+            }
+        }
+        for (i, d) in catalog().iter().enumerate() {
+            let v = self.params.value(d.par);
+            if v != c.pushed[i] {
+                c.pushed[i] = v;
+                let _ = c
+                    .dev
+                    .set_value(d.sdo_index(), 1, &value_of(d.ty.data_type(), v));
+            }
+        }
+        if c.personality == Personality::Ds402 {
+            let od = c.dev.od();
+            let target = raw_i64(od, 0x6042, 0).unwrap_or(0);
+            let speed = self.params.value(par::MOTOR_SPEED);
+            let reached = c.ds402.state() == PowerState::OperationEnabled && speed == target;
+            let sw = i64::from(c.ds402.statusword(reached));
+            for (index, v) in [
+                (0x6041, sw),
+                (0x6043, self.params.value(par::RAMP_OUTPUT)),
+                (0x6044, speed),
+            ] {
+                if raw_i64(c.dev.od(), index, 0) != Some(v) {
+                    let ty = if index == 0x6041 {
+                        cantwin_canopen::od::DataType::Unsigned16
+                    } else {
+                        cantwin_canopen::od::DataType::Integer16
+                    };
+                    let _ = c.dev.set_value(index, 0, &value_of(ty, v));
+                }
+            }
+        }
+    }
+
+    /// CiA 402: the control word and the vl objects command the drive.
+    fn profile_in(&mut self, _now: Instant) {
+        let Some(c) = &mut self.card else { return };
+        if c.personality != Personality::Ds402 {
+            return;
+        }
+        let od = c.dev.od();
+        let cw = raw_i64(od, 0x6040, 0).unwrap_or(0) as u16;
+        let fault = !self.drive.alarms().is_empty();
+        let stopped = self.drive.speed() == 0.0;
+        if c.ds402.update(cw, fault, stopped) {
+            self.drive.reset_alarms();
+            let fault = !self.drive.alarms().is_empty();
+            c.ds402.refresh(fault, stopped);
+        }
+        let target = raw_i64(od, 0x6042, 0).unwrap_or(0);
+        let min = raw_i64(od, 0x6046, 1).unwrap_or(0);
+        let max = raw_i64(od, 0x6046, 2).unwrap_or(i64::from(i16::MAX));
+        let mag = target.abs();
+        let clamped = if mag == 0 {
+            0
+        } else {
+            mag.clamp(min, max.max(min))
+        };
+        let reference = if target < 0 { -clamped } else { clamped };
+        let rate = |index: u16| {
+            let dv = raw_i64(od, index, 1).unwrap_or(1000) as f64;
+            let dt = raw_i64(od, index, 2).unwrap_or(1).max(1) as f64;
+            dv / dt
+        };
+        let state = c.ds402.state();
+        self.drive.set_profile(Some(ProfileCommands {
+            enable: c.ds402.power(),
+            start: state == PowerState::OperationEnabled && !c.ds402.halt(),
+            fast_stop: state == PowerState::QuickStopActive,
+            reference,
+            rates: Some((rate(0x6048), rate(0x6049))),
+        }));
+    }
+
+    fn sync_deadline(&self) -> Option<Instant> {
+        let c = self.card.as_ref()?;
+        let period = raw_i64(c.dev.od(), 0x1006, 0).unwrap_or(0) as u64;
+        if period == 0 || c.dev.state() == State::Stopped {
+            return None;
+        }
+        let last = c.last_sync?;
+        last.checked_add(Duration::from_micros(period * 3 / 2))
+    }
+
+    /// Answers a request to the default SDO server before the CiA 301 stack; `true` if done.
+    fn screen_sdo(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) -> bool {
+        let Some(c) = &self.card else { return false };
+        let node = c.dev.node_id();
+        if frame.id().as_raw() != 0x600 + u32::from(node)
+            || frame.id().is_extended()
+            || frame.is_remote()
+            || c.dev.state() == State::Stopped
+        {
+            return false;
+        }
+        let d = frame.data_bytes();
+        let mut b = [0u8; 8];
+        b[..d.len().min(8)].copy_from_slice(&d[..d.len().min(8)]);
+        let ccs = b[0] >> 5;
+        let index = u16::from_le_bytes([b[1], b[2]]);
+        let sub = b[3];
+        let mut reply = |f: Option<Frame>| {
+            if let Some(f) = f {
+                out.push(f);
+            }
+            true
+        };
+        match ccs {
+            1 | 2 | 5 | 6 if sub == 0xFF => {
+                return reply(abort_frame(node, index, sub, AbortCode::NO_SUB_INDEX));
+            }
+            0 | 3 if self.config.expedited_only => {
+                return reply(abort_frame(node, 0, 0, AbortCode::INVALID_COMMAND));
+            }
+            5 | 6 if self.config.expedited_only => {
+                return reply(abort_frame(node, index, sub, AbortCode::INVALID_COMMAND));
+            }
+            1 if self.config.expedited_only && b[0] & 0x02 == 0 => {
+                return reply(abort_frame(node, index, sub, AbortCode::INVALID_COMMAND));
+            }
+            _ => {}
+        }
+        if !matches!(ccs, 1 | 2) {
+            return false;
+        }
+        if (0x2000..=0x5FFF).contains(&index) {
+            let p = index - 0x2000;
+            if def(p).is_none() {
+                return reply(abort_frame(node, index, sub, AbortCode::NO_OBJECT));
+            }
+            if sub > 1 {
+                return reply(abort_frame(node, index, sub, AbortCode::NO_SUB_INDEX));
+            }
+            if ccs == 2 {
+                let (bytes, len) = if sub == 0 {
+                    ([1, 0, 0, 0], 1)
+                } else {
+                    match self.params.encode(p) {
+                        Ok(v) => v,
+                        Err(e) => return reply(abort_frame(node, index, sub, e.abort_code())),
+                    }
+                };
+                let cmd = 0x43 | ((4 - len as u8) << 2);
+                let i = index.to_le_bytes();
+                return reply(sdo_frame(
+                    node,
+                    [cmd, i[0], i[1], sub, bytes[0], bytes[1], bytes[2], bytes[3]],
+                ));
+            }
+            if b[0] & 0x02 == 0 {
+                // A segmented download of a parameter (limit lifted): longer than 4 bytes.
+                return reply(abort_frame(node, index, sub, AbortCode::LENGTH_TOO_HIGH));
+            }
+            let len = if b[0] & 0x01 != 0 {
+                4 - usize::from((b[0] >> 2) & 0x03)
+            } else {
+                4
+            };
+            let result = if sub == 0 {
+                Err(ParamError::ReadOnly)
+            } else {
+                self.write_param(p, &b[4..4 + len])
+            };
+            return match result {
+                Ok(()) => {
+                    let i = index.to_le_bytes();
+                    let r = reply(sdo_frame(node, [0x60, i[0], i[1], sub, 0, 0, 0, 0]));
+                    self.settle(now, out);
+                    r
+                }
+                Err(e) => reply(abort_frame(node, index, sub, e.abort_code())),
+            };
+        }
+        if ccs == 2 && self.config.expedited_only {
+            let od = c.dev.od();
+            let long = od.locate(index, sub).is_ok_and(|id| od.raw(id).len() > 4);
+            if long {
+                return reply(abort_frame(node, index, sub, AbortCode::LENGTH_TOO_HIGH));
+            }
+        }
+        false
+    }
+
+    fn write_param(&mut self, p: u16, data: &[u8]) -> Result<(), ParamError> {
+        let v = ParamDb::decode(p, data)?;
+        if matches!(p, par::RATED_CURRENT | par::FULL_SCALE_SPEED)
+            && self.params.value(par::ENABLE_STATE) != 0
+        {
+            return Err(ParamError::DeviceState);
+        }
+        self.params.check(p, v)?;
+        // §1.3.3: naming Dig Fieldbus S->Mn as the channel's ipa makes it an MDPLC channel.
+        if let Some(n) = (1..=16u16).find(|n| par::s2m_ipa(*n) == p)
+            && v == i64::from(par::s2m_dig(n))
+        {
+            let f = Format::from_value(self.params.value(par::s2m_sys(n)));
+            let mdplc = if f.bits() == 32 { 7 } else { 6 };
+            let _ = self.params.force(par::s2m_sys(n), mdplc);
+        }
+        self.params.set(p, v)
+    }
+
+    fn card_events(&mut self, now: Instant) {
+        let mut faults = Vec::new();
+        if let Some(c) = &mut self.card {
+            while let Some(e) = c.dev.poll_event() {
+                match e {
+                    Event::Sync { .. } => c.last_sync = Some(now),
+                    Event::LifeGuardingLost | Event::HeartbeatLost { .. } => faults.push(0x8130),
+                    Event::StateChanged {
+                        to: State::Operational,
+                        ..
+                    } => c.last_sync = Some(now),
+                    _ => {}
+                }
+            }
+        }
+        for f in faults {
+            self.bus_fault(f);
+        }
+    }
+
+    fn check_nmt(&mut self, frame: &Frame) {
+        if frame.id().as_raw() != 0 || frame.is_remote() {
+            return;
+        }
+        let Some(c) = &self.card else { return };
+        let node = c.dev.node_id();
+        let d = frame.data_bytes();
+        if d.len() != 2 {
+            self.bus_fault(0xFFC5);
+        } else if (d[1] == 0 || d[1] == node) && !matches!(d[0], 1 | 2 | 128 | 129 | 130) {
+            self.bus_fault(0xFFC6);
+        }
+    }
+}
+
+impl Node for Adv200 {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.reset_drive(now, out);
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        if !self.powered || self.card.is_none() {
+            return;
+        }
+        self.settle(now, out);
+        self.check_nmt(frame);
+        if !self.screen_sdo(frame, now, out)
+            && let Some(c) = &mut self.card
+        {
+            c.dev.on_frame(frame, now, out);
+        }
+        self.card_events(now);
+        self.settle(now, out);
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        if !self.powered {
+            return;
+        }
+        self.settle(now, out);
+        if self.sync_deadline().is_some_and(|d| d <= now) {
+            if let Some(c) = &mut self.card {
+                c.last_sync = Some(now);
+            }
+            self.bus_fault(0);
+            self.settle(now, out);
+        }
+        if let Some(c) = &mut self.card
+            && c.dev.next_deadline().is_some_and(|d| d <= now)
+        {
+            c.dev.on_tick(now, out);
+        }
+        self.card_events(now);
+        self.settle(now, out);
+        if let Some(c) = &mut self.card
+            && c.dev.next_deadline().is_some_and(|d| d <= now)
+        {
+            c.dev.on_tick(now, out);
+        }
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        if !self.powered {
+            return None;
+        }
+        [
+            self.drive.next_deadline(),
+            self.card.as_ref().and_then(|c| c.dev.next_deadline()),
+            self.sync_deadline(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        if let Some(c) = &mut self.card {
+            c.dev.on_sent(frame, now, out);
+        }
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        match event {
+            ControllerEvent::BusOff => self.bus_fault(0xFFC7),
+            ControllerEvent::RxOverrun => self.bus_fault(0x8110),
+            _ => {}
+        }
+        if let Some(c) = &mut self.card {
+            c.dev.on_controller_event(event, now, out);
+        }
+        self.card_events(now);
+        self.settle(now, out);
+    }
+}

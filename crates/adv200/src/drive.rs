@@ -1,0 +1,393 @@
+//! The drive: command sources, speed ramp, motor current, a first-order thermal model,
+//! digital and analog I/O, WordComp/WordDecomp, and the alarm list.
+//!
+//! The control task runs every millisecond of bus time ([`STEP`]) while anything moves or
+//! warms, and sleeps otherwise; inputs (a received PDO, a parameter write) are evaluated at
+//! once. Choices the manual leaves open, each pinned by a test:
+//!
+//! * **Commands**: `Commands remote sel` = Digital takes enable and start from `Dig enable
+//!   src` / `Dig start src`; Terminals takes them from digital inputs 1 and 2. A fieldbus
+//!   profile (CiA 402) may take over both.
+//! * **Ramp**: linear, `Acceleration 0` when the speed magnitude grows, `Deceleration 0` when
+//!   it shrinks, `Fast stop decel` for a fast (quick) stop; the reference is clamped to
+//!   ±`Full scale speed`. The speed loop is ideal: motor speed = ramp output. Without
+//!   enable the motor coasts down at the deceleration rate.
+//! * **Current**: 30 % of rated (magnetising) + the load torque sim (% of rated) + 50 % while
+//!   ramping, only while enabled.
+//! * **Thermal**: θ' = ((I/In)² − θ)/τ with τ = `Motor thermal tc`; `Motor thermal load` =
+//!   100·θ %; Motor overload trips at 110 %.
+//! * **Alarms** trip the drive (enable drops, motor coasts); `Alarm reset` (write 1) clears
+//!   them, except Motor overload while the motor is still above 100 %.
+
+use cantwin_can::{Duration, Instant};
+
+use crate::alarms::Alarm;
+use crate::params::{ParamDb, par};
+
+/// The control task period.
+pub const STEP: Duration = Duration::from_millis(1);
+
+/// Enable/start/fast stop from a fieldbus profile instead of the command source.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ProfileCommands {
+    /// Power stage enabled.
+    pub enable: bool,
+    /// Run (follow the reference).
+    pub start: bool,
+    /// Fast stop: ramp to zero at the fast stop deceleration.
+    pub fast_stop: bool,
+    /// Speed reference, rpm (replaces `Ramp ref 1`).
+    pub reference: i64,
+    /// Acceleration and deceleration, rpm/s (replace `Acceleration 0`/`Deceleration 0`).
+    pub rates: Option<(f64, f64)>,
+}
+
+/// A change of the alarm list, for the fieldbus card to report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AlarmEvent {
+    /// An alarm became active.
+    Raised(Alarm),
+    /// An alarm was reset.
+    Cleared(Alarm),
+}
+
+/// The drive model. See the [module documentation](self).
+#[derive(Debug, Clone, Default)]
+pub struct Drive {
+    speed: f64,
+    current: f64,
+    thermal: f64,
+    ramping: bool,
+    alarms: Vec<Alarm>,
+    events: Vec<AlarmEvent>,
+    inputs: u16,
+    analog: [i64; 2],
+    profile: Option<ProfileCommands>,
+    next_step: Option<Instant>,
+}
+
+fn bit(db: &ParamDb, src: u16) -> bool {
+    let s = db.value(src) as u16;
+    s != 0 && db.value(s) != 0
+}
+
+impl Drive {
+    /// A drive at rest, cold, without alarms.
+    pub fn new() -> Self {
+        Drive::default()
+    }
+
+    /// A drive reset: the motor stops, alarms and the profile are gone; the inputs (wired
+    /// terminals) keep their state.
+    pub fn restart(&mut self) {
+        *self = Drive {
+            inputs: self.inputs,
+            analog: self.analog,
+            ..Drive::default()
+        };
+    }
+
+    /// Motor speed, rpm.
+    pub fn speed(&self) -> f64 {
+        self.speed
+    }
+
+    /// Motor current, A.
+    pub fn current(&self) -> f64 {
+        self.current
+    }
+
+    /// Thermal load, 1.0 = rated.
+    pub fn thermal(&self) -> f64 {
+        self.thermal
+    }
+
+    /// Active alarms, oldest first.
+    pub fn alarms(&self) -> &[Alarm] {
+        &self.alarms
+    }
+
+    /// Sets digital input k (1..=8).
+    pub fn set_digital_input(&mut self, k: u8, on: bool) {
+        if (1..=8).contains(&k) {
+            let m = 1u16 << (k - 1);
+            self.inputs = if on {
+                self.inputs | m
+            } else {
+                self.inputs & !m
+            };
+        }
+    }
+
+    /// Sets analog input k (1..=2) in volts (±10 V = ±16384 counts).
+    pub fn set_analog_input(&mut self, k: u8, volts: f64) {
+        if (1..=2).contains(&k) {
+            let counts = (volts.clamp(-10.0, 10.0) * 1638.4).round() as i64;
+            self.analog[usize::from(k - 1)] = counts;
+        }
+    }
+
+    /// Lets a fieldbus profile command the drive (or gives the command back with `None`).
+    pub fn set_profile(&mut self, p: Option<ProfileCommands>) {
+        self.profile = p;
+    }
+
+    /// Raises `alarm` (nothing if it is already active).
+    pub fn raise(&mut self, alarm: Alarm) {
+        if !self.alarms.contains(&alarm) {
+            self.alarms.push(alarm);
+            self.events.push(AlarmEvent::Raised(alarm));
+        }
+    }
+
+    /// Resets the alarms whose cause is gone; returns whether none is left.
+    pub fn reset_alarms(&mut self) -> bool {
+        let hot = self.thermal >= 1.0;
+        let mut kept = Vec::new();
+        for a in self.alarms.drain(..) {
+            if a == Alarm::MotorOverload && hot {
+                kept.push(a);
+            } else {
+                self.events.push(AlarmEvent::Cleared(a));
+            }
+        }
+        self.alarms = kept;
+        self.alarms.is_empty()
+    }
+
+    /// The next alarm change, oldest first.
+    pub fn poll_event(&mut self) -> Option<AlarmEvent> {
+        if self.events.is_empty() {
+            None
+        } else {
+            Some(self.events.remove(0))
+        }
+    }
+
+    fn idle(&self) -> bool {
+        self.speed == 0.0 && self.current == 0.0 && self.thermal < 1e-4 && !self.ramping
+    }
+
+    /// Runs the control task up to `now`, then evaluates the inputs at `now`.
+    pub fn advance(&mut self, db: &mut ParamDb, now: Instant) {
+        while let Some(t) = self.next_step {
+            if t > now {
+                break;
+            }
+            self.step(db, STEP.as_secs_f64());
+            self.next_step = if self.idle() && !self.wants_motion(db) {
+                None
+            } else {
+                Some(t + STEP)
+            };
+        }
+        self.step(db, 0.0);
+        if self.next_step.is_none() && (!self.idle() || self.wants_motion(db)) {
+            let ms = STEP.as_nanos();
+            self.next_step = Some(Instant::from_nanos((now.as_nanos() / ms + 1) * ms));
+        }
+    }
+
+    /// When the control task runs next.
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.next_step
+    }
+
+    fn commands(&self, db: &ParamDb) -> (bool, bool, bool) {
+        if let Some(p) = self.profile {
+            return (p.enable, p.start, p.fast_stop);
+        }
+        if db.value(par::COMMANDS_REMOTE_SEL) == 1 {
+            (
+                bit(db, par::DIG_ENABLE_SRC),
+                bit(db, par::DIG_START_SRC),
+                false,
+            )
+        } else {
+            (self.inputs & 1 != 0, self.inputs & 2 != 0, false)
+        }
+    }
+
+    fn wants_motion(&self, db: &ParamDb) -> bool {
+        let (enable, _, _) = self.commands(db);
+        enable && self.alarms.is_empty()
+    }
+
+    fn step(&mut self, db: &mut ParamDb, dt: f64) {
+        // Inputs.
+        let _ = db.force(par::DIGITAL_INPUT_MON, i64::from(self.inputs));
+        for k in 1..=8u16 {
+            let _ = db.force(par::digital_input(k), i64::from(self.inputs >> (k - 1) & 1));
+        }
+        let _ = db.force(par::ANALOG_INPUT_1, self.analog[0]);
+        let _ = db.force(par::ANALOG_INPUT_2, self.analog[1]);
+        // WordDecomp.
+        let src = db.value(par::WORD_DECOMP_SRC) as u16;
+        let word = if src == 0 { 0 } else { db.value(src) & 0xFFFF };
+        let _ = db.force(par::WORD_DECOMP_MON, word);
+        for k in 0..16u16 {
+            let _ = db.force(par::word_decomp_bit(k), word >> k & 1);
+        }
+        // Commands.
+        if db.value(par::ALARM_RESET) != 0 {
+            let _ = db.force(par::ALARM_RESET, 0);
+            self.reset_alarms();
+        }
+        let (enable, start, fast_stop) = self.commands(db);
+        let enabled = enable && self.alarms.is_empty();
+        let run = enabled && start && !fast_stop;
+        // Ramp.
+        let fs = db.value(par::FULL_SCALE_SPEED) as f64;
+        let (reference, rates) = match self.profile {
+            Some(p) => (p.reference as f64, p.rates),
+            None => {
+                let src = db.value(par::RAMP_REF_1_SRC) as u16;
+                let r = if src == 0 { 0 } else { db.value(src) };
+                (r as f64, None)
+            }
+        };
+        let target = if run { reference.clamp(-fs, fs) } else { 0.0 };
+        let (acc, dec) = rates.unwrap_or((
+            db.value(par::ACCELERATION) as f64,
+            db.value(par::DECELERATION) as f64,
+        ));
+        let rate = if fast_stop && enabled {
+            db.value(par::FAST_STOP_DECEL) as f64
+        } else if target.abs() > self.speed.abs() && target * self.speed >= 0.0 {
+            acc
+        } else {
+            dec
+        };
+        let before = self.speed;
+        if dt > 0.0 {
+            let max = rate * dt;
+            let delta = (target - self.speed).clamp(-max, max);
+            self.speed += delta;
+            if (self.speed - target).abs() < 1e-9 {
+                self.speed = target;
+            }
+        }
+        self.ramping = (self.speed - target).abs() > 0.0 || (dt > 0.0 && before != self.speed);
+        // Current and temperature.
+        let rated = db.value(par::RATED_CURRENT) as f64 / 10.0;
+        self.current = if enabled {
+            let load = (db.value(par::LOAD) as f64 / 100.0).abs();
+            let accel = if self.speed != target { 0.5 } else { 0.0 };
+            rated * (0.3 + load + accel)
+        } else {
+            0.0
+        };
+        if dt > 0.0 {
+            let tau = db.value(par::THERMAL_TC) as f64;
+            let ratio = if rated > 0.0 {
+                self.current / rated
+            } else {
+                0.0
+            };
+            self.thermal += dt / tau * (ratio * ratio - self.thermal);
+            if self.thermal < 1e-6 && self.current == 0.0 {
+                self.thermal = 0.0;
+            }
+            if self.thermal >= 1.1 {
+                self.raise(Alarm::MotorOverload);
+            }
+        }
+        // Monitors.
+        let speed = self.speed.round() as i64;
+        let _ = db.force(par::RAMP_OUTPUT, speed);
+        let _ = db.force(par::MOTOR_SPEED, speed);
+        let _ = db.force(par::OUTPUT_CURRENT, (self.current * 10.0).round() as i64);
+        let _ = db.force(par::MOTOR_THERMAL, (self.thermal * 100.0).round() as i64);
+        let zero = speed.abs() <= db.value(par::SPEED_ZERO_THR);
+        let _ = db.force(par::SPEED_IS_ZERO, i64::from(zero));
+        let enabled = enable && self.alarms.is_empty();
+        let _ = db.force(par::ENABLE_STATE, i64::from(enabled));
+        let _ = db.force(par::DRIVE_OK, i64::from(self.alarms.is_empty()));
+        let _ = db.force(par::RUN_STATE, i64::from(enabled && start));
+        let active = self.alarms.first().map_or(0, |a| a.emcy_code());
+        let _ = db.force(par::ACTIVE_ALARM, i64::from(active));
+        // Digital outputs and WordComp.
+        let mut outputs = 0;
+        for k in 1..=4u16 {
+            if bit(db, par::digital_output_src(k)) {
+                outputs |= 1 << (k - 1);
+            }
+        }
+        let _ = db.force(par::DIGITAL_OUTPUT_MON, outputs);
+        let mut comp = 0;
+        for k in 0..16u16 {
+            if bit(db, par::word_comp_bit_src(k)) {
+                comp |= 1 << k;
+            }
+        }
+        let _ = db.force(par::WORD_COMP_MON, comp);
+    }
+
+    /// Digital output k (1..=4).
+    pub fn digital_output(db: &ParamDb, k: u8) -> bool {
+        (1..=4).contains(&k) && db.value(par::DIGITAL_OUTPUT_MON) >> (k - 1) & 1 != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at_ms(ms: u64) -> Instant {
+        Instant::from_nanos(ms * 1_000_000)
+    }
+
+    #[test]
+    fn terminals_enable_and_start_ramp_at_the_acceleration() {
+        let mut db = ParamDb::new();
+        db.set(par::DIG_RAMP_REF_1, 500).unwrap();
+        let mut d = Drive::new();
+        d.set_digital_input(1, true);
+        d.set_digital_input(2, true);
+        d.advance(&mut db, at_ms(0));
+        assert_eq!(d.next_deadline(), Some(at_ms(1)));
+        d.advance(&mut db, at_ms(100));
+        assert_eq!(db.value(par::MOTOR_SPEED), 100);
+        d.advance(&mut db, at_ms(1000));
+        assert_eq!(db.value(par::MOTOR_SPEED), 500);
+        assert_eq!(db.value(par::ENABLE_STATE), 1);
+        assert_eq!(db.value(par::SPEED_IS_ZERO), 0);
+        assert_eq!(
+            db.value(par::OUTPUT_CURRENT),
+            30,
+            "30 % of 10 A at constant speed"
+        );
+        d.set_digital_input(2, false);
+        d.advance(&mut db, at_ms(1250));
+        assert_eq!(db.value(par::MOTOR_SPEED), 250);
+        d.advance(&mut db, at_ms(2000));
+        assert_eq!(db.value(par::SPEED_IS_ZERO), 1);
+    }
+
+    #[test]
+    fn thermal_model_trips_motor_overload_and_reset_waits_for_cooling() {
+        let mut db = ParamDb::new();
+        db.set(par::LOAD, 120).unwrap();
+        db.set(par::THERMAL_TC, 1).unwrap();
+        let mut d = Drive::new();
+        d.set_digital_input(1, true);
+        d.advance(&mut db, at_ms(0));
+        // (0.3 + 1.2)² = 2.25 steady state: 110 % after τ·ln(2.25 / 1.15) ≈ 671 ms.
+        d.advance(&mut db, at_ms(670));
+        assert!(d.alarms().is_empty());
+        d.advance(&mut db, at_ms(672));
+        assert_eq!(d.alarms(), [Alarm::MotorOverload]);
+        assert_eq!(
+            d.poll_event(),
+            Some(AlarmEvent::Raised(Alarm::MotorOverload))
+        );
+        assert_eq!(db.value(par::ENABLE_STATE), 0);
+        assert!(!d.reset_alarms(), "still hot");
+        d.advance(&mut db, at_ms(10000));
+        assert!(d.reset_alarms());
+        assert_eq!(
+            d.poll_event(),
+            Some(AlarmEvent::Cleared(Alarm::MotorOverload))
+        );
+    }
+}

@@ -1,0 +1,314 @@
+//! The card's object dictionary for each CANopen personality (§1.1.5, chapter 2).
+//!
+//! Exactly the objects of table 1.5.1: no 0x1003 error history, no TIME objects
+//! (0x1012/0x1013, §1.1 item 9), one default SDO server without 0x1200 (§1.1.8), four RPDOs
+//! whose communication record has sub-indices 1–2 (§1.1.6: sub 0 = 2; no event timer) and four
+//! TPDOs with sub-indices 1–3 (§1.1.7: sub 0 = 3; inhibit time, no event timer), four mapping
+//! entries each (a PDO carries at most 4 words), RPDO and TPDO transmission type 1
+//! (synchronous when the master says nothing). Guard time 60 ms and life time factor 3 are
+//! the defaults of §1.1.3. 0x1005 has bit 31 set as §1.1.9 prints it.
+//!
+//! Every drive parameter PAR is the ARRAY 0x2000 + PAR with its value at sub-index 1 (§1.4).
+//! DS402 adds 0x6040–0x6061 of chapter 2 and maps 0x6040/0x6042 into RPDO1 and 0x6041/0x6044
+//! into TPDO1.
+
+use cantwin_canopen::od::{
+    Access, DataType, OdBuildError, OdBuilder, OdDescription, SubObject, Value,
+};
+
+use crate::params::{ParamAccess, catalog, par};
+use crate::pdc::{Dir, Pdc};
+
+/// Which CANopen profile the card runs (PAR 4000).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Personality {
+    /// Plain CiA 301 with the Process Data Channel.
+    CanOpen,
+    /// CiA 402 velocity mode.
+    Ds402,
+}
+
+/// 0x1018 sub 1: the twin's vendor-ID (the manual gives none).
+pub const VENDOR_ID: u32 = 0x0000_0000;
+/// 0x1018 sub 2: product code, the card type code of PAR 534 (4).
+pub const PRODUCT_CODE: u32 = 4;
+
+fn u32v(name: &str, access: Access, v: u32) -> SubObject {
+    SubObject::new(name, DataType::Unsigned32, access).default(Value::Unsigned32(v))
+}
+
+/// Converts `v` to a value of `ty` (wrapping to its width).
+pub fn value_of(ty: DataType, v: i64) -> Value {
+    match ty {
+        DataType::Integer8 => Value::Integer8(v as i8),
+        DataType::Integer16 => Value::Integer16(v as i16),
+        DataType::Integer32 => Value::Integer32(v as i32),
+        DataType::Unsigned8 => Value::Unsigned8(v as u8),
+        DataType::Unsigned32 => Value::Unsigned32(v as u32),
+        _ => Value::Unsigned16(v as u16),
+    }
+}
+
+fn param_objects(mut b: OdBuilder) -> OdBuilder {
+    let rww: [u16; 16] = core::array::from_fn(|i| par::m2s_mon(i as u16 + 1));
+    for d in catalog() {
+        let access = if rww.contains(&d.par) {
+            Access::Rww
+        } else if d.access == ParamAccess::Ro {
+            Access::Ro
+        } else {
+            Access::Rw
+        };
+        let ty = d.ty.data_type();
+        let mut s = SubObject::new(d.name.clone(), ty, access)
+            .default(value_of(ty, d.default))
+            .mappable();
+        if d.access == ParamAccess::Rw {
+            s = s.limits(value_of(ty, d.min), value_of(ty, d.max));
+        }
+        b = b.array(d.sdo_index(), d.name.clone(), [(1, s)]);
+    }
+    b
+}
+
+fn pdo_objects(mut b: OdBuilder, rx: &[Vec<u32>], tx: &[Vec<u32>]) -> OdBuilder {
+    for n in 0..4u16 {
+        let map = rx.get(usize::from(n)).cloned().unwrap_or_default();
+        let invalid = if map.is_empty() { 0x8000_0000 } else { 0 };
+        b = b.record(
+            0x1400 + n,
+            format!("Receive PDO{} parameter", n + 1),
+            [
+                (
+                    1,
+                    SubObject::new("COB-ID used by PDO", DataType::Unsigned32, Access::Rw)
+                        .default_node_id_plus(Value::Unsigned32(
+                            invalid | (0x200 + 0x100 * u32::from(n)),
+                        )),
+                ),
+                (
+                    2,
+                    SubObject::new("Transmission type", DataType::Unsigned8, Access::Rw)
+                        .default(Value::Unsigned8(1)),
+                ),
+            ],
+        );
+        b = mapping(
+            b,
+            0x1600 + n,
+            format!("Receive PDO{} mapping parameter", n + 1),
+            &map,
+        );
+    }
+    for n in 0..4u16 {
+        let map = tx.get(usize::from(n)).cloned().unwrap_or_default();
+        let invalid = if map.is_empty() { 0x8000_0000 } else { 0 };
+        b = b.record(
+            0x1800 + n,
+            format!("Transmit PDO{} parameter", n + 1),
+            [
+                (
+                    1,
+                    SubObject::new("COB-ID used by PDO", DataType::Unsigned32, Access::Rw)
+                        .default_node_id_plus(Value::Unsigned32(
+                            invalid | (0x180 + 0x100 * u32::from(n)),
+                        )),
+                ),
+                (
+                    2,
+                    SubObject::new("Transmission type", DataType::Unsigned8, Access::Rw)
+                        .default(Value::Unsigned8(1)),
+                ),
+                (
+                    3,
+                    SubObject::new("Inhibit time", DataType::Unsigned16, Access::Rw)
+                        .default(Value::Unsigned16(0)),
+                ),
+            ],
+        );
+        b = mapping(
+            b,
+            0x1A00 + n,
+            format!("Transmit PDO{} mapping parameter", n + 1),
+            &map,
+        );
+    }
+    b.hook(0x1400..=0x1BFF)
+}
+
+fn mapping(b: OdBuilder, index: u16, name: String, map: &[u32]) -> OdBuilder {
+    let mut subs = vec![(
+        0u8,
+        SubObject::new("Number of mapped objects", DataType::Unsigned8, Access::Rw)
+            .default(Value::Unsigned8(map.len() as u8)),
+    )];
+    for k in 1..=4u8 {
+        let v = map.get(usize::from(k) - 1).copied().unwrap_or(0);
+        subs.push((k, u32v(&format!("Mapping entry {k}"), Access::Rw, v)));
+    }
+    b.record(index, name, subs)
+}
+
+fn ds402_objects(b: OdBuilder) -> OdBuilder {
+    let var = |name: &str, ty: DataType, access: Access, v: i64| {
+        SubObject::new(name, ty, access)
+            .default(value_of(ty, v))
+            .mappable()
+    };
+    let ramp = |b: OdBuilder, index: u16, name: &str| {
+        b.record(
+            index,
+            name,
+            [
+                (1, u32v("Delta speed", Access::Rw, 1000).mappable()),
+                (
+                    2,
+                    SubObject::new("Delta time", DataType::Unsigned16, Access::Rw)
+                        .default(Value::Unsigned16(1))
+                        .limits(Value::Unsigned16(1), Value::Unsigned16(u16::MAX))
+                        .mappable(),
+                ),
+            ],
+        )
+    };
+    let b = b
+        .var(
+            0x6040,
+            var("Controlword", DataType::Unsigned16, Access::Rw, 0),
+        )
+        .var(
+            0x6041,
+            var("Statusword", DataType::Unsigned16, Access::Ro, 0x0240),
+        )
+        .var(
+            0x6042,
+            var("vl target velocity", DataType::Integer16, Access::Rw, 0),
+        )
+        .var(
+            0x6043,
+            var("vl velocity demand", DataType::Integer16, Access::Ro, 0),
+        )
+        .var(
+            0x6044,
+            var("vl control effort", DataType::Integer16, Access::Ro, 0),
+        )
+        .array(
+            0x6046,
+            "vl velocity min max amount",
+            [
+                (1, u32v("vl velocity min amount", Access::Rw, 0).mappable()),
+                (
+                    2,
+                    u32v("vl velocity max amount", Access::Rw, 8000).mappable(),
+                ),
+            ],
+        );
+    let b = ramp(b, 0x6048, "vl velocity acceleration");
+    let b = ramp(b, 0x6049, "vl velocity deceleration");
+    b.var(
+        0x6060,
+        SubObject::new("Modes of operation", DataType::Integer8, Access::Rw)
+            .default(Value::Integer8(2))
+            .limits(Value::Integer8(2), Value::Integer8(2)),
+    )
+    .var(
+        0x6061,
+        SubObject::new("Modes of operation display", DataType::Integer8, Access::Ro)
+            .default(Value::Integer8(2))
+            .mappable(),
+    )
+}
+
+/// The dictionary of `personality` with the PDC layout `pdc` (CANopen) as the default PDO
+/// mappings.
+pub fn build(
+    personality: Personality,
+    pdc: &Pdc,
+    serial: u32,
+) -> Result<OdDescription, OdBuildError> {
+    let device_type = match personality {
+        Personality::CanOpen => 0,
+        Personality::Ds402 => 0x192,
+    };
+    let string = |name: &str, v: &str| {
+        SubObject::new(name, DataType::VisibleString, Access::Const)
+            .default(Value::VisibleString(v.into()))
+            .max_len(v.len())
+    };
+    let mut b = OdBuilder::new()
+        .var(0x1000, u32v("Device type", Access::Ro, device_type))
+        .var(
+            0x1001,
+            SubObject::new("Error register", DataType::Unsigned8, Access::Ro).mappable(),
+        )
+        .var(0x1002, u32v("Manufacturer status register", Access::Ro, 0))
+        .var(0x1005, u32v("COB-ID SYNC", Access::Rw, 0x8000_0080))
+        .var(0x1006, u32v("Communication cycle period", Access::Rw, 0))
+        .var(0x1008, string("Manufacturer device name", "ADV200"))
+        .var(0x1009, string("Manufacturer hardware version", "1.0"))
+        .var(0x100A, string("Manufacturer software version", "1.0"))
+        .var(
+            0x100C,
+            SubObject::new("Guard time", DataType::Unsigned16, Access::Rw)
+                .default(Value::Unsigned16(60)),
+        )
+        .var(
+            0x100D,
+            SubObject::new("Life time factor", DataType::Unsigned8, Access::Rw)
+                .default(Value::Unsigned8(3)),
+        )
+        .record(
+            0x1010,
+            "Store parameters",
+            [(1, u32v("Save all parameters", Access::Rw, 1))],
+        )
+        .var(
+            0x1014,
+            SubObject::new("COB-ID EMCY", DataType::Unsigned32, Access::Rw)
+                .default_node_id_plus(Value::Unsigned32(0x80)),
+        )
+        .array(
+            0x1016,
+            "Consumer heartbeat time",
+            [(1, u32v("Consumer heartbeat time", Access::Rw, 0))],
+        )
+        .var(
+            0x1017,
+            SubObject::new("Producer heartbeat time", DataType::Unsigned16, Access::Rw)
+                .default(Value::Unsigned16(0)),
+        )
+        .record(
+            0x1018,
+            "Identity object",
+            [
+                (1, u32v("Vendor-ID", Access::Ro, VENDOR_ID)),
+                (2, u32v("Product code", Access::Ro, PRODUCT_CODE)),
+                (3, u32v("Revision number", Access::Ro, 0x0001_0000)),
+                (4, u32v("Serial number", Access::Ro, serial)),
+            ],
+        );
+    let (rx, tx): (Vec<Vec<u32>>, Vec<Vec<u32>>) = match personality {
+        Personality::CanOpen => (
+            pdc.m2s
+                .pdos
+                .iter()
+                .map(|p| p.iter().map(|i| i.mapping_entry(Dir::M2S)).collect())
+                .collect(),
+            pdc.s2m
+                .pdos
+                .iter()
+                .map(|p| p.iter().map(|i| i.mapping_entry(Dir::S2M)).collect())
+                .collect(),
+        ),
+        Personality::Ds402 => (
+            vec![vec![0x6040_0010, 0x6042_0010]],
+            vec![vec![0x6041_0010, 0x6044_0010]],
+        ),
+    };
+    b = pdo_objects(b, &rx, &tx);
+    b = param_objects(b);
+    if personality == Personality::Ds402 {
+        b = ds402_objects(b);
+    }
+    b.build()
+}
