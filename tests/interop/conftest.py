@@ -8,6 +8,7 @@ hanging the suite.
 import os
 import queue
 import shutil
+import signal
 import subprocess
 import threading
 import time
@@ -74,9 +75,10 @@ def _pump(stream, sink_queue, sink_list):
 
 
 def stop_process(process: subprocess.Popen) -> None:
-    """Terminate, then kill after STOP_TIMEOUT: never leave the simulator behind."""
+    """Stop as Ctrl-C does (so recordings are completed), then kill after STOP_TIMEOUT:
+    never leave the simulator behind. `cantwin sim` stops cleanly on SIGINT."""
     if process.poll() is None:
-        process.terminate()
+        process.send_signal(signal.SIGINT)
         try:
             process.wait(timeout=STOP_TIMEOUT)
         except subprocess.TimeoutExpired:
@@ -159,3 +161,42 @@ def quiet_sim():
         yield sim
     finally:
         stop_process(sim.process)
+
+
+CIA301_SCENARIO = SCENARIOS / "cia301-device.toml"
+# The node-ID of the device in scenarios/cia301-device.toml.
+NODE_ID = 5
+
+
+@pytest.fixture
+def cia301_sim():
+    """scenarios/cia301-device.toml behind socketcand and slcan."""
+    sim = start_sim(CIA301_SCENARIO, slcan=True)
+    try:
+        yield sim
+    finally:
+        stop_process(sim.process)
+
+
+@pytest.fixture
+def network(cia301_sim):
+    """A python-canopen network on the device's bus through the socketcand gateway."""
+    import canopen
+
+    host, port = cia301_sim.socketcand_addr("can0")
+    net = canopen.Network()
+    net.connect(interface="socketcand", channel="can0", host=host, port=port)
+    try:
+        yield net
+    finally:
+        net.disconnect()
+
+
+@pytest.fixture
+def node(network):
+    """The device as a python-canopen RemoteNode (no EDS: objects addressed by index)."""
+    import canopen
+
+    remote = network.add_node(NODE_ID, canopen.ObjectDictionary())
+    remote.sdo.RESPONSE_TIMEOUT = 2.0
+    return remote

@@ -75,6 +75,10 @@ pub const MAX_DOMAIN_SIZE: usize = 16 << 20;
 /// out at 4; up to 8 map the same entries again).
 pub const MAX_PDOS: u16 = 8;
 
+/// The device's transmit queue: a full SDO block plus the frames other services queue
+/// meanwhile.
+pub const TX_QUEUE_DEPTH: usize = 256;
+
 /// Entries of the inputs and outputs arrays.
 const IO_ENTRIES: u8 = 8;
 /// The default of 0x2000, byte `i`.
@@ -359,7 +363,14 @@ impl DeviceKind for Cia301 {
             emcy_code: 0,
             syncs: 0,
         };
-        Ok((Box::new(node), PortConfig::default()))
+        // The SDO server queues a whole upload block (up to 127 segments, CiA 301
+        // §7.2.4.3.10) at once, on top of heartbeat, EMCY and TPDOs; a controller queue of
+        // the default depth would drop most of the block.
+        let port = PortConfig {
+            queue_depth: TX_QUEUE_DEPTH,
+            ..PortConfig::default()
+        };
+        Ok((Box::new(node), port))
     }
 }
 
