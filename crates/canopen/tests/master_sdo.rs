@@ -21,7 +21,7 @@ fn net(master: Master) -> Net {
 fn finish(n: &mut Net, id: TransferId) -> (SdoEvent, Vec<SdoEvent>) {
     let mut others = Vec::new();
     loop {
-        let (_, e) = n.next_event(Duration::from_secs(10)).expect("an event");
+        let (_, e) = n.next_event(Duration::from_secs(60)).expect("an event");
         match e {
             MasterEvent::Sdo { id: i, event, .. } if i == id => match event {
                 SdoEvent::Completed { .. } | SdoEvent::Aborted { .. } => return (event, others),
@@ -604,4 +604,151 @@ fn cia301_7_2_4_3_4_progress_of_a_segmented_download() {
             total: Some(2450)
         })
     );
+}
+
+// ---- lost segments ----
+
+fn drop_attempt(n: &mut Net, attempt: u64) {
+    use cantwin_bus::{FaultRule, FrameSelector};
+    n.sim
+        .bus_mut(n.bus)
+        .unwrap()
+        .inject(FaultRule::drop(FrameSelector::Attempt(attempt)));
+}
+
+#[test]
+fn cia301_7_2_4_3_10_block_download_repeats_from_ackseq_plus_1() {
+    let mut n = net(Master::new());
+    // Attempts: 0 initiate, 1 response, 2.. segments 1..10; segment 3 is lost.
+    drop_attempt(&mut n, 4);
+    let data = pattern(70);
+    assert_eq!(
+        download(&mut n, BIG, data.clone(), Mode::Block { blksize: 127 }),
+        completed(vec![])
+    );
+    assert_eq!(
+        n.device(0).od.get(0x2003, 0),
+        Ok(Value::Domain(data.clone()))
+    );
+    let f = n.frame_strings();
+    let ack = f.iter().position(|s| s.starts_with("585#A2")).unwrap();
+    assert_eq!(f[ack], "585#A2027F0000000000");
+    // The next block starts with the lost segment's data, numbered 1 again.
+    assert_eq!(f[ack + 1], format!("605#01{}", hex(&data[14..21])));
+    assert_eq!(f[ack + 8], format!("605#88{}", hex(&data[63..70])));
+    assert_eq!(f[ack + 9], "585#A2087F0000000000");
+}
+
+#[test]
+fn cia301_7_2_4_3_13_block_upload_acknowledges_the_last_segment_in_order() {
+    let mut n = net(Master::new());
+    let data = pattern(70);
+    n.device(0)
+        .od
+        .set(0x2003, 0, &Value::Domain(data.clone()))
+        .unwrap();
+    // Attempts: 0 initiate, 1 response, 2 start, 3.. segments 1..10; segment 3 is lost.
+    drop_attempt(&mut n, 5);
+    assert_eq!(
+        upload(&mut n, BIG, Mode::Block { blksize: 127 }),
+        completed(data.clone())
+    );
+    let f = n.frame_strings();
+    let ack = f.iter().position(|s| s.starts_with("605#A2")).unwrap();
+    assert_eq!(f[ack], "605#A2027F0000000000");
+    assert_eq!(f[ack + 1], format!("585#01{}", hex(&data[14..21])));
+}
+
+#[test]
+fn cia301_7_2_4_3_10_server_block_size_is_followed() {
+    let mut d = Device::new(5);
+    d.server.set_block_size(4);
+    let mut n = Net::new(Master::new(), vec![d]);
+    let data = pattern(100);
+    assert_eq!(
+        download(&mut n, BIG, data.clone(), Mode::Block { blksize: 127 }),
+        completed(vec![])
+    );
+    assert_eq!(n.device(0).od.get(0x2003, 0), Ok(Value::Domain(data)));
+    let f = n.frame_strings();
+    assert_eq!(f[1], "585#A403200004000000");
+    // 15 segments in blocks of 4: acknowledgements after segments 4, 8, 12 and the last.
+    let acks: Vec<&str> = f
+        .iter()
+        .filter(|s| s.starts_with("585#A2"))
+        .map(String::as_str)
+        .collect();
+    assert_eq!(
+        acks,
+        [
+            "585#A204040000000000",
+            "585#A204040000000000",
+            "585#A204040000000000",
+            "585#A203040000000000"
+        ]
+    );
+}
+
+/// Block upload of `SIZE` bytes at 1 Mbit/s: the time the data segments occupy the bus as
+/// a fraction of the whole transfer (initiate, acknowledgements and end included) — the
+/// bus limit being data segments back to back.
+
+fn block_upload_bus_fraction(size: usize) -> f64 {
+    let mut n = net(Master::new());
+    let data = pattern(size);
+    n.device(0)
+        .od
+        .set(0x2007, 0, &Value::Domain(data.clone()))
+        .unwrap();
+    let mux = Mux::new(0x2007, 0);
+    let start = n.now();
+    let id = n
+        .with_master(|m, now, out| m.upload(5, mux, Mode::Block { blksize: 127 }, now, out))
+        .unwrap();
+    let (e, _) = finish(&mut n, id);
+    assert_eq!(e, SdoEvent::Completed { mux, data });
+    n.run_for(Duration::from_millis(1));
+    let rec = n
+        .sim
+        .bus(n.bus)
+        .unwrap()
+        .tap::<cantwin_bus::Recorder>(n.tap)
+        .unwrap();
+    // Every server frame but the initiate response (first) and the end (last) is a data
+    // segment.
+    let server: Vec<_> = rec
+        .frames()
+        .filter(|r| r.frame.id().as_raw() == 0x585)
+        .collect();
+    let segments = &server[1..server.len() - 1];
+    assert_eq!(segments.len(), size.div_ceil(7));
+    let segment_ns: u64 = segments
+        .iter()
+        .map(|r| r.idle_at.as_nanos() - r.start.as_nanos())
+        .sum();
+    let end = rec.frames().last().unwrap().idle_at.as_nanos();
+    let total = end - start.as_nanos();
+    let fraction = segment_ns as f64 / total as f64;
+    let goodput = size as f64 * 8.0 / (total as f64 / 1e9);
+    println!(
+        "block upload of {size} bytes at 1 Mbit/s: {:.3} s simulated, {:.1} kbit/s of data, segments occupy {:.2} % of the transfer",
+        total as f64 / 1e9,
+        goodput / 1e3,
+        fraction * 100.0
+    );
+    fraction
+}
+
+#[test]
+fn cia301_7_2_4_3_12_block_upload_of_100_000_bytes_uses_over_90_percent_of_the_bus() {
+    let f = block_upload_bus_fraction(100_000);
+    assert!(f >= 0.90, "{f}");
+}
+
+/// The benchmark: `cargo test -p cantwin-canopen --test master_sdo -- --ignored --nocapture`.
+#[test]
+#[ignore = "benchmark: 17 s of simulated traffic"]
+fn cia301_7_2_4_3_12_block_upload_of_1_mib_uses_over_90_percent_of_the_bus() {
+    let f = block_upload_bus_fraction(1 << 20);
+    assert!(f >= 0.90, "{f}");
 }
