@@ -986,3 +986,33 @@ mod flash_tests {
         assert!(Flash::from_text("P21 = x").is_err());
     }
 }
+
+#[cfg(test)]
+mod vf_tests {
+    use super::*;
+
+    #[test]
+    fn output_voltage_follows_the_vf_characteristic_p72_p73_with_p66_boost() {
+        let mut d = Drive::new(MotorData::default(), DriveData::default());
+        d.power_up(Instant::ZERO);
+        assert_eq!(d.output_voltage_pct(), 0.0);
+        d.set_analog_reference_hz(25.0);
+        d.set_input(4, true);
+        let mut t = Instant::ZERO;
+        for _ in 0..2000 {
+            t += Duration::from_millis(1);
+            d.step(Duration::from_millis(1), t);
+        }
+        assert_eq!(d.output_hz(), 25.0);
+        // Point 1 at 83.3 % of 50 Hz and 100 % voltage; boost 5.7 % at rated current.
+        let expected = 100.0 * 25.0 / (50.0 * 0.833) + 5.7 * d.current_pct() / 100.0;
+        assert!((d.output_voltage_pct() - expected).abs() < 1e-9);
+        d.set_analog_reference_hz(50.0);
+        for _ in 0..2000 {
+            t += Duration::from_millis(1);
+            d.step(Duration::from_millis(1), t);
+        }
+        // Above point 1 the voltage stays at P72 (capped at 100 %).
+        assert_eq!(d.output_voltage_pct(), 100.0);
+    }
+}

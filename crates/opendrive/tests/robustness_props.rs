@@ -62,3 +62,39 @@ proptest! {
         prop_assert!(d.drive().current_pct().is_finite());
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    /// Whatever the commands and the load, the physics keeps its limits: the output stays
+    /// within the maximum frequency, the current within the threshold (or the drive trips),
+    /// and the DC bus never passes the trip level without alarm A11.
+    #[test]
+    fn physics_stays_within_its_limits(
+        steps in prop::collection::vec((any::<u8>(), 0u16..=5000, 0.0f64..450.0, 1u64..400), 1..12),
+    ) {
+        let mut d = OpenDrive::new(MotorData::default(), DriveData::default());
+        let mut out = Outbox::new();
+        d.on_power_up(Instant::ZERO, &mut out);
+        let mut t = Instant::ZERO;
+        let limit = 150.0 / 0.5;
+        for (cmd, reference, load, ms) in steps {
+            let [lo, hi] = reference.to_le_bytes();
+            d.on_frame(&Frame::std(440, &[0, cmd, lo, hi]).unwrap(), t, &mut out);
+            d.drive_mut().set_load_torque_pct(load);
+            let end = t + Duration::from_millis(ms);
+            while let Some(next) = d.next_deadline().filter(|n| *n <= end) {
+                d.on_tick(next, &mut out);
+                let m = d.drive();
+                prop_assert!(m.output_hz().abs() <= m.fmax_hz() + 1e-9);
+                prop_assert!(m.current_pct() <= limit + 1e-9);
+                prop_assert!(
+                    m.dc_bus_v() <= m.hardware().overvoltage_trip_v
+                        || m.alarms().contains(cantwin_opendrive::model::A11)
+                );
+                prop_assert!(m.motor_thermal().is_finite() && m.heatsink_c().is_finite());
+            }
+            t = end;
+            out.clear();
+        }
+    }
+}
