@@ -173,7 +173,8 @@ impl CmsServer {
                         write: Some(d),
                     }) => (mux, app.write_mux(index, mux, d.as_slice(), now)),
                     Err(_) => {
-                        // Only a read with data fails to decode; its multiplexor is there.
+                        // A read with data, or a frame without a control byte (answered
+                        // for multiplexor 0).
                         let mux =
                             Mux::from_control(frame.data_bytes().first().copied().unwrap_or(0));
                         (mux, Err(app.malformed(index)))

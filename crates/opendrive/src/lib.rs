@@ -79,6 +79,15 @@
 //!   at mains return (the node's power-up).
 //! * Mains off/on is the node's power cycle on the bus (`Bus::set_powered`): the motor
 //!   coasts, temperatures cool, working values come back from flash, events are disabled.
+//! * The flash ([`Flash`]) holds the saved parameters, the latched alarms and the DIP S1
+//!   position of the last power-up; [`OpenDrive::with_storage`] hands its text image to a
+//!   [`FlashStorage`] whenever it changes, so it can outlive the process.
+//! * Physics: a fixed step ([`node::DEFAULT_PHYSICS_PERIOD`], 1 ms), per-unit motor model:
+//!   current = √(magnetising² + torque²) with torque = load + friction + inertia × ramp;
+//!   above the current limit ([`DriveData::current_limit_pct`] of the drive's rated current,
+//!   i.e. ÷ P61 for the motor) the ramp holds and, if needed, the frequency falls at the
+//!   deceleration rate; the DC bus integrates the power the motor returns
+//!   (C·V·dV/dt = −P) and never falls below the rectified mains.
 //!
 //! ```
 //! use cantwin_can::{Duration, Frame, Instant, Node, Outbox};
