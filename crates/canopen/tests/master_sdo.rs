@@ -689,7 +689,7 @@ fn cia301_7_2_4_3_10_server_block_size_is_followed() {
     );
 }
 
-/// Block upload of `SIZE` bytes at 1 Mbit/s: the time the data segments occupy the bus as
+/// Block upload of `size` bytes at 1 Mbit/s: the time the data segments occupy the bus as
 /// a fraction of the whole transfer (initiate, acknowledgements and end included) — the
 /// bus limit being data segments back to back.
 fn block_upload_bus_fraction(size: usize) -> f64 {

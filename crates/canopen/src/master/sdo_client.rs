@@ -856,3 +856,223 @@ impl SdoClient {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const T0: Instant = Instant::ZERO;
+
+    fn client() -> (SdoClient, Outbox) {
+        (SdoClient::for_node(5).unwrap(), Outbox::new())
+    }
+
+    fn resp(c: &mut SdoClient, b: [u8; 8], out: &mut Outbox) -> Vec<[u8; 8]> {
+        assert!(c.on_frame(&Frame::std(0x585, &b).unwrap(), T0, out));
+        out.drain()
+            .map(|f| {
+                assert_eq!(f.id().as_raw(), 0x605);
+                <[u8; 8]>::try_from(f.data_bytes()).unwrap()
+            })
+            .collect()
+    }
+
+    fn events(c: &mut SdoClient) -> Vec<SdoEvent> {
+        std::iter::from_fn(|| c.poll_event()).collect()
+    }
+
+    const MUX: Mux = Mux::new(0x2003, 0);
+
+    fn aborted(code: AbortCode, by_server: bool) -> SdoEvent {
+        SdoEvent::Aborted {
+            mux: MUX,
+            code,
+            by_server,
+        }
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_7_upload_segment_with_wrong_toggle_aborts_0x05030000() {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Segmented, T0, &mut out)
+            .unwrap();
+        out.clear();
+        let r = resp(&mut c, [0x41, 0x03, 0x20, 0, 10, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x60, 0, 0, 0, 0, 0, 0, 0]]);
+        // Toggle 1 where 0 is expected.
+        let r = resp(&mut c, [0x10, 1, 2, 3, 4, 5, 6, 7], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x00, 0x00, 0x03, 0x05]]);
+        assert_eq!(
+            events(&mut c),
+            [aborted(AbortCode::TOGGLE_BIT_NOT_ALTERNATED, false)]
+        );
+        assert!(c.is_idle());
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_14_block_upload_crc_mismatch_aborts_0x05040004() {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Block { blksize: 4 }, T0, &mut out)
+            .unwrap();
+        assert_eq!(
+            out.drain().next().unwrap().data_bytes(),
+            [0xA4, 0x03, 0x20, 0, 4, 0, 0, 0]
+        );
+        let r = resp(&mut c, [0xC6, 0x03, 0x20, 0, 3, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0xA3, 0, 0, 0, 0, 0, 0, 0]]);
+        let r = resp(&mut c, [0x81, 1, 2, 3, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0xA2, 1, 4, 0, 0, 0, 0, 0]]);
+        // n = 4 unused bytes, wrong CRC.
+        let r = resp(&mut c, [0xD1, 0x12, 0x34, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x04, 0x00, 0x04, 0x05]]);
+        assert_eq!(events(&mut c), [aborted(AbortCode::CRC_ERROR, false)]);
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_13_block_upload_sequence_number_above_block_size_aborts_0x05040003() {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Block { blksize: 2 }, T0, &mut out)
+            .unwrap();
+        out.clear();
+        resp(&mut c, [0xC4, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
+        let r = resp(&mut c, [0x03, 0, 0, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x03, 0x00, 0x04, 0x05]]);
+        assert_eq!(
+            events(&mut c),
+            [aborted(AbortCode::INVALID_SEQUENCE_NUMBER, false)]
+        );
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_10_block_download_ack_beyond_the_block_aborts_0x05040003() {
+        let (mut c, mut out) = client();
+        c.start_download(
+            0x2003,
+            0,
+            vec![0; 20],
+            Mode::Block { blksize: 127 },
+            T0,
+            &mut out,
+        )
+        .unwrap();
+        out.clear();
+        let r = resp(&mut c, [0xA4, 0x03, 0x20, 0, 2, 0, 0, 0], &mut out);
+        assert_eq!(r.len(), 2, "a block of 2 segments");
+        let r = resp(&mut c, [0xA2, 3, 2, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x03, 0x00, 0x04, 0x05]]);
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_9_block_download_with_server_block_size_0_aborts_0x05040002() {
+        let (mut c, mut out) = client();
+        c.start_download(
+            0x2003,
+            0,
+            vec![0; 20],
+            Mode::Block { blksize: 127 },
+            T0,
+            &mut out,
+        )
+        .unwrap();
+        out.clear();
+        let r = resp(&mut c, [0xA4, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x02, 0x00, 0x04, 0x05]]);
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_17_unexpected_response_aborts_0x05040001() {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
+        out.clear();
+        // A download response to an upload request.
+        let r = resp(&mut c, [0x60, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x01, 0x00, 0x04, 0x05]]);
+        assert_eq!(events(&mut c), [aborted(AbortCode::INVALID_COMMAND, false)]);
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_3_uploaded_length_differs_from_indicated_size() {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
+        out.clear();
+        resp(&mut c, [0x41, 0x03, 0x20, 0, 3, 0, 0, 0], &mut out);
+        // The last segment brings 2 bytes instead of 3 (n = 5).
+        let r = resp(&mut c, [0x0B, 1, 2, 0, 0, 0, 0, 0], &mut out);
+        assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x10, 0x00, 0x07, 0x06]]);
+        assert_eq!(events(&mut c), [aborted(AbortCode::TYPE_MISMATCH, false)]);
+    }
+
+    #[test]
+    fn timeout_is_configurable_and_can_be_silent() {
+        let (mut c, mut out) = client();
+        c.config_mut().timeout = Duration::from_millis(20);
+        c.config_mut().abort_on_timeout = false;
+        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
+        out.clear();
+        assert_eq!(c.next_deadline(), Some(Instant::from_nanos(20_000_000)));
+        c.on_tick(Instant::from_nanos(19_999_999), &mut out);
+        assert!(events(&mut c).is_empty());
+        c.on_tick(Instant::from_nanos(20_000_000), &mut out);
+        assert!(out.is_empty());
+        assert_eq!(events(&mut c), [aborted(AbortCode::TIMEOUT, false)]);
+        assert_eq!(c.next_deadline(), None);
+    }
+
+    #[test]
+    fn start_errors() {
+        let (mut c, mut out) = client();
+        assert_eq!(
+            c.start_download(1, 0, vec![0; 5], Mode::Expedited, T0, &mut out),
+            Err(ClientError::ExpeditedLength(5))
+        );
+        assert_eq!(
+            c.start_upload(1, 0, Mode::Block { blksize: 0 }, T0, &mut out),
+            Err(ClientError::BlockSize(0))
+        );
+        c.start_upload(1, 0, Mode::Auto, T0, &mut out).unwrap();
+        assert_eq!(
+            c.start_upload(1, 0, Mode::Auto, T0, &mut out),
+            Err(ClientError::Busy)
+        );
+        assert!(matches!(
+            SdoClient::for_node(0),
+            Err(ClientError::NodeId(0))
+        ));
+        assert!(matches!(
+            SdoClient::for_node(128),
+            Err(ClientError::NodeId(128))
+        ));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        /// Whatever a server answers, the client never panics, and every transfer ends
+        /// (completed or aborted) within the frames given or at its timeout.
+        #[test]
+        fn any_server_answers_end_every_transfer(
+            mode in 0u8..4,
+            upload in any::<bool>(),
+            frames in proptest::collection::vec(any::<[u8; 8]>(), 0..40),
+        ) {
+            let (mut c, mut out) = client();
+            let mode = [Mode::Auto, Mode::Expedited, Mode::Segmented, Mode::Block { blksize: 3 }][usize::from(mode)];
+            let started = if upload {
+                c.start_upload(0x2003, 0, mode, T0, &mut out)
+            } else {
+                c.start_download(0x2003, 0, vec![7; 3], mode, T0, &mut out)
+            };
+            prop_assert!(started.is_ok());
+            for b in frames {
+                c.on_frame(&Frame::std(0x585, &b).unwrap(), T0, &mut out);
+            }
+            c.on_tick(Instant::from_nanos(2_000_000_000), &mut out);
+            prop_assert!(c.is_idle());
+            let ends = events(&mut c)
+                .into_iter()
+                .filter(|e| matches!(e, SdoEvent::Completed { .. } | SdoEvent::Aborted { .. }))
+                .count();
+            prop_assert_eq!(ends, 1);
+        }
+    }
+}
