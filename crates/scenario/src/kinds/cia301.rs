@@ -470,4 +470,159 @@ mod tests {
         assert_eq!(od.get(0x1601, 1).unwrap(), Value::Unsigned32(0x2200_0310));
         assert_eq!(od.get(0x1800, 2).unwrap(), Value::Unsigned8(1));
     }
+
+    /// A built scenario with a recorder on the bus; frames are sent from the peer's port.
+    struct Rig {
+        built: crate::Built,
+        tap: cantwin_bus::TapId,
+        peer: cantwin_bus::PortId,
+    }
+
+    impl Rig {
+        fn new(extra: &str) -> Rig {
+            let mut built = Scenario::parse(&scenario(extra), "t.toml")
+                .unwrap()
+                .build(&Registry::builtin(), &BuildEnv::default())
+                .unwrap();
+            let bus = built.bus("can0").unwrap();
+            let tap = built
+                .sim
+                .bus_mut(bus)
+                .unwrap()
+                .add_tap(cantwin_bus::Recorder::new());
+            let peer = built.device("peer").unwrap().port;
+            Rig { built, tap, peer }
+        }
+
+        /// Sends `data` on `id` from the peer and runs 10 ms.
+        fn send(&mut self, id: u16, data: &[u8]) {
+            self.built
+                .sim
+                .transmit(self.peer, Frame::std(id, data).unwrap())
+                .unwrap();
+            self.built.sim.run_for(Duration::from_millis(10));
+        }
+
+        /// The end of the last frame the peer sent.
+        fn peer_end(&self) -> Instant {
+            let bus = self.built.bus("can0").unwrap();
+            self.built
+                .sim
+                .bus(bus)
+                .unwrap()
+                .tap::<cantwin_bus::Recorder>(self.tap)
+                .unwrap()
+                .frames()
+                .filter(|f| f.sender == self.peer)
+                .map(|f| f.end)
+                .last()
+                .unwrap()
+        }
+
+        /// Every frame the device sent so far, as (id, data, start of frame).
+        fn device_frames(&self) -> Vec<(u16, Vec<u8>, Instant)> {
+            let bus = self.built.bus("can0").unwrap();
+            let dev = self.built.device("dev").unwrap().port;
+            self.built
+                .sim
+                .bus(bus)
+                .unwrap()
+                .tap::<cantwin_bus::Recorder>(self.tap)
+                .unwrap()
+                .frames()
+                .filter(|f| f.sender == dev)
+                .map(|f| {
+                    let Id::Standard(id) = f.frame.id() else {
+                        panic!("extended frame from the device");
+                    };
+                    (id.as_raw(), f.frame.data_bytes().to_vec(), f.start)
+                })
+                .collect()
+        }
+    }
+
+    /// Writing a code to 0x2001 raises it: SDO download response (CiA 301 §7.2.4.3.3), then
+    /// EMCY on 0x80 + node-ID with the code, error register bit 0 and five zero bytes
+    /// (§7.2.7.3.1); writing 0 sends the error reset EMCY 0x0000 with register 0.
+    #[test]
+    fn emcy_trigger_object_raises_and_clears_the_code() {
+        let mut rig = Rig::new("node_id = 5\ndomain_size = 16");
+        rig.built.sim.run_for(Duration::from_millis(1));
+        rig.send(0x605, &[0x2B, 0x01, 0x20, 0x00, 0x00, 0x50, 0, 0]);
+        rig.send(0x605, &[0x2B, 0x01, 0x20, 0x00, 0x00, 0x00, 0, 0]);
+        let frames: Vec<(u16, Vec<u8>)> = rig
+            .device_frames()
+            .into_iter()
+            .map(|(id, d, _)| (id, d))
+            .collect();
+        let sdo_ok = (0x585, vec![0x60, 0x01, 0x20, 0x00, 0, 0, 0, 0]);
+        // The EMCY is queued in the same instant as the SDO response and wins arbitration
+        // with its lower identifier.
+        assert_eq!(
+            frames,
+            vec![
+                (0x705, vec![0x00]),
+                (0x085, vec![0x00, 0x50, 0x01, 0, 0, 0, 0, 0]),
+                sdo_ok.clone(),
+                (0x085, vec![0; 8]),
+                sdo_ok,
+            ]
+        );
+    }
+
+    /// After NMT start (§7.2.8.3.1.1) every SYNC is answered by TPDO1..4 (transmission
+    /// type 1); TPDO1 carries 0x2100 sub 1, the count of SYNCs before this one.
+    #[test]
+    fn tpdos_answer_each_sync_with_the_sync_count() {
+        let mut rig = Rig::new("node_id = 5\ndomain_size = 16");
+        rig.send(0x000, &[0x01, 5]);
+        for _ in 0..3 {
+            rig.send(0x080, &[]);
+        }
+        let frames: Vec<(u16, Vec<u8>)> = rig
+            .device_frames()
+            .into_iter()
+            .map(|(id, d, _)| (id, d))
+            .collect();
+        let expected: Vec<(u16, Vec<u8>)> = (0u8..3)
+            .flat_map(|n| {
+                [
+                    (0x185, vec![n, 0, 0, 0]),
+                    (0x285, vec![0; 4]),
+                    (0x385, vec![0; 4]),
+                    (0x485, vec![0; 4]),
+                ]
+            })
+            .collect();
+        assert_eq!(frames[0], (0x705, vec![0x00]));
+        assert_eq!(frames[1..], expected[..]);
+    }
+
+    /// Reset communication (§7.2.8.3.1.1, command 0x82) brings 0x1017 back to `heartbeat_ms`
+    /// after it was written 0: boot-up, then a heartbeat 50 ms later.
+    #[test]
+    fn reset_communication_restores_heartbeat_ms() {
+        let mut rig = Rig::new("node_id = 5\nheartbeat_ms = 50\ndomain_size = 16");
+        rig.built.sim.run_for(Duration::from_millis(1));
+        rig.send(0x605, &[0x2B, 0x17, 0x10, 0x00, 0x00, 0x00, 0, 0]);
+        rig.built.sim.run_for(Duration::from_millis(200));
+        rig.send(0x000, &[0x82, 5]);
+        let reset_at = rig.peer_end();
+        rig.built.sim.run_for(Duration::from_millis(100));
+        let frames = rig.device_frames();
+        let ids: Vec<(u16, Vec<u8>)> = frames.iter().map(|(id, d, _)| (*id, d.clone())).collect();
+        assert_eq!(
+            ids[..4],
+            [
+                (0x705, vec![0x00]),
+                (0x585, vec![0x60, 0x17, 0x10, 0x00, 0, 0, 0, 0]),
+                (0x705, vec![0x00]),
+                (0x705, vec![0x7F]),
+            ]
+        );
+        // The reset happens when the NMT frame completes; the heartbeat timer starts then, and
+        // on the idle bus each heartbeat starts when it is queued.
+        assert_eq!(frames[3].2, reset_at + Duration::from_millis(50));
+        assert_eq!(frames[4].2, reset_at + Duration::from_millis(100));
+    }
 }
