@@ -43,6 +43,7 @@ impl Registry {
         r.register(Box::new(crate::kinds::generator::Generator));
         r.register(Box::new(crate::kinds::cia301::Cia301));
         r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
+        r.register(Box::new(crate::kinds::adv200::Adv200Kind));
         r
     }
 

@@ -1,5 +1,6 @@
 //! The device kinds built into cantwin.
 
+pub mod adv200;
 pub mod cia301;
 pub mod generator;
 pub mod opendrive;
