@@ -5,6 +5,7 @@ mod benchmarks_md;
 mod capture_tap;
 mod demo;
 mod dump;
+mod eds;
 mod sim;
 
 use anyhow::Result;
@@ -41,6 +42,12 @@ enum Command {
         after_help = "Examples:\n  cantwin dump capture.pcap\n  cantwin dump candump-2024-01-01.log"
     )]
     Dump(dump::Args),
+    /// Check, document and commission CiA 306 EDS/DCF files.
+    #[command(
+        after_help = "Examples:\n  cantwin eds check device.eds\n  cantwin eds doc device.eds -o device.md\n  \
+                            cantwin eds dcf device.eds --node-id 5 -o node5.dcf"
+    )]
+    Eds(eds::Args),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -49,13 +56,24 @@ enum Command {
     Bench(bench::Args),
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::Sim(args) => sim::run(&args),
         Command::Dump(args) => dump::run(&args),
+        Command::Eds(args) => eds::run(&args),
+    }
+}
+
+fn main() -> std::process::ExitCode {
+    // Errors are for the person at the terminal: the message and its causes, no backtrace.
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
     }
 }
 

@@ -52,7 +52,16 @@ fn demo_is_deterministic() {
 
 #[test]
 fn every_command_has_help_with_examples() {
-    for cmd in [&["--help"][..], &["demo", "--help"], &["bench", "--help"]] {
+    for cmd in [
+        &["--help"][..],
+        &["demo", "--help"],
+        &["bench", "--help"],
+        &["sim", "--help"],
+        &["dump", "--help"],
+        &["eds", "--help"],
+        &["eds", "check", "--help"],
+        &["eds", "dcf", "--help"],
+    ] {
         let (ok, out, _) = cantwin(cmd);
         assert!(ok);
         assert!(out.contains("Examples:"), "{cmd:?}: {out}");
@@ -242,4 +251,87 @@ fn sim_records_pcap_and_candump_that_dump_reads_back() {
     assert!(!ok);
     assert!(err.contains("missing.pcap"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn corpus(name: &str) -> String {
+    format!("{}/../eds/tests/corpus/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn eds_check_reports_line_numbered_errors_and_exits_non_zero() {
+    let (ok, out, _) = cantwin(&["eds", "check", &corpus("drive.eds")]);
+    assert!(ok);
+    assert!(out.contains("0 errors"), "{out}");
+    let dir = temp_dir("eds-bad");
+    let bad = dir.join("bad.eds");
+    std::fs::write(
+        &bad,
+        "[1000]\nParameterName=x\nDataType=0x0007\nAccessType=rx\n",
+    )
+    .unwrap();
+    let (ok, _, err) = cantwin(&["eds", "check", bad.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("line 4 [1000] AccessType: invalid value \"rx\""),
+        "{err}"
+    );
+    assert!(!err.contains("Stack backtrace"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn eds_check_warns_about_a_life_time_factor_below_2() {
+    let dir = temp_dir("eds-life");
+    let file = dir.join("guard.eds");
+    let text = std::fs::read_to_string(corpus("drive.eds"))
+        .unwrap()
+        .replace(
+            "[MandatoryObjects]",
+            "[100C]\nParameterName=Guard time\nObjectType=0x7\nDataType=0x0006\nAccessType=rw\n\
+         DefaultValue=100\nPDOMapping=0\n\n[100D]\nParameterName=Life time factor\nObjectType=0x7\n\
+         DataType=0x0005\nAccessType=rw\nDefaultValue=1\nPDOMapping=0\n\n[MandatoryObjects]",
+        );
+    std::fs::write(&file, text).unwrap();
+    let (_, out, err) = cantwin(&["eds", "check", file.to_str().unwrap()]);
+    assert!(out.contains("life time factor 1 is below 2"), "{out}{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn eds_dcf_commissions_a_node_and_doc_renders_markdown() {
+    let (ok, out, err) = cantwin(&[
+        "eds",
+        "dcf",
+        &corpus("drive.eds"),
+        "--node-id",
+        "12",
+        "--bit-rate",
+        "500k",
+        "--name",
+        "drive",
+        "--set",
+        "0x1008:0=Pump 3",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("[DeviceComissioning]\nNodeID=12\nNodeName=drive\nBaudrate=500\n"),
+        "{out}"
+    );
+    assert!(out.contains("ParameterValue=Pump 3"), "{out}");
+    let (ok, _, err) = cantwin(&[
+        "eds",
+        "dcf",
+        &corpus("drive.eds"),
+        "--node-id",
+        "12",
+        "--set",
+        "0x7777:0=1",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("the file has no object 0x7777"), "{err}");
+    let (ok, _, _) = cantwin(&["eds", "dcf", &corpus("drive.eds"), "--node-id", "128"]);
+    assert!(!ok);
+    let (ok, out, _) = cantwin(&["eds", "doc", &corpus("drive.eds")]);
+    assert!(ok);
+    assert!(out.starts_with("# Drive V1"), "{out}");
 }

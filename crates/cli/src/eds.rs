@@ -1,0 +1,200 @@
+//! `cantwin eds`: check, document and commission CiA 306 device description files.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use cantwin_can::BitRate;
+use cantwin_canopen::od::ObjectDictionary;
+use cantwin_eds::{DeviceCommissioning, Eds, EdsValue};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Command {
+    /// Check an EDS or DCF: syntax (errors name line, section and key), mandatory objects,
+    /// object lists, sub-object counts, types, limits, $NODEID values, and advice such as a
+    /// life time factor (0x100D) below 2.
+    #[command(
+        after_help = "Examples:\n  cantwin eds check device.eds\n  cantwin eds check node5.dcf"
+    )]
+    Check {
+        /// The file.
+        file: PathBuf,
+    },
+    /// Document a device as Markdown: device information and every object.
+    #[command(
+        after_help = "Examples:\n  cantwin eds doc device.eds > device.md\n  cantwin eds doc device.eds -o device.md"
+    )]
+    Doc {
+        /// The file.
+        file: PathBuf,
+        /// Write here instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// Make a DCF for one node from an EDS: $NODEID resolved, every value as its
+    /// ParameterValue, [DeviceComissioning] filled in, and values changed with --set.
+    #[command(
+        after_help = "Examples:\n  cantwin eds dcf device.eds --node-id 5 -o node5.dcf\n  \
+                            cantwin eds dcf device.eds --node-id 12 --bit-rate 500k --set 0x1017:0=1000 --set 0x1008:0=\"Pump 3\""
+    )]
+    Dcf {
+        /// The EDS (or DCF) to start from.
+        file: PathBuf,
+        /// The node-ID (1–127).
+        #[arg(long, value_parser = clap::value_parser!(u8).range(1..=127))]
+        node_id: u8,
+        /// The node's name (NodeName).
+        #[arg(long)]
+        name: Option<String>,
+        /// The bit rate (Baudrate), e.g. 500k or 1M.
+        #[arg(long)]
+        bit_rate: Option<BitRate>,
+        /// Set a value: INDEX:SUB=VALUE (index in hex with 0x, sub decimal or hex), repeatable.
+        #[arg(long = "set", value_name = "INDEX:SUB=VALUE")]
+        sets: Vec<String>,
+        /// Write here instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+}
+
+fn load(file: &Path) -> Result<Eds> {
+    let bytes = std::fs::read(file).with_context(|| format!("reading {}", file.display()))?;
+    cantwin_eds::parse_bytes(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))
+}
+
+fn emit(text: &str, output: Option<&Path>) -> Result<()> {
+    match output {
+        Some(path) => {
+            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+        }
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
+}
+
+/// Warnings cantwin adds to the file checks: advice from the device manuals.
+fn advice(eds: &Eds) -> Vec<String> {
+    let mut out = Vec::new();
+    let value = |index, sub| {
+        eds.entry(index, sub)
+            .and_then(|e| e.default_value.as_ref())
+            .and_then(|v| v.evaluate(1))
+    };
+    if let (Some(guard), Some(factor)) = (value(0x100C, 0), value(0x100D, 0))
+        && guard != 0
+        && factor < 2
+    {
+        out.push(format!(
+            "warning: [100D] DefaultValue: life time factor {factor} is below 2: a single lost guarding \
+             request makes the node report a guarding error (use 2 or more)"
+        ));
+    }
+    out
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    match &args.command {
+        Command::Check { file } => {
+            let eds = load(file)?;
+            let report = eds.check();
+            let mut errors = 0;
+            for issue in &report.issues {
+                println!("{}: {issue}", file.display());
+                if issue.severity == cantwin_eds::Severity::Error {
+                    errors += 1;
+                }
+            }
+            let advice = advice(&eds);
+            for a in &advice {
+                println!("{}: {a}", file.display());
+            }
+            let warnings = report.issues.len() - errors + advice.len();
+            println!(
+                "{}: {} objects, {errors} errors, {warnings} warnings",
+                file.display(),
+                eds.objects.len()
+            );
+            if errors > 0 {
+                bail!("{} has {errors} errors", file.display());
+            }
+            Ok(())
+        }
+        Command::Doc { file, output } => {
+            let eds = load(file)?;
+            emit(&cantwin_eds::render_markdown(&eds), output.as_deref())
+        }
+        Command::Dcf {
+            file,
+            node_id,
+            name,
+            bit_rate,
+            sets,
+            output,
+        } => {
+            let eds = load(file)?;
+            let desc =
+                cantwin_eds::to_od(&eds).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?;
+            let od = ObjectDictionary::new(Arc::new(desc), *node_id);
+            let commissioning = DeviceCommissioning {
+                node_id: Some(*node_id),
+                node_name: name.clone(),
+                baudrate: bit_rate.map(|r| (r.bits_per_second() / 1000) as u16),
+                ..Default::default()
+            };
+            let mut dcf = cantwin_eds::to_dcf(&eds, &od, commissioning);
+            for set in sets {
+                apply_set(&mut dcf, set)?;
+            }
+            let report = dcf.check();
+            if !report.is_ok() {
+                bail!("the DCF would not be valid:\n{report}");
+            }
+            emit(&cantwin_eds::write(&dcf), output.as_deref())
+        }
+    }
+}
+
+/// `INDEX:SUB=VALUE` → the sub-object's ParameterValue.
+fn apply_set(dcf: &mut Eds, set: &str) -> Result<()> {
+    let bad = || anyhow::anyhow!("--set {set:?}: expected INDEX:SUB=VALUE, e.g. 0x1017:0=1000");
+    let (target, value) = set.split_once('=').ok_or_else(bad)?;
+    let (index, sub) = target.split_once(':').ok_or_else(bad)?;
+    let num = |t: &str| -> Option<u32> {
+        let t = t.trim();
+        match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+            Some(h) => u32::from_str_radix(h, 16).ok(),
+            None => t.parse().ok(),
+        }
+    };
+    let index = num(index)
+        .and_then(|v| u16::try_from(v).ok())
+        .ok_or_else(bad)?;
+    let sub = num(sub)
+        .and_then(|v| u8::try_from(v).ok())
+        .ok_or_else(bad)?;
+    let object = dcf
+        .objects
+        .get_mut(&index)
+        .ok_or_else(|| anyhow::anyhow!("--set {set:?}: the file has no object {index:#06X}"))?;
+    let entry = if object.subs.is_empty() && sub == 0 {
+        &mut object.entry
+    } else {
+        object.subs.get_mut(&sub).ok_or_else(|| {
+            anyhow::anyhow!("--set {set:?}: object {index:#06X} has no sub-index {sub}")
+        })?
+    };
+    let value = value.trim().trim_matches('"');
+    let parsed = EdsValue::parse(entry.data_type, value)
+        .map_err(|e| anyhow::anyhow!("--set {set:?}: {e}"))?;
+    entry.parameter_value = Some(parsed);
+    Ok(())
+}
