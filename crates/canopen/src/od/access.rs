@@ -199,6 +199,7 @@ impl<'a, H: OdHooks + ?Sized> Hooked<'a, H> {
 }
 
 impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
+    #[inline]
     fn read(
         &mut self,
         index: u16,
@@ -206,10 +207,11 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
         offset: usize,
         buf: &mut [u8],
     ) -> Result<ReadInfo, AbortCode> {
-        let id = self.od.readable(index, sub)?;
-        if self.od.description().is_hooked(index)
-            && let Some(r) = self.hooks.read(self.od, index, sub, offset, buf)
-        {
+        let (id, hooked) = self.od.description().locate_hooked(index, sub)?;
+        if !self.od.desc_access(id).readable() {
+            return Err(AbortCode::WRITE_ONLY);
+        }
+        if hooked && let Some(r) = self.hooks.read(self.od, index, sub, offset, buf) {
             return r;
         }
         Ok(read_from(self.od.raw(id), offset, buf))
@@ -220,16 +222,14 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
-        let id = self.od.locate(index, sub)?;
+        let (id, hooked) = self.od.description().locate_hooked(index, sub)?;
+        if !hooked {
+            return self.od.download(index, sub, data);
+        }
         self.od.check_download(id, data)?;
-        let hooked = self.od.description().is_hooked(index);
-        if hooked {
-            self.hooks.validate(self.od, index, sub, data)?;
-        }
+        self.hooks.validate(self.od, index, sub, data)?;
         self.od.set_raw(id, data)?;
-        if hooked {
-            self.hooks.written(self.od, index, sub);
-        }
+        self.hooks.written(self.od, index, sub);
         Ok(())
     }
 

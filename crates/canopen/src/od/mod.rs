@@ -650,8 +650,19 @@ impl OdDescription {
     /// sub-index does not (CiA 301 table 22).
     #[inline]
     pub fn locate(&self, index: u16, sub: u8) -> Result<EntryId, AbortCode> {
+        self.locate_hooked(index, sub).map(|(id, _)| id)
+    }
+
+    /// [`Self::locate`], also telling whether the object is served by device hooks.
+    #[inline]
+    pub fn locate_hooked(&self, index: u16, sub: u8) -> Result<(EntryId, bool), AbortCode> {
         let oi = self.position(index).ok_or(AbortCode::NO_OBJECT)?;
         let o = self.spans[oi];
+        self.sub_in(o, sub).map(|id| (id, o.hooked))
+    }
+
+    #[inline]
+    fn sub_in(&self, o: Span, sub: u8) -> Result<EntryId, AbortCode> {
         let first = o.first as usize;
         if o.dense {
             if u16::from(sub) < o.count {
