@@ -389,3 +389,44 @@ fn cia301_7_4_8_2_remote_pdo_write_refused_reports_the_abort() {
         }
     );
 }
+
+#[test]
+fn cia301_7_2_7_emergency_messages_are_reported() {
+    let mut n = Net::new(Master::new(), vec![listener()]);
+    let port = n.devices[0];
+    n.sim
+        .transmit(
+            port,
+            cantwin_can::Frame::std(0x08A, &[0x10, 0x82, 0x11, 1, 2, 3, 4, 5]).unwrap(),
+        )
+        .unwrap();
+    let (t, e) = n.next_event(Duration::from_millis(1)).unwrap();
+    assert_eq!(
+        e,
+        MasterEvent::Emcy {
+            node: 10,
+            emcy: cantwin_canopen::wire::Emcy {
+                code: 0x8210,
+                register: 0x11,
+                manufacturer: [1, 2, 3, 4, 5]
+            }
+        }
+    );
+    assert_eq!(t.as_nanos(), n.frames()[0].1);
+}
+
+#[test]
+fn cia301_7_2_8_3_2_2_node_age_from_the_last_heartbeat() {
+    let mut d = Device::new(3);
+    d.heartbeat = Some(Duration::from_millis(100));
+    let mut n = Net::new(Master::new(), vec![d]);
+    let now = n.now();
+    assert_eq!(n.master().age(3, now), None);
+    n.run_for(Duration::from_millis(130));
+    let heard = n.frames()[0].1;
+    let now = n.now();
+    assert_eq!(
+        n.master().age(3, now).unwrap().as_nanos(),
+        now.as_nanos() - heard
+    );
+}

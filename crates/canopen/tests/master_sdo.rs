@@ -751,3 +751,23 @@ fn cia301_7_2_4_3_12_block_upload_of_1_mib_uses_over_90_percent_of_the_bus() {
     let f = block_upload_bus_fraction(1 << 20);
     assert!(f >= 0.90, "{f}");
 }
+
+#[test]
+fn cia301_7_2_4_3_9_block_download_through_a_4_frame_transmit_queue() {
+    // The master paces its frames by their transmit confirmations: with its window no
+    // larger than the controller queue, a block of 127 segments never overflows it.
+    let port = cantwin_bus::PortConfig::default().with_queue_depth(4);
+    let cfg = MasterConfig {
+        tx_window: Some(4),
+        ..MasterConfig::default()
+    };
+    let mut n = Net::with_master_port(Master::with_config(cfg), vec![Device::new(5)], port);
+    let data = pattern(100_000);
+    assert_eq!(
+        download(&mut n, BIG, data.clone(), Mode::Block { blksize: 127 }),
+        completed(vec![])
+    );
+    assert_eq!(n.device(0).od.get(0x2003, 0), Ok(Value::Domain(data)));
+    let status = n.sim.bus(n.bus).unwrap().port_status(n.master).unwrap();
+    assert_eq!(status.stats.tx_dropped, 0);
+}

@@ -299,6 +299,13 @@ impl Master {
             .map(|p| p.status)
     }
 
+    /// How long ago `node` was last heard, if ever.
+    pub fn age(&self, node: u8, now: Instant) -> Option<Duration> {
+        self.status(node)?
+            .last_seen
+            .map(|t| now.saturating_duration_since(t))
+    }
+
     fn peer(&mut self, node: usize) -> &mut Peer {
         let slot = &mut self.peers[node & 0x7F];
         slot.get_or_insert_with(|| {
