@@ -8,6 +8,7 @@
 //! stream into it ([`ObjectAccess::write_begin`] …). The expedited path does not allocate.
 //!
 //! Decisions where CiA 301 leaves room:
+//!
 //! * A frame whose command specifier is not the next step of the transfer in progress
 //!   (including a new initiate) aborts that transfer with 0x05040001 and is not served;
 //!   the client starts again. An abort from the client ends the transfer silently.
@@ -16,11 +17,6 @@
 //! * CiA 301 §7.2.4.3 gives every SDO frame 8 data bytes; a request with fewer is padded
 //!   with zeros (some clients send short frames; lely-core does the same), a request with
 //!   none is answered with 0x05040001, and remote frames are ignored.
-//!
-//! On a new initiate during a transfer, implementations differ: CANopenNode v4 and
-//! lely-core abort the running transfer with 0x05040001 (the frame is judged against the
-//! state the transfer is in), python-canopen's server starts the new transfer and drops
-//! the old one silently. We do what the two embedded stacks do.
 //! * An expedited download without indicated size writes the type's size if it is below
 //!   4 bytes, else 4 bytes.
 //! * Block download: a segment out of sequence is ignored; at the end of the block (or at
@@ -30,6 +26,11 @@
 //! * Block upload switches to a normal (expedited or segmented) upload when the client's
 //!   protocol switch threshold is not 0 and the size is at or below it (§7.2.4.3.12).
 //! * The server supports CRC; it is used when the client supports it too.
+//!
+//! On a new initiate during a transfer, implementations differ: CANopenNode v4 and
+//! lely-core abort the running transfer with 0x05040001 (the frame is judged against the
+//! state the transfer is in), python-canopen's server starts the new transfer and drops
+//! the old one silently. This server does what the two embedded stacks do.
 
 use super::crc::Crc16;
 use super::wire::{BlockSegment, Initiate, Mux, Request, Response};
