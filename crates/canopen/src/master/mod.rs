@@ -7,7 +7,7 @@
 //!   different nodes run concurrently, transfers to the same node queue), the NMT master
 //!   services and the producers, and reports everything as timestamped [`MasterEvent`]s;
 //! * [`pdo`]: reading and writing another node's PDO parameters and decoding its PDOs;
-//! * [`drive`]: a loop that runs a [`Master`] over any [`Port`] with a clock.
+//! * [`drive()`]: a loop that runs a [`Master`] over any [`Port`] with a clock.
 //!
 //! ```
 //! use cantwin_can::{Instant, Node, Outbox};
@@ -968,6 +968,101 @@ impl Node for Master {
             // A frame that will never be confirmed frees its place in the window.
             self.in_flight = self.in_flight.saturating_sub(1);
             self.release(out);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn cia301_7_2_8_3_1_node_ids_are_checked() {
+        let mut m = Master::new();
+        let mut out = Outbox::new();
+        let mux = Mux::new(0x1000, 0);
+        assert_eq!(
+            m.upload(0, mux, Mode::Auto, Instant::ZERO, &mut out),
+            Err(MasterError::NodeId(0))
+        );
+        assert_eq!(
+            m.upload(128, mux, Mode::Auto, Instant::ZERO, &mut out),
+            Err(MasterError::NodeId(128))
+        );
+        assert_eq!(
+            m.guard(5, Some((Duration::ZERO, 3)), Instant::ZERO),
+            Err(MasterError::ZeroTime)
+        );
+        assert_eq!(
+            m.download(5, mux, vec![0; 5], Mode::Expedited, Instant::ZERO, &mut out),
+            Err(MasterError::Client(ClientError::ExpeditedLength(5)))
+        );
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn tx_window_holds_frames_until_they_are_sent() {
+        let cfg = MasterConfig {
+            tx_window: Some(2),
+            ..MasterConfig::default()
+        };
+        let mut m = Master::with_config(cfg);
+        let mut out = Outbox::new();
+        for cs in [NmtCs::Start, NmtCs::Stop, NmtCs::ResetNode] {
+            m.nmt(cs, 0, &mut out).unwrap();
+        }
+        let sent: Vec<Frame> = out.drain().collect();
+        assert_eq!(sent.len(), 2);
+        m.on_sent(&sent[0], Instant::ZERO, &mut out);
+        let more: Vec<String> = out.drain().map(|f| f.to_string()).collect();
+        assert_eq!(more, ["000#8100"]);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Any traffic, during a scan with guarding and a SYNC producer running: no panic,
+        /// and the scan still ends at its timeout.
+        #[test]
+        fn any_traffic_is_handled(
+            frames in proptest::collection::vec(
+                (0u16..0x800, proptest::collection::vec(any::<u8>(), 0..=8), any::<bool>()),
+                0..200,
+            ),
+        ) {
+            let mut m = Master::new();
+            let mut out = Outbox::new();
+            m.scan(Instant::ZERO, &mut out).unwrap();
+            m.guard(7, Some((Duration::from_millis(10), 3)), Instant::ZERO).unwrap();
+            m.watch_heartbeat(9, Some(Duration::from_millis(20))).unwrap();
+            m.set_sync(Some((Duration::from_millis(1), 5)), Instant::ZERO).unwrap();
+            let mut now = Instant::ZERO;
+            for (id, data, remote) in frames {
+                now += Duration::from_micros(100);
+                let f = if remote {
+                    Frame::remote(Id::standard(id).unwrap(), 1).unwrap()
+                } else {
+                    Frame::std(id, &data).unwrap()
+                };
+                m.on_frame(&f, now, &mut out);
+                for f in out.drain().collect::<Vec<_>>() {
+                    m.on_sent(&f, now, &mut out);
+                }
+                if m.next_deadline().is_some_and(|d| d <= now) {
+                    m.on_tick(now, &mut out);
+                }
+            }
+            let end = Instant::from_nanos(2_000_000_000);
+            while let Some(d) = m.next_deadline().filter(|d| *d <= end) {
+                m.on_tick(d, &mut out);
+                for f in out.drain().collect::<Vec<_>>() {
+                    m.on_sent(&f, d, &mut out);
+                }
+            }
+            let finished = std::iter::from_fn(|| m.poll_event())
+                .filter(|(_, e)| matches!(e, MasterEvent::ScanFinished { .. }))
+                .count();
+            prop_assert_eq!(finished, 1);
         }
     }
 }
