@@ -38,7 +38,8 @@ def decode(tshark, pcap, fields, display_filter):
 @pytest.fixture(scope="module")
 def recorded_pcap(tmp_path_factory):
     """A run of scenarios/cia301-device.toml driven by python-canopen, recorded to a pcap:
-    NMT start, an expedited SDO upload of 0x1018 sub 1, five SYNCs with their TPDOs."""
+    NMT start, an expedited SDO upload of 0x1018 sub 1, five SYNCs with their TPDOs, an
+    EMCY raised through 0x2001 and an aborted SDO upload."""
     pcap = tmp_path_factory.mktemp("tshark") / "run.pcap"
     sim = start_sim(CIA301_SCENARIO, extra=["--pcap", str(pcap)])
     try:
@@ -54,6 +55,10 @@ def recorded_pcap(tmp_path_factory):
             for _ in range(5):
                 net.sync.transmit()
                 time.sleep(0.05)
+            node.sdo.download(0x2001, 0, struct.pack("<H", 0x5000))  # raise EMCY 0x5000
+            with pytest.raises(canopen.SdoAbortedError):
+                node.sdo.upload(0x6000, 0)
+            time.sleep(0.05)
         finally:
             net.disconnect()
     finally:
@@ -107,3 +112,19 @@ def test_tshark_decodes_sync_and_tpdos(tshark, recorded_pcap):
     # 0x2100 sub 1 counts SYNCs: the TPDO1 answering SYNC n carries n - 1.
     counts = [struct.unpack_from("<H", bytes.fromhex(d.replace(":", "")))[0] for d in tpdo1]
     assert counts == [0, 1, 2, 3, 4], counts
+
+
+def test_tshark_decodes_emcy(tshark, recorded_pcap):
+    rows = decode(
+        tshark, recorded_pcap,
+        ["canopen.cob_id", "canopen.em.err_code", "canopen.em.err_reg_ge"],
+        "canopen.em.err_code",
+    )
+    assert [(int(c, 16), int(e, 0)) for c, e, _ in rows] == [(0x80 + NODE_ID, 0x5000)], rows
+    assert rows[0][2] in ("1", "True"), rows
+
+
+def test_tshark_decodes_sdo_abort_code(tshark, recorded_pcap):
+    rows = decode(tshark, recorded_pcap, ["canopen.cob_id", "canopen.sdo.abort_code"],
+                  "canopen.sdo.abort_code")
+    assert [(int(c, 16), int(a, 0)) for c, a in rows] == [(0x580 + NODE_ID, 0x06020000)], rows
