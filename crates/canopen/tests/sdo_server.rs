@@ -4,7 +4,9 @@
 mod sdo_harness;
 
 use cantwin_can::{Duration, Id, Instant, Outbox};
-use cantwin_canopen::od::{ObjectDictionary, ReadInfo, Value};
+use cantwin_canopen::od::{
+    Access, DataType, Hooked, ObjectDictionary, OdBuilder, OdHooks, ReadInfo, SubObject, Value,
+};
 use cantwin_canopen::sdo::SdoServer;
 use cantwin_canopen::sdo::crc::Crc16;
 use cantwin_canopen::{AbortCode, ObjectAccess};
@@ -523,6 +525,82 @@ fn cia301_7_2_4_3_17_device_abort_codes_reach_the_wire() {
             abort(0x1600, 1, code)
         );
     }
+}
+
+/// A device whose parameters 0x2000..=0x20FF may only be written while it is stopped.
+struct Drive {
+    running: bool,
+}
+
+impl OdHooks for Drive {
+    fn validate_begin(
+        &mut self,
+        _: &ObjectDictionary,
+        _: u16,
+        _: u8,
+        _: Option<usize>,
+    ) -> Result<(), AbortCode> {
+        if self.running {
+            Err(AbortCode::DEVICE_STATE)
+        } else {
+            Ok(())
+        }
+    }
+    fn validate(&mut self, _: &ObjectDictionary, _: u16, _: u8, _: &[u8]) -> Result<(), AbortCode> {
+        if self.running {
+            Err(AbortCode::DEVICE_STATE)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+#[test]
+fn cia301_7_2_4_3_17_present_device_state_does_not_allow_it() {
+    let desc = OdBuilder::new()
+        .var(
+            0x2000,
+            SubObject::new("Speed", DataType::Unsigned16, Access::Rw),
+        )
+        .var(
+            0x2001,
+            SubObject::new("Name", DataType::VisibleString, Access::Rw),
+        )
+        .hook(0x2000..=0x20FF)
+        .build()
+        .unwrap();
+    let mut od = ObjectDictionary::new(Arc::new(desc), NODE);
+    let mut drive = Drive { running: true };
+    let mut server = SdoServer::for_node(NODE);
+    let mut out = Outbox::new();
+    let mut send = |b: [u8; 8], drive: &mut Drive, out: &mut Outbox| {
+        out.clear();
+        let mut access = Hooked::new(&mut od, drive);
+        server.on_frame(&frame(RX, b), Instant::ZERO, &mut access, out);
+        out.frames()
+            .iter()
+            .map(|f| <[u8; 8]>::try_from(f.data_bytes()).unwrap())
+            .collect::<Vec<_>>()
+    };
+    // Expedited: refused as the value arrives.
+    assert_eq!(
+        send([0x2B, 0x00, 0x20, 0x00, 1, 0, 0, 0], &mut drive, &mut out),
+        [[0x80, 0x00, 0x20, 0x00, 0x22, 0x00, 0x00, 0x08]]
+    );
+    // Segmented: refused at the initiate, before any data.
+    assert_eq!(
+        send([0x21, 0x01, 0x20, 0x00, 10, 0, 0, 0], &mut drive, &mut out),
+        [abort(0x2001, 0, AbortCode::DEVICE_STATE)]
+    );
+    drive.running = false;
+    assert_eq!(
+        send([0x2B, 0x00, 0x20, 0x00, 1, 0, 0, 0], &mut drive, &mut out),
+        [[0x60, 0x00, 0x20, 0x00, 0, 0, 0, 0]]
+    );
+    assert_eq!(
+        send([0x21, 0x01, 0x20, 0x00, 2, 0, 0, 0], &mut drive, &mut out),
+        [[0x60, 0x01, 0x20, 0x00, 0, 0, 0, 0]]
+    );
 }
 
 // ---- SDO timeout ----

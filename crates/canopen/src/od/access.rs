@@ -136,6 +136,20 @@ pub trait OdHooks {
         None
     }
 
+    /// Accepts or refuses a segmented or block download as it starts (e.g. 0x08000022 when
+    /// the device state does not allow it), before any data is sent. `size` is the size
+    /// the client indicated, if it did.
+    fn validate_begin(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        size: Option<usize>,
+    ) -> Result<(), AbortCode> {
+        let _ = (od, index, sub, size);
+        Ok(())
+    }
+
     /// Accepts or refuses (with the abort code to send) a write that passed the
     /// dictionary's checks.
     fn validate(
@@ -234,7 +248,14 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
     }
 
     fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
-        self.od.stage_begin(index, sub, size).map(|_| ())
+        self.od.stage_begin(index, sub, size)?;
+        if self.od.description().is_hooked(index)
+            && let Err(code) = self.hooks.validate_begin(self.od, index, sub, size)
+        {
+            self.od.stage_cancel();
+            return Err(code);
+        }
+        Ok(())
     }
 
     fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
