@@ -386,6 +386,45 @@ pub fn decode(
     Ok(values)
 }
 
+/// Decodes the PDOs of several nodes, each by the COB-ID and mapping read from the node
+/// (a [`PdoOutcome::Read`]) and the node's dictionary description.
+#[derive(Debug, Clone, Default)]
+pub struct PdoDecoder {
+    pdos: Vec<(u32, Vec<MapEntry>, std::sync::Arc<OdDescription>)>,
+}
+
+impl PdoDecoder {
+    /// An empty decoder.
+    pub fn new() -> Self {
+        PdoDecoder::default()
+    }
+
+    /// Decodes frames on `params.cob_id` with `params.mapping` and `od` (replacing an earlier
+    /// PDO on the same identifier). A PDO whose COB-ID is not valid (bit 31) is not added.
+    pub fn add(&mut self, params: &PdoParams, od: std::sync::Arc<OdDescription>) {
+        if params.cob_id & 0x8000_0000 != 0 {
+            return;
+        }
+        // Bit 30 (RTR) does not change the identifier; bit 29 marks a 29-bit one.
+        let id = params.cob_id & 0x3FFF_FFFF;
+        self.pdos.retain(|p| p.0 != id);
+        self.pdos.push((id, params.mapping.clone(), od));
+    }
+
+    /// The values of `frame` if it is one of the PDOs added (`None` otherwise).
+    pub fn decode(&self, frame: &cantwin_can::Frame) -> Option<Result<Vec<PdoValue>, DecodeError>> {
+        if frame.is_remote() {
+            return None;
+        }
+        let key = match frame.id() {
+            cantwin_can::Id::Standard(s) => u32::from(s.as_raw()),
+            cantwin_can::Id::Extended(e) => e.as_raw() | 0x2000_0000,
+        };
+        let (_, mapping, od) = self.pdos.iter().find(|p| p.0 == key)?;
+        Some(decode(mapping, od, frame.data_bytes()))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -480,6 +519,29 @@ mod tests {
         assert_eq!(
             decode(&mapping, &od, &[0x01, 0x18]),
             Err(DecodeError::TooShort { need: 24, have: 16 })
+        );
+
+        let mut d = PdoDecoder::new();
+        let od = std::sync::Arc::new(od);
+        let params = PdoParams {
+            cob_id: 0x4000_0185,
+            mapping: mapping.to_vec(),
+            ..PdoParams::default()
+        };
+        d.add(&params, od.clone());
+        d.add(
+            &PdoParams {
+                cob_id: 0x8000_0186,
+                ..params.clone()
+            },
+            od,
+        );
+        let f = cantwin_can::Frame::std(0x185, &[0x00, 0xE8, 0x03]).unwrap();
+        let v = d.decode(&f).unwrap().unwrap();
+        assert_eq!(v[1].value, Value::Integer16(1000));
+        assert!(
+            d.decode(&cantwin_can::Frame::std(0x186, &[0; 3]).unwrap())
+                .is_none()
         );
     }
 }
