@@ -44,6 +44,7 @@ impl Registry {
         r.register(Box::new(crate::kinds::cia301::Cia301));
         r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
         r.register(Box::new(crate::kinds::adv200::Adv200Kind));
+        r.register(Box::new(crate::kinds::tm3::Tm3Kind));
         r
     }
 

@@ -129,6 +129,8 @@ pub struct Tm3Coupler {
     status: Vec<Status>,
     /// Physical digital inputs per module, bit n = channel n.
     di: Vec<u32>,
+    /// Physical analog inputs, by 0x6401 channel (0-based).
+    ai: Vec<i16>,
     triggers: AnalogTriggers,
     failure: bool,
     internal_error: bool,
@@ -182,6 +184,7 @@ impl Tm3Coupler {
             fitted,
             status: vec![Status::Ok; n],
             di: vec![0; n],
+            ai: vec![0; usize::from(config.island.layout().analog_inputs)],
             triggers: AnalogTriggers::new(config.island.layout().analog_inputs),
             failure: false,
             internal_error: false,
@@ -325,6 +328,29 @@ impl Tm3Coupler {
         }
     }
 
+    /// Writes the physical inputs of the working modules into 0x6000/0x6401 again (after
+    /// the application objects went back to their defaults).
+    fn reapply_inputs(&mut self) {
+        self.triggers.reset();
+        for i in 0..self.di.len() {
+            if !self.working(i) {
+                continue;
+            }
+            self.apply_digital_inputs(i);
+            let (Some(o), Some(m)) = (
+                self.config.island.offsets(i),
+                self.config.island.modules().get(i),
+            ) else {
+                continue;
+            };
+            for ch in 0..m.spec.analog_inputs {
+                let sub = o.analog_input + ch + 1;
+                let v = self.ai.get(usize::from(sub) - 1).copied().unwrap_or(0);
+                self.triggers.set_input(self.device.od_mut(), sub, v);
+            }
+        }
+    }
+
     /// Sets analog input `channel` (0-based) of module `module` (1-based) to `value`
     /// (raw 16-bit). A 0x6421 trigger that fires makes the event-driven TPDOs mapping the
     /// channel due.
@@ -338,14 +364,17 @@ impl Tm3Coupler {
         if channel >= spec.analog_inputs {
             return Err(IoError::NoChannel { module, channel });
         }
-        if !self.working(i) {
-            return Ok(());
-        }
         let sub = self
             .config
             .island
             .offsets(i)
             .map_or(1, |o| o.analog_input + channel + 1);
+        if let Some(v) = self.ai.get_mut(usize::from(sub) - 1) {
+            *v = value;
+        }
+        if !self.working(i) {
+            return Ok(());
+        }
         if self.triggers.set_input(self.device.od_mut(), sub, value) != 0
             && let Some(p) = self.device.pdo_mut()
         {
@@ -563,14 +592,7 @@ impl Tm3Coupler {
                     self.sync_timed_out = false;
                     self.raise_module_errors();
                 }
-                Event::ResetApplication => {
-                    self.triggers.reset();
-                    for i in 0..self.di.len() {
-                        if self.working(i) {
-                            self.apply_digital_inputs(i);
-                        }
-                    }
-                }
+                Event::ResetApplication => self.reapply_inputs(),
                 Event::StateChanged {
                     to: State::Operational,
                     ..
@@ -785,7 +807,10 @@ impl Node for Tm3Coupler {
         self.rx_level = 0;
         self.rx_last = now;
         self.module_check();
-        self.run(now, out, |c, o| c.device.on_power_up(now, o));
+        self.run(now, out, |c, o| {
+            c.device.on_power_up(now, o);
+            c.reapply_inputs();
+        });
     }
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

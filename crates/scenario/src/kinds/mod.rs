@@ -4,3 +4,4 @@ pub mod adv200;
 pub mod cia301;
 pub mod generator;
 pub mod opendrive;
+pub mod tm3;
