@@ -2,7 +2,9 @@
 
 mod bench;
 mod benchmarks_md;
+mod cal;
 mod capture_tap;
+mod connect;
 mod demo;
 mod dump;
 mod eds;
@@ -48,6 +50,13 @@ enum Command {
                             cantwin eds dcf device.eds --node-id 5 -o node5.dcf"
     )]
     Eds(eds::Args),
+    /// A CAL master for the OPEN DRIVE (application 003): commands, reference, parameters, alarm events.
+    #[command(
+        after_help = "Examples:\n  cantwin cal --scenario scenarios/opendrive.toml cmd --reference-remote on --command-remote on --start on --ref 50\n  \
+                            cantwin cal --socketcand 127.0.0.1:29536 read\n  cantwin cal --socketcand 127.0.0.1:29536 param read max-frequency\n  \
+                            cantwin cal --socketcand 127.0.0.1:29536 events watch"
+    )]
+    Cal(cal::Args),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -63,6 +72,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Sim(args) => sim::run(&args),
         Command::Dump(args) => dump::run(&args),
         Command::Eds(args) => eds::run(&args),
+        Command::Cal(args) => cal::run(&args),
     }
 }
 

@@ -61,6 +61,9 @@ fn every_command_has_help_with_examples() {
         &["eds", "--help"],
         &["eds", "check", "--help"],
         &["eds", "dcf", "--help"],
+        &["cal", "--help"],
+        &["cal", "cmd", "--help"],
+        &["cal", "param", "--help"],
     ] {
         let (ok, out, _) = cantwin(cmd);
         assert!(ok);
@@ -334,4 +337,83 @@ fn eds_dcf_commissions_a_node_and_doc_renders_markdown() {
     let (ok, out, _) = cantwin(&["eds", "doc", &corpus("drive.eds")]);
     assert!(ok);
     assert!(out.starts_with("# Drive V1"), "{out}");
+}
+
+/// Start `cantwin sim SCENARIO --socketcand 0` and return the child and the address.
+fn sim_with_socketcand(scenario: &str, seconds: &str) -> (std::process::Child, String) {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["sim", scenario, "--socketcand", "0", "--duration", seconds])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line.split_whitespace().nth(1).unwrap().to_string();
+    (child, addr)
+}
+
+fn scenario_file(name: &str) -> String {
+    format!("{}/../../scenarios/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn cal_commands_drive_the_opendrive_twin_through_socketcand() {
+    let (mut child, addr) = sim_with_socketcand(&scenario_file("opendrive.toml"), "20");
+    let cal = |args: &[&str]| {
+        let mut full = vec!["cal", "--socketcand", addr.as_str()];
+        full.extend_from_slice(args);
+        cantwin(&full)
+    };
+    let (ok, out, err) = cal(&["read"]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        out.trim(),
+        "reference 0.00 Hz  reference-remote off  command-remote off  start off  reverse off"
+    );
+    let (ok, out, err) = cal(&[
+        "cmd",
+        "--reference-remote",
+        "on",
+        "--command-remote",
+        "on",
+        "--start",
+        "on",
+        "--ref",
+        "50",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        out.trim(),
+        "reference 50.00 Hz  reference-remote on  command-remote on  start on  reverse off"
+    );
+    // The drive keeps its state between commands: a remote-frame read sees the same.
+    let (ok, out, err) = cal(&["read", "--remote"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("reference 50.00 Hz") && out.contains("start on"),
+        "{out}"
+    );
+    let (ok, out, err) = cal(&["param", "read", "max-frequency"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "max-frequency = 5000 (0x1388)");
+    // A value the drive refuses comes back as its error code.
+    let (ok, _, err) = cal(&["param", "write", "thermal-current", "5"]);
+    assert!(!ok);
+    assert!(err.contains("error code 2 (value not allowed)"), "{err}");
+    let (ok, out, err) = cal(&["events", "enable"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "alarm events enabled");
+    child.kill().ok();
+    child.wait().ok();
+}
+
+#[test]
+fn client_commands_need_a_target() {
+    let (ok, _, err) = cantwin(&["cal", "read"]);
+    assert!(!ok);
+    assert!(err.contains("--socketcand HOST:PORT"), "{err}");
 }
