@@ -105,6 +105,10 @@ pub struct Adv200 {
     latched: Latched,
     powered: bool,
     sticky: Option<Alarm>,
+    /// The time of the last call from the bus.
+    last_now: Instant,
+    /// An input changed outside a call from the bus: evaluate at once.
+    dirty: bool,
 }
 
 impl core::fmt::Debug for Adv200 {
@@ -151,6 +155,8 @@ impl Adv200 {
             latched: Latched::default(),
             powered: false,
             sticky: None,
+            last_now: Instant::ZERO,
+            dirty: false,
         }
     }
 
@@ -166,6 +172,7 @@ impl Adv200 {
 
     /// Writes parameter `par` from the keypad (checked like an SDO write).
     pub fn set_param(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
+        self.dirty = true;
         self.params.set(par, value)
     }
 
@@ -186,16 +193,19 @@ impl Adv200 {
 
     /// Sets digital input k (1..=8), effective at the next event.
     pub fn set_digital_input(&mut self, k: u8, on: bool) {
+        self.dirty = true;
         self.drive.set_digital_input(k, on);
     }
 
     /// Sets analog input k (1..=2) in volts.
     pub fn set_analog_input(&mut self, k: u8, volts: f64) {
+        self.dirty = true;
         self.drive.set_analog_input(k, volts);
     }
 
     /// Raises a drive alarm (an outside cause: overvoltage, external fault, …).
     pub fn raise_alarm(&mut self, alarm: Alarm) {
+        self.dirty = true;
         self.drive.raise(alarm);
     }
 
@@ -271,6 +281,7 @@ impl Adv200 {
     /// fieldbus parameters and restarts the card.
     pub fn reset_drive(&mut self, now: Instant, out: &mut Outbox) {
         self.powered = true;
+        self.last_now = now;
         self.card = None;
         self.drive.restart();
         self.sticky = None;
@@ -374,6 +385,8 @@ impl Adv200 {
 
     /// Runs the drive to `now`, exchanges values with the dictionary and reports alarms.
     fn settle(&mut self, now: Instant, _out: &mut Outbox) {
+        self.last_now = self.last_now.max(now);
+        self.dirty = false;
         self.pull();
         self.profile_in(now);
         self.drive.advance(&mut self.params, now);
@@ -505,13 +518,19 @@ impl Adv200 {
         }
         let od = c.dev.od();
         let cw = raw_i64(od, 0x6040, 0).unwrap_or(0) as u16;
+        // The fault reset clears the drive's alarms first, so that transition 15 sees them
+        // gone in the same evaluation.
+        if c.ds402.reset_requested(cw) && !self.drive.alarms().is_empty() {
+            self.drive.reset_alarms();
+            if let Some(sticky) = self.sticky
+                && !self.drive.alarms().contains(&sticky)
+            {
+                self.drive.raise(sticky);
+            }
+        }
         let fault = !self.drive.alarms().is_empty();
         let stopped = self.drive.speed() == 0.0;
-        if c.ds402.update(cw, fault, stopped) {
-            self.drive.reset_alarms();
-            let fault = !self.drive.alarms().is_empty();
-            c.ds402.refresh(fault, stopped);
-        }
+        c.ds402.update(cw, fault, stopped);
         let target = raw_i64(od, 0x6042, 0).unwrap_or(0);
         let min = raw_i64(od, 0x6046, 1).unwrap_or(0);
         let max = raw_i64(od, 0x6046, 2).unwrap_or(i64::from(i16::MAX));
@@ -749,6 +768,9 @@ impl Node for Adv200 {
     fn next_deadline(&self) -> Option<Instant> {
         if !self.powered {
             return None;
+        }
+        if self.dirty {
+            return Some(self.last_now);
         }
         [
             self.drive.next_deadline(),

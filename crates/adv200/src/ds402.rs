@@ -92,6 +92,12 @@ impl Ds402 {
         self.state
     }
 
+    /// Whether `cw` requests a fault reset: a rising edge of bit 7 against the last control
+    /// word applied.
+    pub fn reset_requested(&self, cw: u16) -> bool {
+        cw & 0x80 != 0 && self.last_cw & 0x80 == 0
+    }
+
     /// Applies control word `cw` given whether a fault is active and whether the motor has
     /// stopped (to end a quick stop). Returns whether a fault reset was requested (rising edge
     /// of bit 7).

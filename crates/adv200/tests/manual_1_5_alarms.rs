@@ -1,0 +1,192 @@
+//! §1.5: the drive's alarms as EMCY, alarm reset, and the fieldbus faults raised at run time.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use cantwin_adv200::alarms::Alarm;
+use cantwin_adv200::params::par;
+use cantwin_adv200::{Adv200, Leds};
+use cantwin_can::{ControllerEvent, Instant, Node, Outbox};
+use common::*;
+
+fn emcy(code: u16, register: u8, mfr: [u8; 5]) -> String {
+    let c = code.to_le_bytes();
+    let b = [c[0], c[1], register, mfr[0], mfr[1], mfr[2], mfr[3], mfr[4]];
+    let hex: String = b.iter().map(|x| format!("{x:02X}")).collect();
+    format!("08C#{hex}")
+}
+
+fn register(h: &H) -> u8 {
+    h.d.device().unwrap().error_register()
+}
+
+#[test]
+fn manual_1_5_every_drive_alarm_sends_its_emcy_code() {
+    let table: [(Alarm, u16); 14] = [
+        (Alarm::Overvoltage, 0x3210),
+        (Alarm::Undervoltage, 0x3220),
+        (Alarm::GroundFault, 0x2110),
+        (Alarm::Overcurrent, 0x2310),
+        (Alarm::Desaturation, 0x2130),
+        (Alarm::MultiUndervolt, 0xFF06),
+        (Alarm::HeatsinkOt, 0x4210),
+        (Alarm::MotorOt, 0xFF0C),
+        (Alarm::DriveOverload, 0x8311),
+        (Alarm::MotorOverload, 0x7121),
+        (Alarm::OptEncFault, 0x3130),
+        (Alarm::ExternalFault, 0x9000),
+        (Alarm::PlcFault(1), 0xFF17),
+        (Alarm::ParamError, 0xFF2D),
+    ];
+    for (a, code) in table {
+        assert_eq!(a.emcy_code(), code, "{a:?}");
+    }
+    for a in Alarm::all() {
+        let mut h = H::canopen(|_| {});
+        h.send("000#010C");
+        h.run_to(MS);
+        let from = h.log.len();
+        h.d.raise_alarm(a);
+        h.run_to(2 * MS);
+        let reg = register(&h);
+        assert_eq!(reg & 0x01, 0x01, "generic error bit for {a:?}");
+        assert_eq!(
+            h.since(from),
+            [(MS, emcy(a.emcy_code(), reg, a.manufacturer_bytes()))],
+            "{a:?}"
+        );
+        assert_eq!(h.d.param(par::DRIVE_OK), Ok(0));
+        assert_eq!(h.d.param(par::ACTIVE_ALARM), Ok(i64::from(a.emcy_code())));
+    }
+}
+
+#[test]
+fn manual_1_5_alarm_reset_clears_the_emcy() {
+    let mut h = H::canopen(|_| {});
+    h.send("000#010C");
+    h.d.raise_alarm(Alarm::Overvoltage);
+    h.run_to(MS);
+    let from = h.log.len();
+    // Alarm reset (PAR 1070 = 0x242E) by SDO.
+    assert_eq!(
+        h.send("60C#2F2E240101000000"),
+        ["58C#602E240100000000", "08C#0000000000000000"]
+    );
+    assert_eq!(h.since(from).len(), 2);
+    assert_eq!(h.d.param(par::DRIVE_OK), Ok(1));
+    assert!(h.d.drive().alarms().is_empty());
+}
+
+#[test]
+fn manual_1_5_opt_bus_fault_only_while_enabled_unless_alarm_mode() {
+    // Invalid NMT command (FFC6) while disabled, alarm mode 0: nothing.
+    let mut h = H::canopen(|_| {});
+    h.send("000#010C");
+    assert_eq!(h.send("000#050C"), Vec::<String>::new());
+    assert!(h.d.opt_bus_faults().is_empty());
+    // Enabled (terminal enable, digital input 1): Opt Bus Fault FFC6.
+    h.d.set_digital_input(1, true);
+    h.run_to(MS);
+    let reg = 0x81;
+    assert_eq!(
+        h.send("000#050C"),
+        [emcy(0xFF11, reg, [0xC6, 0xFF, 0, 0, 0])]
+    );
+    assert_eq!(h.d.opt_bus_faults(), [0xFFC6]);
+    assert_eq!(h.d.param(par::ENABLE_STATE), Ok(0), "the drive trips");
+    // Alarm mode 1 (PAR 4012): also while disabled.
+    let mut h = H::canopen(|d| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap());
+    assert_eq!(
+        h.send("000#050C"),
+        [emcy(0xFF11, reg, [0xC6, 0xFF, 0, 0, 0])]
+    );
+}
+
+#[test]
+fn manual_1_5_wrong_nmt_length_bus_off_and_overflow() {
+    let alarm_mode = |d: &mut Adv200| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap();
+    let mut h = H::canopen(alarm_mode);
+    assert_eq!(
+        h.send("000#01"),
+        [emcy(0xFF11, 0x81, [0xC5, 0xFF, 0, 0, 0])]
+    );
+    let mut h = H::canopen(alarm_mode);
+    let mut out = Outbox::new();
+    h.d.on_controller_event(ControllerEvent::BusOff, Instant::from_nanos(MS), &mut out);
+    assert_eq!(h.d.opt_bus_faults(), [0xFFC7]);
+    let mut h = H::canopen(alarm_mode);
+    h.d.on_controller_event(
+        ControllerEvent::RxOverrun,
+        Instant::from_nanos(MS),
+        &mut out,
+    );
+    assert_eq!(h.d.opt_bus_faults(), [0x8110]);
+}
+
+#[test]
+fn manual_1_1_3_life_guarding_loss_raises_bus_fault_8130() {
+    let mut h = H::canopen(|d| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap());
+    h.send("000#010C");
+    h.run_to(10 * MS);
+    // The master guards once: the card answers with toggle 0 and state operational (5).
+    assert_eq!(h.send("70C#R"), ["70C#05"]);
+    let from = h.log.len();
+    // Life time 60 ms × 3 = 180 ms later the card loses the master.
+    h.run_to(300 * MS);
+    let got = h.since(from);
+    assert_eq!(got[0], (190 * MS, "08C#3081110000000000".to_string()));
+    assert_eq!(
+        got[1],
+        (190 * MS, emcy(0xFF11, 0x91, [0x30, 0x81, 0, 0, 0]))
+    );
+    assert!(h.d.opt_bus_faults().contains(&0x8130));
+}
+
+#[test]
+fn manual_1_5_communication_cycle_period_exceeded_is_bus_loss() {
+    let mut h = H::canopen(|d| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap());
+    // 0x1006 = 10 000 µs.
+    assert_eq!(h.send("60C#2306100010270000"), ["58C#6006100000000000"]);
+    h.send("000#010C");
+    for k in 1..=3 {
+        h.run_to(k * 10 * MS);
+        h.send("080#");
+    }
+    assert!(h.d.opt_bus_faults().is_empty());
+    let from = h.log.len();
+    // The last SYNC at 30 ms; none within 1.5 periods: bus loss (sub-code 0) at 45 ms.
+    h.run_to(100 * MS);
+    assert_eq!(
+        h.since(from),
+        [(45 * MS, emcy(0xFF11, 0x81, [0, 0, 0, 0, 0]))]
+    );
+    assert_eq!(h.d.opt_bus_faults(), [0x0000]);
+}
+
+#[test]
+fn manual_leds_follow_nmt_and_alarm() {
+    let mut h = H::canopen(|d| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap());
+    let on = |al, op| Leds {
+        al,
+        op,
+        pwr: true,
+        vc5: true,
+    };
+    assert_eq!(h.d.leds(), on(true, false));
+    h.send("000#010C");
+    assert_eq!(h.d.leds(), on(false, true));
+    assert_eq!(h.d.param(par::FIELDBUS_STATE), Ok(2));
+    h.send("000#050C");
+    assert_eq!(
+        h.d.leds(),
+        on(true, true),
+        "Opt Bus Fault lights AL in Operational"
+    );
+    h.send("000#020C");
+    assert_eq!(h.d.param(par::FIELDBUS_STATE), Ok(0));
+    assert_eq!(h.d.leds(), on(true, false));
+    h.send("000#800C");
+    assert_eq!(h.d.param(par::FIELDBUS_STATE), Ok(1));
+    // Not powered: all off.
+    assert_eq!(Adv200::new(Default::default()).leds(), Leds::default());
+}
