@@ -136,8 +136,10 @@ pub struct Tm3Coupler {
     internal_error: bool,
     switch: u8,
     history: Vec<u32>,
-    /// The module each active code was raised for.
-    emcy_module: Vec<(u16, u8)>,
+    /// The (code, module) pairs raised and still active.
+    raised: Vec<(u16, u8)>,
+    /// The modules of the EMCYs the CiA 301 layer will send in this call, in order.
+    pending: Vec<(u16, u8)>,
     sync_seen: Option<Instant>,
     sync_timed_out: bool,
     rx_level: u64,
@@ -190,7 +192,8 @@ impl Tm3Coupler {
             internal_error: false,
             switch: config.node_id,
             history: Vec::new(),
-            emcy_module: Vec::new(),
+            raised: Vec::new(),
+            pending: Vec::new(),
             sync_seen: None,
             sync_timed_out: false,
             rx_level: 0,
@@ -468,28 +471,29 @@ impl Tm3Coupler {
     }
 
     /// Raises `code` for `module` (0 = coupler): through the CiA 301 layer if newly
-    /// active there, else (the same code for another module) as an EMCY of its own.
+    /// active there, else (the same code for another module) as an EMCY of its own. A
+    /// code already active for that module is not raised again.
     fn raise(&mut self, code: u16, module: u8) {
+        if self.raised.contains(&(code, module)) && self.device.emcy().is_active(code) {
+            return;
+        }
         if matches!(code, 0x7000..=0x7FFF) {
             self.device.emcy().set_register_bits(0x80, true);
         }
-        self.emcy_module.retain(|&(c, _)| c != code);
-        self.emcy_module.push((code, module));
-        if !self.device.emcy().raise(code, [0; 5]) {
-            let register = self.device.error_register();
-            self.push_history(diag::history_entry(code, register, module));
-            if self.state().allows_emcy() {
-                let mut data = [0u8; 8];
-                data[..2].copy_from_slice(&code.to_le_bytes());
-                data[2] = register;
-                if let Some(id) = self.emcy_id() {
-                    self.scratch.push(Frame::data_array(id, data));
-                }
-            }
-        } else {
-            let register = self.device.error_register();
-            self.push_history(diag::history_entry(code, register, module));
+        self.raised.push((code, module));
+        if self.device.emcy().raise(code, [0; 5]) {
+            self.pending.push((code, module));
+        } else if self.state().allows_emcy()
+            && let Some(id) = self.emcy_id()
+        {
+            let mut data = [0u8; 8];
+            data[..2].copy_from_slice(&code.to_le_bytes());
+            data[2] = self.device.error_register();
+            data[7] = module;
+            self.scratch.push(Frame::data_array(id, data));
         }
+        let register = self.device.error_register();
+        self.push_history(diag::history_entry(code, register, module));
     }
 
     fn push_history(&mut self, entry: u32) {
@@ -547,7 +551,8 @@ impl Tm3Coupler {
         for (k, &code) in diag::STACK_CODES.iter().enumerate() {
             if !before[k] && self.device.emcy().is_active(code) {
                 let register = self.device.error_register();
-                self.emcy_module.retain(|&(c, _)| c != code);
+                self.raised.push((code, 0));
+                self.pending.push((code, 0));
                 self.push_history(diag::history_entry(code, register, 0));
                 if code == diag::RPDO_TIMEOUT {
                     self.failure = true;
@@ -559,27 +564,36 @@ impl Tm3Coupler {
         // Flush EMCYs raised above.
         self.device.on_tick(now, &mut scratch);
         self.mirror();
-        // EMCYs the coupler built itself (a code already active for another module).
-        for f in self.scratch.drain() {
-            scratch.push(f);
-        }
         let status = self.manufacturer_status().to_le_bytes();
         let emcy = self.emcy_id();
+        let mut pending = core::mem::take(&mut self.pending).into_iter();
         for mut f in scratch.drain() {
             if Some(f.id()) == emcy && f.len() == 8 && !f.is_remote() {
                 let mut d = [0u8; 8];
                 d.copy_from_slice(f.data_bytes());
                 let code = u16::from_le_bytes([d[0], d[1]]);
                 d[3..7].copy_from_slice(&status);
-                d[7] = self
-                    .emcy_module
-                    .iter()
-                    .find(|&&(c, _)| c == code && code != 0)
-                    .map_or(0, |&(_, m)| m);
+                // The CiA 301 layer sends its EMCYs in the order they were raised.
+                d[7] = match code {
+                    0 => 0,
+                    _ => pending
+                        .by_ref()
+                        .find(|&(c, _)| c == code)
+                        .map_or(0, |(_, m)| m),
+                };
                 f = Frame::data_array(f.id(), d);
             }
             out.push(f);
         }
+        // EMCYs the coupler built itself (a code already active for another module).
+        for f in self.scratch.drain() {
+            let mut d = [0u8; 8];
+            d.copy_from_slice(f.data_bytes());
+            d[3..7].copy_from_slice(&status);
+            out.push(Frame::data_array(f.id(), d));
+        }
+        let device = &mut self.device;
+        self.raised.retain(|&(c, _)| device.emcy().is_active(c));
     }
 
     fn events(&mut self, now: Instant, out: &mut Outbox) {
@@ -587,7 +601,7 @@ impl Tm3Coupler {
             match e {
                 Event::ResetCommunication => {
                     self.history.clear();
-                    self.emcy_module.clear();
+                    self.raised.clear();
                     self.sync_seen = None;
                     self.sync_timed_out = false;
                     self.raise_module_errors();
