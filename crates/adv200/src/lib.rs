@@ -6,6 +6,7 @@
 //! * [`pdc`]: the Process Data Channel mapping rules (§1.3) and their Opt Bus Fault codes;
 //! * [`ds402`]: the CiA 402 power state machine (chapter 2);
 //! * [`od`]: the card's object dictionary for the CANopen and DS402 personalities;
+//! * [`eds`]: their EDS files, generated from the dictionary;
 //! * [`card`]: the drive and its card as one sans-IO [`cantwin_can::Node`];
 //! * [`example`]: the worked example of §1.6 as a ready network.
 //!
@@ -34,6 +35,7 @@ pub mod alarms;
 pub mod card;
 pub mod drive;
 pub mod ds402;
+pub mod eds;
 pub mod example;
 pub mod od;
 pub mod params;

@@ -6,7 +6,8 @@
 //! TPDOs with sub-indices 1–3 (§1.1.7: sub 0 = 3; inhibit time, no event timer), four mapping
 //! entries each (a PDO carries at most 4 words), RPDO and TPDO transmission type 1
 //! (synchronous when the master says nothing). Guard time 60 ms and life time factor 3 are
-//! the defaults of §1.1.3. 0x1005 has bit 31 set as §1.1.9 prints it.
+//! the defaults of §1.1.3. 0x1005 has bit 31 set as §1.1.9 prints it. TPDO COB-IDs have bit
+//! 30 set: no remote request (§1.1.7 says RTR is not supported).
 //!
 //! Every drive parameter PAR is the ARRAY 0x2000 + PAR with its value at sub-index 1 (§1.4).
 //! DS402 adds 0x6040–0x6061 of chapter 2 and maps 0x6040/0x6042 into RPDO1 and 0x6041/0x6044
@@ -102,7 +103,13 @@ fn pdo_objects(mut b: OdBuilder, rx: &[Vec<u32>], tx: &[Vec<u32>]) -> OdBuilder 
     }
     for n in 0..4u16 {
         let map = tx.get(usize::from(n)).cloned().unwrap_or_default();
-        let invalid = if map.is_empty() { 0x8000_0000 } else { 0 };
+        // §1.1.7: RTR is not supported; CiA 301 says so with bit 30 = 1 (the manual prints
+        // 0 for "not supported", the meaning the twin follows).
+        let invalid = if map.is_empty() {
+            0xC000_0000
+        } else {
+            0x4000_0000
+        };
         b = b.record(
             0x1800 + n,
             format!("Transmit PDO{} parameter", n + 1),

@@ -63,10 +63,10 @@ fn manual_1_3_1_pdos_fill_from_rpdo1_four_words_each_up_to_four() {
     assert_eq!(pdo(&h, 0x1602), (0x8000_040C, vec![]));
     assert_eq!(
         pdo(&h, 0x1A00),
-        (0x18C, vec![s(1, 16), s(2, 16), s(3, 16), s(4, 16)])
+        (0x4000_018C, vec![s(1, 16), s(2, 16), s(3, 16), s(4, 16)])
     );
-    assert_eq!(pdo(&h, 0x1A01), (0x28C, vec![s(5, 16), s(6, 16)]));
-    assert_eq!(pdo(&h, 0x1A03), (0x8000_048C, vec![]));
+    assert_eq!(pdo(&h, 0x1A01), (0x4000_028C, vec![s(5, 16), s(6, 16)]));
+    assert_eq!(pdo(&h, 0x1A03), (0xC000_048C, vec![]));
 }
 
 #[test]

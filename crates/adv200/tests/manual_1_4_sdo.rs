@@ -117,3 +117,17 @@ fn manual_1_1_5_objects_and_defaults() {
     // Device type 0 in the CANopen personality.
     assert_eq!(h.send("60C#4000100000000000"), ["58C#4300100000000000"]);
 }
+
+#[test]
+fn manual_1_1_7_tpdos_do_not_answer_remote_requests() {
+    let mut h = H::canopen(|d| {
+        d.set_param_str(par::s2m_sys(1), "Count 16").unwrap();
+        d.set_param(par::s2m_ipa(1), i64::from(par::MOTOR_SPEED))
+            .unwrap();
+    });
+    h.send("000#010C");
+    // COB-ID with bit 30 set: no RTR.
+    assert_eq!(h.send("60C#4000180100000000"), ["58C#430018018C010040"]);
+    assert_eq!(h.send("18C#R"), Vec::<String>::new());
+    assert_eq!(h.send("080#"), ["18C#0000"]);
+}
