@@ -197,6 +197,8 @@ struct Core<H> {
     time: TimeService,
     reaction: Reaction,
     pdo: Option<PdoEngine>,
+    /// RPDO faults whose EMCY is active: (RPDO slot, error code).
+    pdo_faults: Vec<(u16, u16)>,
     storage: Option<Box<dyn Storage>>,
     events: VecDeque<Event>,
     error_passive: bool,
@@ -275,6 +277,7 @@ impl<H: OdHooks> Device<H> {
             time: TimeService::default(),
             reaction: Reaction::PreOperational,
             pdo,
+            pdo_faults: Vec::new(),
             storage: None,
             events: VecDeque::new(),
             error_passive: false,
@@ -398,7 +401,8 @@ impl<H: OdHooks> Device<H> {
         self.core.events.pop_front()
     }
 
-    /// Bytes of heap this device uses (its share: the shared description not counted).
+    /// Bytes of heap this device uses: its values, SDO servers, services and queues. The
+    /// shared description and the PDO engine's tables are not counted.
     pub fn heap_bytes(&self) -> usize {
         self.core.od.heap_bytes()
             + self.sdo.capacity() * core::mem::size_of::<SdoServer>()
@@ -406,6 +410,7 @@ impl<H: OdHooks> Device<H> {
             + self.core.events.capacity() * core::mem::size_of::<Event>()
             + self.core.emcy.heap_bytes()
             + self.core.consumer.heap_bytes()
+            + self.core.pdo_faults.capacity() * 4
     }
 
     fn apply_sdo_config(&mut self) {
@@ -646,6 +651,7 @@ impl<H> Core<H> {
         self.sync.stop();
         self.load_group(Group::Communication);
         self.emcy.reset();
+        self.pdo_faults.clear();
         self.guarding.reset();
         self.overrun = false;
         self.bus_off_recovered = false;
@@ -751,13 +757,46 @@ impl<H> Core<H> {
         }
     }
 
+    /// Raises the EMCYs of PDO faults and clears them when the RPDO is received correctly
+    /// again: 0x8250 (deadline missed) and 0x8210 (too short) by the next processed
+    /// reception, 0x8220 (too long) by the next reception of the right length. A code stays
+    /// active while any RPDO still has that fault.
     fn pdo_events(&mut self) {
+        let mut too_long = None;
         while let Some(e) = self.pdo.as_mut().and_then(PdoEngine::poll_event) {
-            if let Some(code) = e.emcy_code() {
-                self.raise(code, [0; 5]);
+            match e {
+                PdoEvent::LengthError { rpdo, emcy, .. } => {
+                    if emcy == crate::pdo::EMCY_PDO_LENGTH_EXCEEDED {
+                        too_long = Some(rpdo);
+                    }
+                    self.pdo_fault(rpdo, emcy);
+                }
+                PdoEvent::Timeout { rpdo } => self.pdo_fault(rpdo, crate::pdo::EMCY_RPDO_TIMEOUT),
+                PdoEvent::Received { rpdo } => {
+                    let long = too_long.take() == Some(rpdo);
+                    self.pdo_faults.retain(|&(n, code)| {
+                        n != rpdo || long && code == crate::pdo::EMCY_PDO_LENGTH_EXCEEDED
+                    });
+                    for code in [
+                        crate::pdo::EMCY_PDO_LENGTH,
+                        crate::pdo::EMCY_PDO_LENGTH_EXCEEDED,
+                        crate::pdo::EMCY_RPDO_TIMEOUT,
+                    ] {
+                        if !self.pdo_faults.iter().any(|&(_, c)| c == code) {
+                            self.clear(code);
+                        }
+                    }
+                }
             }
             self.push_event(Event::Pdo(e));
         }
+    }
+
+    fn pdo_fault(&mut self, rpdo: u16, code: u16) {
+        if !self.pdo_faults.contains(&(rpdo, code)) {
+            self.pdo_faults.push((rpdo, code));
+        }
+        self.raise(code, [0; 5]);
     }
 
     fn next_deadline(&self) -> Option<Instant> {

@@ -783,3 +783,31 @@ fn cia301_7_5_2_32_device_specific_error_applies_its_sub_index() {
     );
     assert!(out.is_empty());
 }
+
+#[test]
+fn cia301_7_2_2_rpdo_faults_raise_and_clear_their_emcys() {
+    let mut h = Harness::booted();
+    // RPDO1 deadline monitoring: event timer 100 ms.
+    h.write(ms(0), 0x1400, 5, &100u16.to_le_bytes()).unwrap();
+    h.rx(ms(1), "000#0105");
+    h.rx(ms(10), "205#01");
+    h.run_until(ms(150));
+    h.rx(ms(200), "205#02");
+    // Too short: not processed; too long: processed, reported.
+    h.rx(ms(250), "205#");
+    h.rx(ms(260), "205#03");
+    h.rx(ms(270), "205#0405");
+    h.rx(ms(280), "205#06");
+    assert_eq!(
+        h.take(),
+        at_ms(&[
+            (110, "085#5082110000000000"),
+            (200, "085#0000000000000000"),
+            (250, "085#1082110000000000"),
+            (260, "085#0000000000000000"),
+            (270, "085#2082110000000000"),
+            (280, "085#0000000000000000"),
+        ])
+    );
+    assert_eq!(h.dev.od().get(0x6200, 0).unwrap(), Value::Unsigned8(6));
+}
