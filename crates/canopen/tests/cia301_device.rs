@@ -811,3 +811,29 @@ fn cia301_7_2_2_rpdo_faults_raise_and_clear_their_emcys() {
     );
     assert_eq!(h.dev.od().get(0x6200, 0).unwrap(), Value::Unsigned8(6));
 }
+
+#[test]
+fn cia301_7_5_2_12_time_producer_bit_refused_when_the_device_cannot_produce() {
+    let config = DeviceConfig {
+        time_producer: false,
+        ..DeviceConfig::new(5)
+    };
+    let mut h = Harness::with_device(device_with_config(&options(), config));
+    h.power_up(ms(0));
+    assert_eq!(
+        h.write(ms(0), 0x1012, 0, &u32le(0x4000_0100)),
+        Err(AbortCode::INVALID_VALUE)
+    );
+    // Consuming is always possible.
+    h.write(ms(0), 0x1012, 0, &u32le(0x8000_0100)).unwrap();
+}
+
+#[test]
+fn cia301_7_5_2_15_emcy_cob_id_bit_30_is_reserved() {
+    let mut h = Harness::booted();
+    assert_eq!(
+        h.write(ms(0), 0x1014, 0, &u32le(0x4000_0085)),
+        Err(AbortCode::INVALID_VALUE)
+    );
+    assert_eq!(h.read_u32(0x1014, 0).unwrap(), 0x85);
+}
