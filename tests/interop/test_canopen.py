@@ -133,12 +133,6 @@ def test_sdo_block_upload_64k_domain(node):
     assert data == DOMAIN_DEFAULT
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="gateway: a client port's transmit queue holds 32 frames; python-canopen sends a "
-    "127-segment block at once, the socketcand server answers '< error transmit queue full >' "
-    "(which python-can cannot parse: its receive thread dies) instead of holding back",
-)
 def test_sdo_block_download_64k_domain(node):
     data = os.urandom(DOMAIN_SIZE)
     with node.sdo.open(

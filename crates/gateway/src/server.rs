@@ -151,9 +151,27 @@ impl Link<'_> {
     }
 
     /// Queue a frame on the client's bus.
+    ///
+    /// A full transmit queue holds the client back instead of refusing the frame: this
+    /// reader thread waits for room, the client's socket fills, and TCP slows the client
+    /// down, as the socketcand daemon's blocking write to its CAN socket does. Tools send
+    /// whole bursts at once (python-canopen sends an SDO block of up to 127 segments without
+    /// waiting) and expect every frame to go out. Only a queue that stays full for
+    /// [`Limits::write_timeout`] (a bus that carries nothing, e.g. the node is bus-off) gives
+    /// [`PortError::TxQueueFull`].
     pub(crate) fn send(&mut self, frame: Frame) -> Result<(), PortError> {
         let port = self.conn.port().clone().ok_or(PortError::Closed)?;
-        port.send(frame)
+        let give_up = Instant::now() + self.limits.write_timeout;
+        let mut pause = std::time::Duration::from_micros(100);
+        loop {
+            match port.send(frame) {
+                Err(PortError::TxQueueFull) if Instant::now() < give_up => {
+                    std::thread::sleep(pause);
+                    pause = (pause * 2).min(std::time::Duration::from_millis(2));
+                }
+                other => return other,
+            }
+        }
     }
 
     /// Start (after [`Limits::settle`]) or stop writing bus frames to the client.
