@@ -165,4 +165,34 @@ impl Link {
         }
         Ok(())
     }
+
+    /// Receive frames for up to `limit` (or until Ctrl-C ends the process), handing each with
+    /// its wall-clock time to `f` until it returns false.
+    pub fn watch(
+        &mut self,
+        limit: Option<WallDuration>,
+        mut f: impl FnMut(&Frame, std::time::SystemTime) -> bool,
+    ) -> Result<()> {
+        let until = limit.map(|l| WallInstant::now() + l);
+        loop {
+            let wait = match until {
+                Some(u) => {
+                    let now = WallInstant::now();
+                    if now >= u {
+                        return Ok(());
+                    }
+                    (u - now).min(WallDuration::from_millis(100))
+                }
+                None => WallDuration::from_millis(100),
+            };
+            if let Some(rx) = self
+                .port
+                .recv_timeout(wait)
+                .context("receiving from the bus")?
+                && !f(&rx.frame, rx.timestamp)
+            {
+                return Ok(());
+            }
+        }
+    }
 }

@@ -3,6 +3,7 @@
 mod bench;
 mod benchmarks_md;
 mod cal;
+mod canopen;
 mod capture_tap;
 mod connect;
 mod demo;
@@ -57,6 +58,29 @@ enum Command {
                             cantwin cal --socketcand 127.0.0.1:29536 events watch"
     )]
     Cal(cal::Args),
+    /// SDO read and write (CiA 309-3 type mnemonics), with progress for large domains.
+    #[command(
+        after_help = "Examples:\n  cantwin sdo --socketcand 127.0.0.1:29536 read 5 0x1008 0 vs\n  \
+                            cantwin sdo --scenario scenarios/cia301-device.toml write 5 0x1017 0 u16 500\n  \
+                            cantwin sdo --socketcand 127.0.0.1:29536 --mode block read 5 0x2000 0 --output domain.bin"
+    )]
+    Sdo(canopen::SdoArgs),
+    /// Send an NMT command to one node or all: start, stop, preop, reset, reset-comm.
+    #[command(
+        after_help = "Examples:\n  cantwin nmt --socketcand 127.0.0.1:29536 start 5\n  cantwin nmt --socketcand 127.0.0.1:29536 reset-comm all"
+    )]
+    Nmt(canopen::NmtArgs),
+    /// Find the CANopen nodes on a bus (SDO upload of 0x1000 to ids 1–127).
+    #[command(
+        after_help = "Examples:\n  cantwin scan --socketcand 127.0.0.1:29536\n  cantwin scan --scenario scenarios/cia301-device.toml"
+    )]
+    Scan(canopen::ScanArgs),
+    /// Print the frames on a bus, decoded: NMT, SYNC, EMCY with meanings, SDO, PDO values named from an EDS.
+    #[command(
+        after_help = "Examples:\n  cantwin trace --socketcand 127.0.0.1:29536\n  \
+                            cantwin trace --socketcand 127.0.0.1:29536 --eds 5=device.eds --seconds 10"
+    )]
+    Trace(canopen::TraceArgs),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -73,6 +97,10 @@ fn run(cli: Cli) -> Result<()> {
         Command::Dump(args) => dump::run(&args),
         Command::Eds(args) => eds::run(&args),
         Command::Cal(args) => cal::run(&args),
+        Command::Sdo(args) => canopen::run_sdo(&args),
+        Command::Nmt(args) => canopen::run_nmt(&args),
+        Command::Scan(args) => canopen::run_scan(&args),
+        Command::Trace(args) => canopen::run_trace(&args),
     }
 }
 

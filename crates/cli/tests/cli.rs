@@ -64,6 +64,11 @@ fn every_command_has_help_with_examples() {
         &["cal", "--help"],
         &["cal", "cmd", "--help"],
         &["cal", "param", "--help"],
+        &["sdo", "read", "--help"],
+        &["sdo", "write", "--help"],
+        &["nmt", "--help"],
+        &["scan", "--help"],
+        &["trace", "--help"],
     ] {
         let (ok, out, _) = cantwin(cmd);
         assert!(ok);
@@ -416,4 +421,97 @@ fn client_commands_need_a_target() {
     let (ok, _, err) = cantwin(&["cal", "read"]);
     assert!(!ok);
     assert!(err.contains("--socketcand HOST:PORT"), "{err}");
+}
+
+#[test]
+fn canopen_commands_against_the_cia301_twin_through_socketcand() {
+    let (mut child, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "30");
+    let run = |args: &[&str]| {
+        let mut full = vec![args[0], "--socketcand", addr.as_str()];
+        full.extend_from_slice(&args[1..]);
+        cantwin(&full)
+    };
+    let (ok, out, err) = run(&["scan"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("node   5  device type"), "{out}");
+    assert!(out.trim_end().ends_with("1 nodes found"), "{out}");
+    let (ok, out, err) = run(&["sdo", "read", "5", "0x1008", "0", "vs"]);
+    assert!(ok, "{err}");
+    assert!(out.starts_with("cantwin generic CiA 301 device"), "{out}");
+    let (ok, out, err) = run(&["sdo", "write", "5", "0x1017", "0", "u16", "500"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "written 2 bytes to node 5 0x1017sub0");
+    let (ok, out, err) = run(&["sdo", "read", "5", "0x1017", "0", "u16"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "500 (0x01F4)");
+    // Aborts arrive with the code and its meaning.
+    let (ok, _, err) = run(&["sdo", "read", "5", "0x6000", "0", "u16"]);
+    assert!(!ok);
+    assert!(
+        err.contains("SDO aborted by the server: 0x06020000"),
+        "{err}"
+    );
+    // A 64 KiB DOMAIN by block transfer into a file, and back by segmented transfer.
+    let dir = temp_dir("sdo-domain");
+    let file = dir.join("domain.bin");
+    let (ok, _, err) = run(&[
+        "sdo",
+        "--mode",
+        "block",
+        "read",
+        "5",
+        "0x2000",
+        "0",
+        "--output",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let data = std::fs::read(&file).unwrap();
+    assert_eq!(data.len(), 65536);
+    assert_eq!(data[1..4], [1, 2, 3]);
+    let mut changed = data.clone();
+    changed.reverse();
+    std::fs::write(&file, &changed).unwrap();
+    let (ok, _, err) = run(&[
+        "sdo",
+        "--mode",
+        "segmented",
+        "write",
+        "5",
+        "0x2000",
+        "0",
+        "d",
+        "--input",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let (ok, _, err) = run(&[
+        "sdo",
+        "--mode",
+        "block",
+        "read",
+        "5",
+        "0x2000",
+        "0",
+        "--output",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(std::fs::read(&file).unwrap(), changed);
+    std::fs::remove_dir_all(&dir).unwrap();
+    // NMT and the trace of what follows.
+    let (ok, out, err) = run(&["nmt", "preop", "5"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "sent 000#8005");
+    let (ok, out, err) = run(&["trace", "--count", "1", "--seconds", "5"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("705#7F") && out.contains("node 5 pre-operational"),
+        "{out}"
+    );
+    let (ok, _, err) = run(&["sdo", "read", "5", "0x1017", "0", "q9"]);
+    assert!(!ok);
+    assert!(err.contains("unknown data type \"q9\""), "{err}");
+    child.kill().ok();
+    child.wait().ok();
 }

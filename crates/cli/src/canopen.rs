@@ -1,0 +1,633 @@
+//! CANopen client commands: `cantwin sdo`, `nmt`, `scan` and `trace`, driving the sans-IO
+//! master of `cantwin-canopen` over any bus a client command can reach.
+
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration as WallDuration;
+
+use anyhow::{Context, Result, bail};
+use cantwin_can::{Frame, Outbox};
+use cantwin_canopen::master::pdo::{PdoDecoder, PdoParams};
+use cantwin_canopen::master::{Master, MasterEvent, Mode, SdoEvent, TransferId};
+use cantwin_canopen::od::{DataType, ObjectDictionary, Value};
+use cantwin_canopen::pdo::MapEntry;
+use cantwin_canopen::sdo::wire::Mux;
+use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
+
+use crate::connect::{Link, Target};
+
+/// CiA 309-3 data type mnemonics.
+const TYPES: &[(&str, DataType)] = &[
+    ("b", DataType::Boolean),
+    ("i8", DataType::Integer8),
+    ("i16", DataType::Integer16),
+    ("i24", DataType::Integer24),
+    ("i32", DataType::Integer32),
+    ("i40", DataType::Integer40),
+    ("i48", DataType::Integer48),
+    ("i56", DataType::Integer56),
+    ("i64", DataType::Integer64),
+    ("u8", DataType::Unsigned8),
+    ("u16", DataType::Unsigned16),
+    ("u24", DataType::Unsigned24),
+    ("u32", DataType::Unsigned32),
+    ("u40", DataType::Unsigned40),
+    ("u48", DataType::Unsigned48),
+    ("u56", DataType::Unsigned56),
+    ("u64", DataType::Unsigned64),
+    ("r32", DataType::Real32),
+    ("r64", DataType::Real64),
+    ("t", DataType::TimeOfDay),
+    ("td", DataType::TimeDifference),
+    ("vs", DataType::VisibleString),
+    ("os", DataType::OctetString),
+    ("us", DataType::UnicodeString),
+    ("d", DataType::Domain),
+];
+
+fn data_type(mnemonic: &str) -> Result<DataType> {
+    TYPES
+        .iter()
+        .find(|(m, _)| m.eq_ignore_ascii_case(mnemonic))
+        .map(|(_, t)| *t)
+        .with_context(|| {
+            let all: Vec<&str> = TYPES.iter().map(|(m, _)| *m).collect();
+            format!(
+                "unknown data type {mnemonic:?} (CiA 309-3 mnemonics: {})",
+                all.join(" ")
+            )
+        })
+}
+
+fn number(text: &str, what: &str) -> Result<u32> {
+    let t = text.trim();
+    let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
+        Some(h) => u32::from_str_radix(h, 16),
+        None => t.parse(),
+    };
+    v.with_context(|| format!("{what} {text:?} is not a number (decimal, or hex with 0x)"))
+}
+
+fn node_id(text: &str) -> Result<u8> {
+    let n = number(text, "node-ID")?;
+    u8::try_from(n)
+        .ok()
+        .filter(|n| (1..=127).contains(n))
+        .with_context(|| format!("node-ID {text} is outside 1–127"))
+}
+
+fn mux(index: &str, sub: &str) -> Result<Mux> {
+    let i = number(index, "index")?;
+    let s = number(sub, "sub-index")?;
+    Ok(Mux::new(
+        u16::try_from(i).with_context(|| format!("index {index} is above 0xFFFF"))?,
+        u8::try_from(s).with_context(|| format!("sub-index {sub} is above 255"))?,
+    ))
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ModeArg {
+    Auto,
+    Expedited,
+    Segmented,
+    Block,
+}
+
+impl ModeArg {
+    fn mode(self, blksize: u8) -> Mode {
+        match self {
+            ModeArg::Auto => Mode::Auto,
+            ModeArg::Expedited => Mode::Expedited,
+            ModeArg::Segmented => Mode::Segmented,
+            ModeArg::Block => Mode::Block { blksize },
+        }
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub struct SdoArgs {
+    #[command(flatten)]
+    target: Target,
+    /// SDO protocol: auto (by size), expedited, segmented or block.
+    #[arg(long, value_enum, default_value_t = ModeArg::Auto, global = true)]
+    mode: ModeArg,
+    /// Segments per block for block transfers (1–127).
+    #[arg(long, default_value_t = 127, value_parser = clap::value_parser!(u8).range(1..=127), global = true)]
+    block_size: u8,
+    /// SDO timeout in seconds (CiA 301's usual 1 s).
+    #[arg(long, default_value_t = 1.0, global = true)]
+    timeout: f64,
+    #[command(subcommand)]
+    command: SdoCommand,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum SdoCommand {
+    /// Read (upload) an object: NODE INDEX SUB [TYPE]. Without a type the bytes are shown
+    /// in hex; `--output FILE` writes them to a file.
+    #[command(
+        after_help = "Examples:\n  cantwin sdo --socketcand 127.0.0.1:29536 read 5 0x1008 0 vs\n  \
+                            cantwin sdo --socketcand 127.0.0.1:29536 read 5 0x1017 0 u16\n  \
+                            cantwin sdo --socketcand 127.0.0.1:29536 --mode block read 5 0x2000 0 --output domain.bin\n\n\
+                            Types (CiA 309-3): b i8 i16 i24 i32 i40 i48 i56 i64 u8 u16 u24 u32 u40 u48 u56 u64 r32 r64 t td vs os us d"
+    )]
+    Read {
+        /// Node-ID (1–127).
+        node: String,
+        /// Object index (0x1017 or 4119).
+        index: String,
+        /// Sub-index.
+        sub: String,
+        /// CiA 309-3 data type mnemonic.
+        r#type: Option<String>,
+        /// Write the bytes read to this file.
+        #[arg(long, short)]
+        output: Option<PathBuf>,
+    },
+    /// Write (download) an object: NODE INDEX SUB TYPE VALUE, or `--input FILE` for the
+    /// bytes of a DOMAIN.
+    #[command(
+        after_help = "Examples:\n  cantwin sdo --socketcand 127.0.0.1:29536 write 5 0x1017 0 u16 1000\n  \
+                            cantwin sdo --socketcand 127.0.0.1:29536 write 5 0x1008 0 vs \"Pump 3\"\n  \
+                            cantwin sdo --socketcand 127.0.0.1:29536 --mode block write 5 0x2000 0 d --input firmware.bin"
+    )]
+    Write {
+        /// Node-ID (1–127).
+        node: String,
+        /// Object index.
+        index: String,
+        /// Sub-index.
+        sub: String,
+        /// CiA 309-3 data type mnemonic.
+        r#type: String,
+        /// The value (decimal, 0x hex, text, or hex bytes for os/d).
+        value: Option<String>,
+        /// Read the bytes to write from this file.
+        #[arg(long, short)]
+        input: Option<PathBuf>,
+    },
+}
+
+fn progress_bar(done: u32, total: Option<u32>) {
+    let mut err = std::io::stderr();
+    match total {
+        Some(t) if t > 0 => {
+            let width = 40usize;
+            let filled = (u64::from(done) * width as u64 / u64::from(t)) as usize;
+            let _ = write!(
+                err,
+                "\r[{}{}] {done}/{t} bytes",
+                "#".repeat(filled.min(width)),
+                " ".repeat(width - filled.min(width))
+            );
+        }
+        _ => {
+            let _ = write!(err, "\r{done} bytes");
+        }
+    }
+    let _ = err.flush();
+}
+
+/// Run one transfer on `master` to its end.
+fn transfer(link: &mut Link, master: &mut Master, id: TransferId, timeout: f64) -> Result<Vec<u8>> {
+    let mut result = None;
+    let mut shown_progress = false;
+    let finished = link.run(
+        master,
+        |m| {
+            while let Some((_, ev)) = m.poll_event() {
+                if let MasterEvent::Sdo { id: got, event, .. } = ev
+                    && got == id
+                {
+                    match event {
+                        SdoEvent::Progress { done, total } => {
+                            if total.is_some_and(|t| t >= 4096) || done >= 4096 {
+                                shown_progress = true;
+                                progress_bar(done, total);
+                            }
+                        }
+                        SdoEvent::FellBack { code } => {
+                            eprintln!("the server refused block transfer ({code}); falling back to segmented");
+                        }
+                        SdoEvent::Completed { data, .. } => result = Some(Ok(data)),
+                        SdoEvent::Aborted { code, by_server, .. } => {
+                            result = Some(Err((code, by_server)));
+                        }
+                    }
+                }
+            }
+            result.is_some()
+        },
+        // The master's own SDO timeout decides; this is only a safety net.
+        WallDuration::from_secs_f64(timeout * 2.0 + 600.0),
+    )?;
+    if shown_progress {
+        eprintln!();
+    }
+    match result {
+        Some(Ok(data)) => Ok(data),
+        Some(Err((code, true))) => bail!("SDO aborted by the server: {code}"),
+        Some(Err((code, false))) => bail!("SDO aborted: {code}"),
+        None if !finished => bail!("no answer"),
+        None => bail!("the transfer ended without a result"),
+    }
+}
+
+fn master(timeout: f64) -> Result<Master> {
+    if !(timeout.is_finite() && timeout > 0.0) {
+        bail!("--timeout must be a positive number of seconds");
+    }
+    let mut m = Master::new();
+    m.config_mut().sdo.timeout = cantwin_can::Duration::from_secs_f64(timeout);
+    Ok(m)
+}
+
+pub fn run_sdo(args: &SdoArgs) -> Result<()> {
+    let mode = args.mode.mode(args.block_size);
+    let mut m = master(args.timeout)?;
+    match &args.command {
+        SdoCommand::Read {
+            node,
+            index,
+            sub,
+            r#type,
+            output,
+        } => {
+            let node = node_id(node)?;
+            let mux = mux(index, sub)?;
+            let ty = r#type.as_deref().map(data_type).transpose()?;
+            let mut link = Link::open(&args.target)?;
+            let mut out = Outbox::new();
+            let id = m
+                .upload(node, mux, mode, link.now(), &mut out)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            for f in out.drain() {
+                link.send(f)?;
+            }
+            let data = transfer(&mut link, &mut m, id, args.timeout)?;
+            if let Some(path) = output {
+                std::fs::write(path, &data)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("{} bytes written to {}", data.len(), path.display());
+                return Ok(());
+            }
+            match ty {
+                Some(ty) => {
+                    let v = Value::from_le_bytes(ty, &data).map_err(|e| {
+                        anyhow::anyhow!("the {} bytes read are not a {ty:?}: {e}", data.len())
+                    })?;
+                    match v {
+                        Value::Unsigned8(_)
+                        | Value::Unsigned16(_)
+                        | Value::Unsigned32(_)
+                        | Value::Unsigned64(_) => {
+                            println!("{v} (0x{})", hex_le(&data))
+                        }
+                        _ => println!("{v}"),
+                    }
+                }
+                None => println!("{}", hex_bytes(&data)),
+            }
+            Ok(())
+        }
+        SdoCommand::Write {
+            node,
+            index,
+            sub,
+            r#type,
+            value,
+            input,
+        } => {
+            let node = node_id(node)?;
+            let mux = mux(index, sub)?;
+            let ty = data_type(r#type)?;
+            let data = match (value, input) {
+                (Some(_), Some(_)) => bail!("give either a VALUE or --input FILE, not both"),
+                (None, None) => bail!("give the VALUE to write, or --input FILE"),
+                (None, Some(path)) => {
+                    std::fs::read(path).with_context(|| format!("reading {}", path.display()))?
+                }
+                (Some(text), None) => Value::parse(ty, text)
+                    .map_err(|e| anyhow::anyhow!("{text:?}: {e}"))?
+                    .to_le_bytes(),
+            };
+            let mut link = Link::open(&args.target)?;
+            let mut out = Outbox::new();
+            let id = m
+                .download(node, mux, data.clone(), mode, link.now(), &mut out)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            for f in out.drain() {
+                link.send(f)?;
+            }
+            transfer(&mut link, &mut m, id, args.timeout)?;
+            println!(
+                "written {} bytes to node {node} {:#06X}sub{}",
+                data.len(),
+                mux.index,
+                mux.sub
+            );
+            Ok(())
+        }
+    }
+}
+
+fn hex_bytes(data: &[u8]) -> String {
+    data.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn hex_le(data: &[u8]) -> String {
+    data.iter().rev().map(|b| format!("{b:02X}")).collect()
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum NmtCommand {
+    Start,
+    Stop,
+    Preop,
+    Reset,
+    ResetComm,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct NmtArgs {
+    #[command(flatten)]
+    target: Target,
+    /// The command.
+    #[arg(value_enum)]
+    command: NmtCommand,
+    /// A node-ID (1–127) or `all`.
+    node: String,
+}
+
+pub fn run_nmt(args: &NmtArgs) -> Result<()> {
+    let node = if args.node.eq_ignore_ascii_case("all") {
+        0
+    } else {
+        node_id(&args.node)?
+    };
+    let cs = match args.command {
+        NmtCommand::Start => NmtCs::Start,
+        NmtCommand::Stop => NmtCs::Stop,
+        NmtCommand::Preop => NmtCs::EnterPreOperational,
+        NmtCommand::Reset => NmtCs::ResetNode,
+        NmtCommand::ResetComm => NmtCs::ResetCommunication,
+    };
+    let mut link = Link::open(&args.target)?;
+    let mut m = Master::new();
+    let mut out = Outbox::new();
+    m.nmt(cs, node, &mut out)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    for f in out.drain() {
+        link.send(f)?;
+        println!("sent {f}");
+    }
+    // Let the frame leave before the link closes.
+    link.run(&mut m, |_| false, WallDuration::from_millis(100))?;
+    Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub struct ScanArgs {
+    #[command(flatten)]
+    target: Target,
+    /// How long each node has to answer, in seconds.
+    #[arg(long, default_value_t = 0.3)]
+    timeout: f64,
+}
+
+pub fn run_scan(args: &ScanArgs) -> Result<()> {
+    let mut m = master(args.timeout)?;
+    let mut link = Link::open(&args.target)?;
+    let mut out = Outbox::new();
+    m.scan(link.now(), &mut out)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    for f in out.drain() {
+        link.send(f)?;
+    }
+    let mut found = None;
+    link.run(
+        &mut m,
+        |m| {
+            while let Some((_, ev)) = m.poll_event() {
+                if let MasterEvent::ScanFinished { found: f } = ev {
+                    found = Some(f);
+                }
+            }
+            found.is_some()
+        },
+        WallDuration::from_secs_f64(args.timeout * 4.0 + 10.0),
+    )?;
+    let found = found.context("the scan did not finish")?;
+    for hit in &found {
+        match hit.device_type {
+            Ok(t) => println!(
+                "node {:3}  device type 0x{t:08X} (profile {}, additional 0x{:04X})",
+                hit.node,
+                t & 0xFFFF,
+                t >> 16
+            ),
+            Err(code) => println!("node {:3}  answered with abort {code}", hit.node),
+        }
+    }
+    println!("{} nodes found", found.len());
+    Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub struct TraceArgs {
+    #[command(flatten)]
+    target: Target,
+    /// Name PDO values from a node's EDS or DCF: NODE=FILE (repeatable).
+    #[arg(long = "eds", value_name = "NODE=FILE")]
+    eds: Vec<String>,
+    /// Stop after this many seconds (default: until Ctrl-C).
+    #[arg(long)]
+    seconds: Option<f64>,
+    /// Stop after this many frames.
+    #[arg(long)]
+    count: Option<u64>,
+}
+
+/// Meaning of an EMCY error code (CiA 301 table 21), most specific first.
+pub fn emcy_meaning(code: u16) -> &'static str {
+    match code {
+        0x0000 => "error reset or no error",
+        0x1000 => "generic error",
+        0x8110 => "CAN overrun (objects lost)",
+        0x8120 => "CAN in error passive mode",
+        0x8130 => "life guard error or heartbeat error",
+        0x8140 => "recovered from bus off",
+        0x8150 => "CAN-ID collision",
+        0x8210 => "PDO not processed due to length error",
+        0x8220 => "PDO length exceeded",
+        0x8230 => "DAM MPDO not processed, destination object not available",
+        0x8240 => "unexpected SYNC data length",
+        0x8250 => "RPDO timeout",
+        _ => match code >> 12 {
+            0x2 => "current",
+            0x3 => "voltage",
+            0x4 => "temperature",
+            0x5 => "device hardware",
+            0x6 => "device software",
+            0x7 => "additional modules",
+            0x8 => "monitoring",
+            0x9 => "external error",
+            0xF if code >> 8 == 0xFF => "device specific",
+            0xF => "additional functions",
+            _ => "unknown error code",
+        },
+    }
+}
+
+/// The PDOs an EDS declares for `node`, with their default COB-IDs and mappings.
+fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
+    let mut decoder = PdoDecoder::new();
+    for spec in specs {
+        let (node, file) = spec
+            .split_once('=')
+            .with_context(|| format!("--eds {spec:?}: expected NODE=FILE"))?;
+        let node = node_id(node)?;
+        let bytes = std::fs::read(file).with_context(|| format!("reading {file}"))?;
+        let eds = cantwin_eds::parse_bytes(&bytes).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+        let desc = Arc::new(cantwin_eds::to_od(&eds).map_err(|e| anyhow::anyhow!("{file}: {e}"))?);
+        let mut od = ObjectDictionary::new(desc.clone(), node);
+        cantwin_eds::apply_parameter_values(&eds, &mut od)
+            .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
+        let u32_of = |index, sub| match od.get(index, sub) {
+            Ok(Value::Unsigned32(v)) => Some(v),
+            _ => None,
+        };
+        let u8_of = |index, sub| match od.get(index, sub) {
+            Ok(Value::Unsigned8(v)) => Some(v),
+            _ => None,
+        };
+        for (comm_base, map_base) in [(0x1400u16, 0x1600u16), (0x1800, 0x1A00)] {
+            for n in 0..512u16 {
+                let (comm, map) = (comm_base + n, map_base + n);
+                let Some(cob_id) = u32_of(comm, 1) else {
+                    continue;
+                };
+                let count = u8_of(map, 0).unwrap_or(0);
+                let mapping: Vec<MapEntry> = (1..=count)
+                    .filter_map(|s| u32_of(map, s).map(MapEntry::from_u32))
+                    .collect();
+                let params = PdoParams {
+                    cob_id,
+                    transmission_type: u8_of(comm, 2).unwrap_or(0),
+                    inhibit_time: None,
+                    event_timer: None,
+                    mapping,
+                };
+                decoder.add(&params, desc.clone());
+            }
+        }
+    }
+    Ok(decoder)
+}
+
+/// One line for a frame: the service and its decoded content.
+pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
+    if let Some(values) = pdos.decode(frame) {
+        return match values {
+            Ok(values) => {
+                let parts: Vec<String> = values
+                    .iter()
+                    .map(|v| format!("{}={}", v.name, v.value))
+                    .collect();
+                format!("PDO {}", parts.join(" "))
+            }
+            Err(e) => format!("PDO (cannot decode: {e})"),
+        };
+    }
+    let msg = wire::decode(frame);
+    match msg {
+        Message::Nmt(cmd) => {
+            let target = if cmd.node == 0 {
+                "all nodes".to_string()
+            } else {
+                format!("node {}", cmd.node)
+            };
+            format!("NMT {:?} {target}", cmd.cs)
+        }
+        Message::Sync(s) => match s.counter {
+            Some(c) => format!("SYNC counter {c}"),
+            None => "SYNC".to_string(),
+        },
+        Message::Emcy { node, emcy } => format!(
+            "EMCY node {node} code 0x{:04X} ({}) register 0x{:02X} data {}",
+            emcy.code,
+            emcy_meaning(emcy.code),
+            emcy.register,
+            hex_bytes(&emcy.manufacturer)
+        ),
+        Message::Time(t) => format!("TIME {}", t.0),
+        Message::Pdo { kind, node, .. } => format!("PDO {kind:?} node {node}"),
+        Message::SdoRequest { node, .. } => match msg.sdo_request() {
+            Some(Ok(r)) => format!("SDO request to node {node}: {r:?}"),
+            _ => format!("SDO request to node {node} (segment or malformed)"),
+        },
+        Message::SdoResponse { node, .. } => match msg.sdo_response() {
+            Some(Ok(cantwin_canopen::sdo::wire::Response::Abort { mux, code })) => format!(
+                "SDO abort from node {node} {:#06X}sub{}: {code}",
+                mux.index, mux.sub
+            ),
+            Some(Ok(r)) => format!("SDO response from node {node}: {r:?}"),
+            _ => format!("SDO response from node {node} (segment or malformed)"),
+        },
+        Message::ErrorControl(ec) => match ec {
+            ErrorControl::GuardRequest { node } => format!("NODE GUARD request node {node}"),
+            ErrorControl::State { node, state: 0, .. } => format!("BOOT-UP node {node}"),
+            ErrorControl::State {
+                node,
+                toggle,
+                state,
+            } => {
+                let name = match state {
+                    4 => "stopped",
+                    5 => "operational",
+                    127 => "pre-operational",
+                    _ => "unknown state",
+                };
+                format!(
+                    "HEARTBEAT/GUARD node {node} {name} (toggle {})",
+                    u8::from(toggle)
+                )
+            }
+        },
+        Message::Malformed { error, .. } => format!("malformed: {error}"),
+        Message::Other(_) => String::new(),
+    }
+}
+
+pub fn run_trace(args: &TraceArgs) -> Result<()> {
+    let pdos = pdo_decoder(&args.eds)?;
+    let mut link = Link::open(&args.target)?;
+    let limit = args.seconds.map(WallDuration::from_secs_f64);
+    let mut seen = 0u64;
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let mut failed = None;
+    link.watch(limit, |frame, at| {
+        let t = at
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| format!("{}.{:06}", d.as_secs(), d.subsec_micros()))
+            .unwrap_or_default();
+        let text = describe(frame, &pdos);
+        if let Err(e) = writeln!(out, "({t}) {:<20} {text}", frame.to_string()) {
+            failed = Some(e);
+            return false;
+        }
+        seen += 1;
+        args.count.is_none_or(|c| seen < c)
+    })?;
+    match failed {
+        // A closed pipe (`| head`) ends the trace quietly.
+        Some(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
