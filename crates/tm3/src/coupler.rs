@@ -136,6 +136,13 @@ pub struct Tm3Coupler {
     internal_error: bool,
     switch: u8,
     history: Vec<u32>,
+    /// `history` changed since it was last written into 0x1003.
+    history_dirty: bool,
+    /// 0x1003 was last written non-empty.
+    history_written: bool,
+    /// An EMCY was raised or cleared outside the CiA 301 layer's own processing: it must
+    /// run once more to send it.
+    flush: bool,
     /// The (code, module) pairs raised and still active.
     raised: Vec<(u16, u8)>,
     /// The modules of the EMCYs the CiA 301 layer will send in this call, in order.
@@ -192,6 +199,9 @@ impl Tm3Coupler {
             internal_error: false,
             switch: config.node_id,
             history: Vec::new(),
+            history_dirty: false,
+            history_written: false,
+            flush: false,
             raised: Vec::new(),
             pending: Vec::new(),
             sync_seen: None,
@@ -451,7 +461,7 @@ impl Tm3Coupler {
                 c.failure = true;
                 c.raise(diag::GENERIC_ERROR, 0);
             } else {
-                c.device.emcy().clear(diag::GENERIC_ERROR);
+                c.clear(diag::GENERIC_ERROR);
             }
         });
     }
@@ -465,7 +475,7 @@ impl Tm3Coupler {
             if changed {
                 c.raise(diag::ROTARY_SWITCH_CHANGED, 0);
             } else {
-                c.device.emcy().clear(diag::ROTARY_SWITCH_CHANGED);
+                c.clear(diag::ROTARY_SWITCH_CHANGED);
             }
         });
     }
@@ -496,7 +506,16 @@ impl Tm3Coupler {
         self.push_history(diag::history_entry(code, register, module));
     }
 
+    /// Clears `code` (error reset EMCY if it was active).
+    fn clear(&mut self, code: u16) {
+        if self.device.emcy().clear(code) {
+            self.flush = true;
+        }
+    }
+
     fn push_history(&mut self, entry: u32) {
+        self.history_dirty = true;
+        self.flush = true;
         self.history.insert(0, entry);
         self.history.truncate(usize::from(od::ERROR_HISTORY));
     }
@@ -542,10 +561,7 @@ impl Tm3Coupler {
     /// Runs `f` on the coupler and then everything that follows a call into the device.
     fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
         self.now = now;
-        let before: Vec<bool> = diag::STACK_CODES
-            .iter()
-            .map(|&c| self.device.emcy().is_active(c))
-            .collect();
+        let before = diag::STACK_CODES.map(|c| self.device.emcy().is_active(c));
         let mut scratch = Outbox::new();
         f(self, &mut scratch);
         for (k, &code) in diag::STACK_CODES.iter().enumerate() {
@@ -561,8 +577,10 @@ impl Tm3Coupler {
             }
         }
         self.events(now, &mut scratch);
-        // Flush EMCYs raised above.
-        self.device.on_tick(now, &mut scratch);
+        // Send the EMCYs raised or cleared above.
+        if core::mem::take(&mut self.flush) {
+            self.device.on_tick(now, &mut scratch);
+        }
         self.mirror();
         let status = self.manufacturer_status().to_le_bytes();
         let emcy = self.emcy_id();
@@ -632,7 +650,7 @@ impl Tm3Coupler {
                 Event::Sync { .. } => {
                     self.sync_seen = Some(now);
                     self.sync_timed_out = false;
-                    self.device.emcy().clear(diag::SYNC_TIMEOUT);
+                    self.clear(diag::SYNC_TIMEOUT);
                 }
                 Event::Pdo(PdoEvent::Received { .. })
                     if self.failure && self.can_leave_failure() =>
@@ -650,7 +668,7 @@ impl Tm3Coupler {
                 Ok(Value::Boolean(true))
             )
         {
-            self.device.emcy().clear(diag::ANALOG_DISABLE);
+            self.clear(diag::ANALOG_DISABLE);
         }
         if let Some(t) = self.sync_deadline()
             && now >= t
@@ -694,16 +712,26 @@ impl Tm3Coupler {
     fn mirror(&mut self) {
         let status = self.manufacturer_status();
         let od = self.device.od_mut();
-        let _ = od.set(0x1002, 0, &Value::Unsigned32(status));
-        // The CiA 301 layer empties 0x1003 when 0 is written to sub 0 (or at a reset).
-        if od.get_unsigned(0x1003, 0) == Some(0) {
+        if od.get_unsigned(0x1002, 0) != Some(u64::from(status)) {
+            let _ = od.set(0x1002, 0, &Value::Unsigned32(status));
+        }
+        // The CiA 301 layer empties 0x1003 when 0 is written to sub 0 (or at a reset), and
+        // writes its own form of the entries whenever its errors change.
+        let count = od.get_unsigned(0x1003, 0).unwrap_or(0);
+        if count == 0 && !self.history.is_empty() && self.history_written {
             self.history.clear();
         }
-        let _ = od.set(0x1003, 0, &Value::Unsigned8(self.history.len() as u8));
-        for k in 0..od::ERROR_HISTORY {
-            let v = self.history.get(usize::from(k)).copied().unwrap_or(0);
-            let _ = od.set(0x1003, k + 1, &Value::Unsigned32(v));
+        let first = od.get_unsigned(0x1003, 1).unwrap_or(0);
+        let want_first = u64::from(self.history.first().copied().unwrap_or(0));
+        if count != self.history.len() as u64 || first != want_first || self.history_dirty {
+            let _ = od.set(0x1003, 0, &Value::Unsigned8(self.history.len() as u8));
+            for k in 0..od::ERROR_HISTORY {
+                let v = self.history.get(usize::from(k)).copied().unwrap_or(0);
+                let _ = od.set(0x1003, k + 1, &Value::Unsigned32(v));
+            }
         }
+        self.history_dirty = false;
+        self.history_written = !self.history.is_empty();
     }
 
     /// The SDO server receive identifiers.
@@ -786,7 +814,7 @@ impl Tm3Coupler {
         if self.rx_level == 0 {
             self.rx_last = now;
             if self.device.emcy().is_active(diag::RX_QUEUE_OVERRUN) {
-                self.device.emcy().clear(diag::RX_QUEUE_OVERRUN);
+                self.clear(diag::RX_QUEUE_OVERRUN);
             }
         }
         if self.rx_level >= u64::from(self.config.rx_queue_capacity) {
@@ -850,7 +878,7 @@ impl Node for Tm3Coupler {
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
         self.run(now, out, |c, o| {
             c.device.on_sent(frame, now, o);
-            c.device.emcy().clear(diag::TX_QUEUE_OVERRUN);
+            c.clear(diag::TX_QUEUE_OVERRUN);
         });
     }
 
