@@ -387,15 +387,16 @@ impl Adv200 {
     fn settle(&mut self, now: Instant, _out: &mut Outbox) {
         self.last_now = self.last_now.max(now);
         self.dirty = false;
-        self.pull();
         self.profile_in(now);
         self.drive.advance(&mut self.params, now);
         let mut not_operational = false;
+        let mut ds402 = false;
         if let Some(c) = &mut self.card {
             if c.personality == Personality::Ds402 {
                 let fault = !self.drive.alarms().is_empty();
                 let stopped = self.drive.speed() == 0.0;
                 c.ds402.refresh(fault, stopped);
+                ds402 = true;
             }
             let state = match c.dev.state() {
                 State::Operational => 2,
@@ -413,8 +414,11 @@ impl Adv200 {
         {
             self.drive.raise(sticky);
         }
-        self.profile_in(now);
-        self.drive.advance(&mut self.params, now);
+        if ds402 || !self.drive.alarms().is_empty() {
+            // The power state or the alarms changed what the drive is commanded to do.
+            self.profile_in(now);
+            self.drive.advance(&mut self.params, now);
+        }
         self.report_alarms();
         self.push();
     }
@@ -734,6 +738,7 @@ impl Node for Adv200 {
             && let Some(c) = &mut self.card
         {
             c.dev.on_frame(frame, now, out);
+            self.pull();
         }
         self.card_events(now);
         self.settle(now, out);
@@ -744,24 +749,28 @@ impl Node for Adv200 {
             return;
         }
         self.settle(now, out);
+        let mut again = false;
         if self.sync_deadline().is_some_and(|d| d <= now) {
             if let Some(c) = &mut self.card {
                 c.last_sync = Some(now);
             }
             self.bus_fault(0);
+            again = true;
+        }
+        if let Some(c) = &mut self.card
+            && c.dev.next_deadline().is_some_and(|d| d <= now)
+        {
+            c.dev.on_tick(now, out);
+            again = true;
+        }
+        if again {
+            self.card_events(now);
             self.settle(now, out);
-        }
-        if let Some(c) = &mut self.card
-            && c.dev.next_deadline().is_some_and(|d| d <= now)
-        {
-            c.dev.on_tick(now, out);
-        }
-        self.card_events(now);
-        self.settle(now, out);
-        if let Some(c) = &mut self.card
-            && c.dev.next_deadline().is_some_and(|d| d <= now)
-        {
-            c.dev.on_tick(now, out);
+            if let Some(c) = &mut self.card
+                && c.dev.next_deadline().is_some_and(|d| d <= now)
+            {
+                c.dev.on_tick(now, out);
+            }
         }
     }
 

@@ -11,10 +11,37 @@
 //!   Speed is zero, bit 8 digital input 4, bit 9 digital input 5; word 2 = Motor speed (260);
 //!   word 3 = Analog input 2 (1550).
 
-use cantwin_can::{Duration, Frame, Instant, Node, Outbox};
+use cantwin_bus::{BusConfig, BusError, PortConfig, Recorder, Simulation};
+use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
 
 use crate::card::{Adv200, Adv200Config};
 use crate::params::{ParamError, par};
+
+/// Why the example could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ExampleError {
+    /// A parameter setting was refused (a defect of the example).
+    #[error("parameter: {0}")]
+    Param(#[from] ParamError),
+    /// The virtual bus refused something.
+    #[error("bus: {0}")]
+    Bus(#[from] BusError),
+    /// A frame could not be built.
+    #[error("frame: {0}")]
+    Frame(#[from] cantwin_can::FrameError),
+}
+
+/// A node that only acknowledges frames: the master's port on the example's bus.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Master;
+
+impl Node for Master {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
 
 /// The example's node-ID.
 pub const NODE: u8 = 12;
@@ -77,20 +104,73 @@ pub struct Sample {
     pub analog_input_2: i16,
 }
 
+/// Runs the example on a 500 kbit/s virtual bus with exact frame timing: the drive boots at
+/// 0, the master starts it at 1 ms, sends RPDO1 (enable + start, `speed` rpm) at 2 ms and a
+/// SYNC every `period` from `period` on, until `duration`. Returns TPDO1 as the master
+/// received it (its time is the end of the frame).
+pub fn simulate(
+    speed: i16,
+    period: Duration,
+    duration: Duration,
+) -> Result<Vec<Sample>, ExampleError> {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+    sim.attach(bus, drive()?, PortConfig::default())?;
+    let m = sim.attach(bus, Master, PortConfig::default())?;
+    let tap = sim
+        .bus_mut(bus)
+        .ok_or(BusError::NoSuchBus(bus))?
+        .add_tap(Recorder::new());
+    let ms = Duration::from_millis(1);
+    sim.run_until(Instant::ZERO + ms);
+    sim.transmit(m, Frame::std(0x000, &[0x01, NODE])?)?;
+    sim.run_until(Instant::ZERO + ms + ms);
+    let s = speed.to_le_bytes();
+    sim.transmit(
+        m,
+        Frame::std(0x200 + u16::from(NODE), &[0x03, 0x00, s[0], s[1]])?,
+    )?;
+    let end = Instant::ZERO + duration;
+    let mut t = Instant::ZERO + period.max(ms + ms + ms);
+    while t <= end {
+        sim.run_until(t);
+        sim.transmit(m, Frame::std(0x080, &[])?)?;
+        t = t + period.max(ms);
+    }
+    sim.run_until(end + ms);
+    let rec = sim
+        .bus(bus)
+        .ok_or(BusError::NoSuchBus(bus))?
+        .tap::<Recorder>(tap)
+        .ok_or(BusError::NoSuchBus(bus))?;
+    Ok(rec
+        .frames()
+        .filter(|r| r.frame.id().as_raw() == 0x180 + u32::from(NODE) && r.frame.len() >= 6)
+        .map(|r| {
+            let b = r.frame.data_bytes();
+            Sample {
+                time: r.end,
+                status: u16::from_le_bytes([b[0], b[1]]),
+                speed: i16::from_le_bytes([b[2], b[3]]),
+                analog_input_2: i16::from_le_bytes([b[4], b[5]]),
+            }
+        })
+        .collect())
+}
+
 /// Runs the example without a bus (frames handed straight to the drive): NMT start, then
 /// every `period` a SYNC and an RPDO1 with enable + start and `speed` rpm, for `duration`.
 /// Returns TPDO1 as the master sees it after each SYNC.
-pub fn run(speed: i16, period: Duration, duration: Duration) -> Result<Vec<Sample>, ParamError> {
+pub fn run(speed: i16, period: Duration, duration: Duration) -> Result<Vec<Sample>, ExampleError> {
     let mut d = drive()?;
     let mut out = Outbox::new();
     let mut now = Instant::ZERO;
     d.on_power_up(now, &mut out);
-    let start = Frame::std(0x000, &[0x01, NODE]).map_err(|_| ParamError::Invalid)?;
+    let start = Frame::std(0x000, &[0x01, NODE])?;
     d.on_frame(&start, now, &mut out);
     let s = speed.to_le_bytes();
-    let rpdo = Frame::std(0x200 + u16::from(NODE), &[0x03, 0x00, s[0], s[1]])
-        .map_err(|_| ParamError::Invalid)?;
-    let sync = Frame::std(0x080, &[]).map_err(|_| ParamError::Invalid)?;
+    let rpdo = Frame::std(0x200 + u16::from(NODE), &[0x03, 0x00, s[0], s[1]])?;
+    let sync = Frame::std(0x080, &[])?;
     let mut samples = Vec::new();
     let end = Instant::ZERO + duration;
     while now <= end {

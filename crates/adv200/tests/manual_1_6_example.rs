@@ -143,3 +143,42 @@ fn manual_1_6_run_reports_speed_and_status_over_time() {
     assert_eq!(samples[1].status, 0x0003);
     assert_eq!(samples[20].status, 0x0003);
 }
+
+#[test]
+fn manual_1_6_simulate_on_the_bus_reports_tpdo1_with_exact_times() {
+    let samples = example::simulate(
+        1000,
+        cantwin_can::Duration::from_millis(100),
+        cantwin_can::Duration::from_millis(1500),
+    )
+    .unwrap();
+    assert_eq!(samples.len(), 15);
+    // SYNC (0 data bytes) at 100 ms takes 47 bits + 3 intermission at 2 µs; TPDO1 (6 bytes)
+    // follows: its end is the sample time.
+    let sync_bits = u64::from(f("080#").bit_length());
+    let tpdo_bits = u64::from(f("18C#060000000000").bit_length());
+    assert_eq!(
+        samples[0].time.as_nanos(),
+        100 * MS + sync_bits * 2_000 + (tpdo_bits - 3) * 2_000
+    );
+    let speeds: Vec<i16> = samples.iter().map(|s| s.speed).collect();
+    // The RPDO is applied at the first SYNC (its end, a little after 100 ms): each later
+    // SYNC sees 100 more rpm.
+    let want: Vec<i16> = (0..15).map(|k| (k * 100).min(1000)).collect();
+    assert_eq!(speeds, want);
+    assert_eq!(samples[14].status, 0x0003);
+}
+
+#[test]
+fn manual_1_2_m2s_enable_off_ignores_rpdo_data() {
+    let mut drive = example::drive().unwrap();
+    drive.set_param_str(par::FIELDBUS_MS_ENABLE, "Off").unwrap();
+    let mut out = Outbox::new();
+    drive.on_power_up(Instant::ZERO, &mut out);
+    let t = Instant::from_nanos(MS);
+    drive.on_frame(&f("000#010C"), t, &mut out);
+    drive.on_frame(&f("20C#0300DC05"), t, &mut out);
+    drive.on_frame(&f("080#"), t, &mut out);
+    assert_eq!(drive.param(par::m2s_mon(1)), Ok(0));
+    assert_eq!(drive.param(par::ENABLE_STATE), Ok(0));
+}
