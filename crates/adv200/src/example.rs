@@ -135,7 +135,7 @@ pub fn simulate(
     while t <= end {
         sim.run_until(t);
         sim.transmit(m, Frame::std(0x080, &[])?)?;
-        t = t + period.max(ms);
+        t += period.max(ms);
     }
     sim.run_until(end + ms);
     let rec = sim
