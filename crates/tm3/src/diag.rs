@@ -107,6 +107,25 @@ pub fn check_life_time(guard_time_ms: u16, life_time_factor: u8) -> Option<LifeT
     }
 }
 
+/// [`check_life_time`] on the values an EDS or DCF gives 0x100C and 0x100D
+/// (`ParameterValue` when present, else `DefaultValue`; absent counts as 0).
+pub fn check_life_time_eds(eds: &cantwin_eds::Eds) -> Option<LifeTimeWarning> {
+    let value = |index| {
+        let e = eds.entry(index, 0)?;
+        match e.parameter_value.as_ref().or(e.default_value.as_ref())? {
+            cantwin_eds::EdsValue::Integer(v) => Some(*v),
+            _ => None,
+        }
+    };
+    let guard = value(0x100C)
+        .and_then(|v| u16::try_from(v).ok())
+        .unwrap_or(0);
+    let factor = value(0x100D)
+        .and_then(|v| u8::try_from(v).ok())
+        .unwrap_or(0);
+    check_life_time(guard, factor)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -127,6 +146,25 @@ mod tests {
     #[test]
     fn manual_1003_entry_layout() {
         assert_eq!(history_entry(0x7003, 0x81, 3), 0x0381_7003);
+    }
+
+    #[test]
+    fn manual_100d_advice_on_a_dcf() {
+        let island = crate::island::Island::from_references(&["TM3DI8"]).unwrap();
+        let mut eds = crate::eds::eds(&island).unwrap();
+        assert_eq!(check_life_time_eds(&eds), None);
+        let set = |eds: &mut cantwin_eds::Eds, index, v| {
+            eds.objects.get_mut(&index).unwrap().entry.parameter_value =
+                Some(cantwin_eds::EdsValue::Integer(v));
+        };
+        set(&mut eds, 0x100C, 250);
+        set(&mut eds, 0x100D, 1);
+        assert_eq!(
+            check_life_time_eds(&eds),
+            Some(LifeTimeWarning::FactorOne { guard_time_ms: 250 })
+        );
+        set(&mut eds, 0x100D, 3);
+        assert_eq!(check_life_time_eds(&eds), None);
     }
 
     #[test]

@@ -44,6 +44,51 @@ pub mod catalogue;
 pub mod coupler;
 pub mod diag;
 pub mod eds;
+
+/// A ready-made island for demonstrations: the modules of `scenarios/tm3-island.toml`
+/// (digital inputs and outputs, relays, analog inputs and outputs, temperature inputs, a
+/// TM2 module).
+pub mod demo {
+    use crate::coupler::{CouplerConfig, CouplerError, Tm3Coupler};
+    use crate::island::Island;
+
+    /// The demo island's modules, in bus order.
+    pub const MODULES: [&str; 7] = [
+        "TM3DI16",
+        "TM3DQ16T",
+        "TM3DM24R",
+        "TM3AI4",
+        "TM3AQ2",
+        "TM3TI4",
+        "TM2DDI8DT",
+    ];
+
+    /// The demo island.
+    pub fn island() -> Island {
+        // The references are in the catalogue and fewer than 14.
+        Island::from_references(&MODULES).unwrap_or_else(|_| unreachable!())
+    }
+
+    /// An unpowered coupler at `node_id` carrying the demo island.
+    pub fn coupler(node_id: u8) -> Result<Tm3Coupler, CouplerError> {
+        Tm3Coupler::new(CouplerConfig::new(node_id, island()))
+    }
+
+    #[cfg(test)]
+    mod tests {
+        #[test]
+        fn demo_island_matches_the_scenario() {
+            let text = include_str!("../../../scenarios/tm3-island.toml");
+            let line = text.lines().find(|l| l.starts_with("modules")).unwrap();
+            for m in super::MODULES {
+                assert!(line.contains(&format!("\"{m}\"")), "{m}");
+            }
+            assert_eq!(super::island().modules().len(), 7);
+            assert!(super::coupler(3).is_ok());
+            assert!(super::coupler(0).is_err());
+        }
+    }
+}
 pub mod island;
 pub mod od;
 
