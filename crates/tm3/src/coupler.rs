@@ -38,7 +38,10 @@
 //! * **Downloads the manual restricts** are refused with 0x06090030: 0x1006 outside 0 and
 //!   10 000..=10 000 000 µs in 1 ms steps, 29-bit identifiers where "not supported" (0x1005,
 //!   0x1014, TPDOs), TPDO bit 30, RPDO transmission types 241–254, TPDO transmission types
-//!   241–254 (manual: transmission type tables). Checked on expedited downloads.
+//!   241–254 (manual: transmission type tables), 0x1016 sub 1 with bits 24–31 set. Checked
+//!   on expedited downloads.
+//! * **Error register.** Besides the CiA 301 bits, bit 7 (manufacturer-specific) is set
+//!   while a module error is active and bit 5 (device profile) while 0x0080 is.
 
 use crate::diag::{self, Status};
 use crate::island::{Island, MAX_MODULES};
@@ -490,6 +493,10 @@ impl Tm3Coupler {
         if matches!(code, 0x7000..=0x7FFF) {
             self.device.emcy().set_register_bits(0x80, true);
         }
+        if code == diag::ANALOG_DISABLE {
+            // Manual 1001H bit 5: problems related to the device profile.
+            self.device.emcy().set_register_bits(0x20, true);
+        }
         self.raised.push((code, module));
         if self.device.emcy().raise(code, [0; 5]) {
             self.pending.push((code, module));
@@ -508,6 +515,9 @@ impl Tm3Coupler {
 
     /// Clears `code` (error reset EMCY if it was active).
     fn clear(&mut self, code: u16) {
+        if code == diag::ANALOG_DISABLE {
+            self.device.emcy().set_register_bits(0x20, false);
+        }
         if self.device.emcy().clear(code) {
             self.flush = true;
         }
@@ -753,6 +763,8 @@ impl Tm3Coupler {
         match (index, sub) {
             (0x1006, 0) => v != 0 && (!(10_000..=10_000_000).contains(&v) || v % 1000 != 0),
             (0x1005, 0) | (0x1014, 0) => v & (1 << 29) != 0,
+            // Manual 1016H: bits 31-24 are 0.
+            (0x1016, 1) => v >> 24 != 0,
             (0x1400..=0x141C, 2) => (241..=254).contains(&ttype),
             (0x1800..=0x1837, 1) => v & (3 << 29) != 0,
             (0x1800..=0x1837, 2) => (241..=254).contains(&ttype),

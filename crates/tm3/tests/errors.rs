@@ -370,3 +370,17 @@ fn manual_1003_newest_first_and_cleared_by_writing_0() {
     }
     assert_eq!(read(&mut c, ms(40), 0x1003, 0), Ok(vec![10]));
 }
+
+#[test]
+fn manual_1029_stopped_on_sync_timeout_sends_the_emcy_first() {
+    let mut c = running();
+    assert_eq!(write(&mut c, ms(6), 0x1029, 1, &[2]), Ok(()));
+    assert_eq!(
+        write(&mut c, ms(6), 0x1006, 0, &20_000u32.to_le_bytes()),
+        Ok(())
+    );
+    send(&mut c, ms(10), 0x080, &[]);
+    assert_eq!(tick(&mut c, ms(40)), ["083#01F0010000000000"]);
+    assert_eq!(c.state(), State::Stopped);
+    assert_eq!(outputs(&c), 0);
+}

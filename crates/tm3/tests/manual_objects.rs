@@ -154,6 +154,11 @@ fn manual_1016_1017_heartbeat() {
         write(&mut c, t, 0x1016, 1, &0x0001_0064u32.to_le_bytes()),
         Ok(())
     );
+    assert_eq!(
+        write(&mut c, t, 0x1016, 1, &0x0101_0064u32.to_le_bytes()),
+        Err(INVALID),
+        "bits 31-24 are 0"
+    );
     assert_eq!(read(&mut c, t, 0x1017, 0), Ok(vec![0, 0]));
     assert_eq!(write(&mut c, t, 0x1017, 0, &500u16.to_le_bytes()), Ok(()));
 }

@@ -278,11 +278,12 @@ fn cia401_6421_analog_triggers_send_tpdo2() {
 #[test]
 fn manual_0080_analog_interrupts_disabled_on_start() {
     let mut c = coupler(&["TM3AI2H"]);
-    // 0x6423 is FALSE by default: EMCY 0x0080 with the error register's generic bit,
+    // 0x6423 is FALSE by default: EMCY 0x0080 with the error register's generic and
+    // device profile bits (0x21),
     // after the TPDOs sent on entering OPERATIONAL.
     assert_eq!(
         start(&mut c, ms(2)),
-        ["283#00000000", "083#8000010000000000"]
+        ["283#00000000", "083#8000210000000000"]
     );
     c.set_analog_input(1, 0, 5000).unwrap();
     assert_eq!(tick(&mut c, ms(3)), Vec::<String>::new());
@@ -291,7 +292,7 @@ fn manual_0080_analog_interrupts_disabled_on_start() {
         send(&mut c, ms(4), 0x603, &[0x2F, 0x23, 0x64, 0, 1, 0, 0, 0]),
         ["583#6023640000000000", "083#0000000000000000"]
     );
-    assert_eq!(read_u32(&mut c, ms(5), 0x1003, 1), Ok(0x0001_0080));
+    assert_eq!(read_u32(&mut c, ms(5), 0x1003, 1), Ok(0x0021_0080));
 }
 
 #[test]
