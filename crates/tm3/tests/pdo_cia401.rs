@@ -327,3 +327,53 @@ fn cia301_rpdo_deadline_is_armed_by_the_first_reception() {
     assert_eq!(c.digital_output(1, 0), Ok(true));
     assert_eq!(c.digital_output(1, 4), Ok(false));
 }
+
+#[test]
+fn manual_1800_type_0_sends_after_sync_following_an_event() {
+    let mut c = coupler(&["TM3DI8"]);
+    assert_eq!(write(&mut c, ms(1), 0x1800, 2, &[0]), Ok(()));
+    assert_eq!(
+        start(&mut c, ms(2)),
+        Vec::<String>::new(),
+        "synchronous: nothing on start"
+    );
+    c.set_digital_input(1, 3, true).unwrap();
+    assert_eq!(tick(&mut c, ms(3)), Vec::<String>::new());
+    assert_eq!(send(&mut c, ms(4), 0x080, &[]), ["183#08"]);
+    assert_eq!(
+        send(&mut c, ms(5), 0x080, &[]),
+        Vec::<String>::new(),
+        "no new event"
+    );
+}
+
+#[test]
+fn manual_1800_type_2_sends_every_second_sync() {
+    let mut c = coupler(&["TM3DI8"]);
+    assert_eq!(write(&mut c, ms(1), 0x1800, 2, &[2]), Ok(()));
+    start(&mut c, ms(2));
+    let sent: Vec<Vec<String>> = (0..4)
+        .map(|k| send(&mut c, ms(10 + k), 0x080, &[]))
+        .collect();
+    assert_eq!(
+        sent,
+        [
+            vec![],
+            vec!["183#00".to_string()],
+            vec![],
+            vec!["183#00".to_string()]
+        ]
+    );
+}
+
+#[test]
+fn manual_1400_synchronous_rpdo_applies_at_the_next_sync() {
+    let mut c = coupler(&["TM3DQ8T"]);
+    assert_eq!(write(&mut c, ms(1), 0x1400, 2, &[0]), Ok(()));
+    start(&mut c, ms(2));
+    send(&mut c, ms(3), 0x203, &[0x81]);
+    assert_eq!(c.digital_output(1, 0), Ok(false), "held until SYNC");
+    send(&mut c, ms(4), 0x080, &[]);
+    assert_eq!(c.digital_output(1, 0), Ok(true));
+    assert_eq!(c.digital_output(1, 7), Ok(true));
+}
