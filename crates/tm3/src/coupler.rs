@@ -156,6 +156,8 @@ pub struct Tm3Coupler {
     rx_last: Instant,
     scratch: Outbox,
     now: Instant,
+    /// The CiA 301 layer's events, passed on to [`Tm3Coupler::poll_event`].
+    events: std::collections::VecDeque<Event>,
 }
 
 impl core::fmt::Debug for Tm3Coupler {
@@ -213,6 +215,7 @@ impl Tm3Coupler {
             rx_last: Instant::ZERO,
             scratch: Outbox::new(),
             now: Instant::ZERO,
+            events: std::collections::VecDeque::new(),
             config,
         })
     }
@@ -225,6 +228,12 @@ impl Tm3Coupler {
     /// The CiA 301 device inside, mutably.
     pub fn device_mut(&mut self) -> &mut Device {
         &mut self.device
+    }
+
+    /// The next event of the CiA 301 layer (state changes, lost heartbeats, PDOs, SYNC...),
+    /// oldest first; at most [`cantwin_canopen::device::MAX_EVENTS`] are kept.
+    pub fn poll_event(&mut self) -> Option<Event> {
+        self.events.pop_front()
     }
 
     /// The configuration.
@@ -626,6 +635,10 @@ impl Tm3Coupler {
 
     fn events(&mut self, now: Instant, out: &mut Outbox) {
         while let Some(e) = self.device.poll_event() {
+            if self.events.len() >= cantwin_canopen::device::MAX_EVENTS {
+                self.events.pop_front();
+            }
+            self.events.push_back(e);
             match e {
                 Event::ResetCommunication => {
                     self.history.clear();

@@ -228,6 +228,8 @@ fn manual_8130_heartbeat_loss_safe_outputs_and_1029_pre_operational() {
     assert_eq!(tick(&mut c, ms(110)), ["083#3081110000000000"]);
     assert_eq!(c.state(), State::PreOperational);
     assert!(c.in_failure_state());
+    let events: Vec<_> = std::iter::from_fn(|| c.poll_event()).collect();
+    assert!(events.contains(&cantwin_canopen::device::Event::HeartbeatLost { node: 1 }));
     assert_eq!(outputs(&c), 0);
     assert_eq!(read_u32(&mut c, ms(111), 0x1003, 1), Ok(0x0011_8130));
 }
