@@ -5,7 +5,9 @@
 //!   FF01 wrong type, FF02 baud rate None, FF03 address outside 1–127), places the Process
 //!   Data Channel (CANopen) and builds the card's CiA 301 device. With a configuration fault
 //!   FF01–FF03 the card stays off the bus, as the real one does from the factory defaults.
-//!   DeviceNet (PAR 4000 = DeviceNet) is not modelled: the card stays off the bus.
+//!   PAR 4000 = DeviceNet runs the [`crate::devicenet`] personality instead (chapter 3: bit
+//!   rates 125k–500k, else FFC5; MAC ID 1–63, else FFC6; faults FFC7 bus-off, FFC9 duplicate
+//!   MAC ID, 0 polled I/O timed out or enable without polled I/O; no EMCY, §3.7.2).
 //! * **SDO** (§1.1 items 10–11, §1.4): requests to 0x600 + node are screened before the CiA
 //!   301 stack sees them. Sub-index 0xFF is refused (0x06090011). Unless
 //!   [`Adv200Config::expedited_only`] is off, a segmented or block request is aborted with
@@ -21,13 +23,16 @@
 //! * **LEDs** (§"Leds", §1.6.2.1): PWR and +5VC on while powered and the card active, OP on in
 //!   Operational, AL on in any other NMT state or with Opt Bus Fault active.
 
-use cantwin_can::{ControllerEvent, Duration, Frame, Instant, Node, Outbox};
+use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, Event};
 use cantwin_canopen::nmt::State;
 use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
 
+use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
+
 use crate::alarms::Alarm;
+use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
 use crate::ds402::{Ds402, State as PowerState};
 use crate::od::{Personality, build, value_of};
@@ -102,6 +107,7 @@ pub struct Adv200 {
     params: ParamDb,
     drive: Drive,
     card: Option<Card>,
+    dnet: Option<Slave<DnApp>>,
     latched: Latched,
     powered: bool,
     sticky: Option<Alarm>,
@@ -152,6 +158,7 @@ impl Adv200 {
             params: ParamDb::new(),
             drive: Drive::new(),
             card: None,
+            dnet: None,
             latched: Latched::default(),
             powered: false,
             sticky: None,
@@ -283,6 +290,7 @@ impl Adv200 {
         self.powered = true;
         self.last_now = now;
         self.card = None;
+        self.dnet = None;
         self.drive.restart();
         self.sticky = None;
         let p = &self.params;
@@ -297,7 +305,8 @@ impl Adv200 {
         let personality = match self.latched.ty {
             1 => Personality::CanOpen,
             3 => Personality::Ds402,
-            0 | 2 => {
+            2 => return self.reset_devicenet(now, out),
+            0 => {
                 self.drive.advance(&mut self.params, now);
                 return;
             }
@@ -353,6 +362,118 @@ impl Adv200 {
             self.drive.raise(Alarm::OptBusFault(code));
         }
         self.settle(now, out);
+    }
+
+    /// Chapter 3: the DeviceNet personality. Bit rates 125k/250k/500k (else FFC5), MAC ID
+    /// 1–63 (else FFC6), then the PDC (§3.8) as polled I/O.
+    fn reset_devicenet(&mut self, now: Instant, out: &mut Outbox) {
+        let rate = match self.latched.baud {
+            1 => BitRate::R125K,
+            2 => BitRate::R250K,
+            3 => BitRate::R500K,
+            _ => return self.config_fault(0xFFC5, now),
+        };
+        let Some(mac) = u8::try_from(self.latched.address)
+            .ok()
+            .filter(|a| (1..=63).contains(a))
+            .and_then(|a| MacId::new(a).ok())
+        else {
+            return self.config_fault(0xFFC6, now);
+        };
+        if self
+            .config
+            .bus_bit_rate
+            .is_some_and(|b| b != rate.bits_per_second())
+        {
+            self.drive.advance(&mut self.params, now);
+            return;
+        }
+        let (pdc, fault) = match pdc::configure(&mut self.params) {
+            Ok(p) => (p, None),
+            Err(e) => (Pdc::default(), Some(e.code())),
+        };
+        let app = DnApp {
+            params: ParamDb::new(),
+            pdc,
+            ms_enable: self.latched.ms_enable,
+            events: Vec::new(),
+        };
+        let config = SlaveConfig::new(mac, rate, identity(self.config.serial));
+        let Ok(mut slave) = Slave::new(config, app) else {
+            return self.config_fault(0xFF04, now);
+        };
+        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        slave.on_power_up(now, out);
+        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        self.dnet = Some(slave);
+        if let Some(code) = fault {
+            self.sticky = Some(Alarm::OptBusFault(code));
+            self.drive.raise(Alarm::OptBusFault(code));
+        }
+        self.dnet_events(now);
+    }
+
+    /// Runs `f` on the DeviceNet slave with the parameters lent to it.
+    fn with_dnet(&mut self, f: impl FnOnce(&mut Slave<DnApp>)) -> bool {
+        let Some(slave) = &mut self.dnet else {
+            return false;
+        };
+        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        f(slave);
+        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        true
+    }
+
+    /// DeviceNet events: Fieldbus state (§3.6: Stop, Pre-Operational while the master
+    /// recognises the node, Operational with polled I/O), faults (§3.7.1), the drive.
+    fn dnet_events(&mut self, now: Instant) {
+        let Some(slave) = &mut self.dnet else { return };
+        let events: Vec<SlaveEvent> = slave.app_mut().events.drain(..).collect();
+        let io = slave.poll_connection().is_some();
+        let mut state = self.params.value(par::FIELDBUS_STATE);
+        for e in events {
+            match e {
+                SlaveEvent::Allocated { .. } if state == 0 => state = 1,
+                SlaveEvent::Released { choice: 0 } => state = 0,
+                SlaveEvent::IoEstablished => state = 2,
+                SlaveEvent::IoTimedOut => {
+                    state = 1;
+                    self.bus_fault(0);
+                }
+                SlaveEvent::DuplicateMac => self.bus_fault(0xFFC9),
+                SlaveEvent::BusOff => self.bus_fault(0xFFC7),
+                _ => {}
+            }
+        }
+        if state == 2 && !io {
+            state = 1;
+        }
+        let _ = self.params.force(par::FIELDBUS_STATE, state);
+        self.drive.advance(&mut self.params, now);
+        if state != 2 && self.drive_enable_cmd() {
+            self.bus_fault(0);
+        }
+        if let Some(sticky) = self.sticky
+            && !self.drive.alarms().contains(&sticky)
+        {
+            self.drive.raise(sticky);
+        }
+        self.drive.advance(&mut self.params, now);
+        while self.drive.poll_event().is_some() {}
+        self.last_now = self.last_now.max(now);
+        self.dirty = false;
+    }
+
+    /// The DeviceNet (OP green, AL red) LEDs (manual "LEDs" table), if the card runs
+    /// DeviceNet.
+    pub fn devicenet_leds(&self) -> Option<(Led, Led)> {
+        let slave = self.dnet.as_ref()?;
+        Some(slave.network_status().leds())
+    }
+
+    /// The DeviceNet slave, if the card runs DeviceNet.
+    pub fn devicenet(&self) -> Option<&Slave<DnApp>> {
+        self.dnet.as_ref()
     }
 
     fn config_fault(&mut self, code: u16, now: Instant) {
@@ -671,21 +792,7 @@ impl Adv200 {
 
     fn write_param(&mut self, p: u16, data: &[u8]) -> Result<(), ParamError> {
         let v = ParamDb::decode(p, data)?;
-        if matches!(p, par::RATED_CURRENT | par::FULL_SCALE_SPEED)
-            && self.params.value(par::ENABLE_STATE) != 0
-        {
-            return Err(ParamError::DeviceState);
-        }
-        self.params.check(p, v)?;
-        // §1.3.3: naming Dig Fieldbus S->Mn as the channel's ipa makes it an MDPLC channel.
-        if let Some(n) = (1..=16u16).find(|n| par::s2m_ipa(*n) == p)
-            && v == i64::from(par::s2m_dig(n))
-        {
-            let f = Format::from_value(self.params.value(par::s2m_sys(n)));
-            let mdplc = if f.bits() == 32 { 7 } else { 6 };
-            let _ = self.params.force(par::s2m_sys(n), mdplc);
-        }
-        self.params.set(p, v)
+        bus_write(&mut self.params, p, v)
     }
 
     fn card_events(&mut self, now: Instant) {
@@ -723,12 +830,35 @@ impl Adv200 {
     }
 }
 
+/// A parameter write from a fieldbus (SDO, DeviceNet explicit message): the motor data
+/// cannot change while the drive is enabled; naming `Dig Fieldbus S->Mn` as S2M channel n's
+/// `ipa` makes it an MDPLC channel (§1.3.3).
+pub(crate) fn bus_write(db: &mut ParamDb, p: u16, v: i64) -> Result<(), ParamError> {
+    if matches!(p, par::RATED_CURRENT | par::FULL_SCALE_SPEED) && db.value(par::ENABLE_STATE) != 0 {
+        return Err(ParamError::DeviceState);
+    }
+    db.check(p, v)?;
+    if let Some(n) = (1..=16u16).find(|n| par::s2m_ipa(*n) == p)
+        && v == i64::from(par::s2m_dig(n))
+    {
+        let f = Format::from_value(db.value(par::s2m_sys(n)));
+        let mdplc = if f.bits() == 32 { 7 } else { 6 };
+        let _ = db.force(par::s2m_sys(n), mdplc);
+    }
+    db.set(p, v)
+}
+
 impl Node for Adv200 {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         self.reset_drive(now, out);
     }
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        if self.powered && self.dnet.is_some() {
+            self.dnet_events(now);
+            self.with_dnet(|s| s.on_frame(frame, now, out));
+            return self.dnet_events(now);
+        }
         if !self.powered || self.card.is_none() {
             return;
         }
@@ -747,6 +877,18 @@ impl Node for Adv200 {
     fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
         if !self.powered {
             return;
+        }
+        if self.dnet.is_some() {
+            self.dnet_events(now);
+            if self
+                .dnet
+                .as_ref()
+                .and_then(|s| s.next_deadline())
+                .is_some_and(|d| d <= now)
+            {
+                self.with_dnet(|s| s.on_tick(now, out));
+            }
+            return self.dnet_events(now);
         }
         self.settle(now, out);
         let mut again = false;
@@ -784,6 +926,7 @@ impl Node for Adv200 {
         [
             self.drive.next_deadline(),
             self.card.as_ref().and_then(|c| c.dev.next_deadline()),
+            self.dnet.as_ref().and_then(|s| s.next_deadline()),
             self.sync_deadline(),
         ]
         .into_iter()
@@ -795,6 +938,9 @@ impl Node for Adv200 {
         if let Some(c) = &mut self.card {
             c.dev.on_sent(frame, now, out);
         }
+        if self.with_dnet(|s| s.on_sent(frame, now, out)) {
+            self.dnet_events(now);
+        }
     }
 
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
@@ -805,6 +951,9 @@ impl Node for Adv200 {
         }
         if let Some(c) = &mut self.card {
             c.dev.on_controller_event(event, now, out);
+        }
+        if self.with_dnet(|s| s.on_controller_event(event, now, out)) {
+            return self.dnet_events(now);
         }
         self.card_events(now);
         self.settle(now, out);

@@ -5,6 +5,7 @@
 //! * [`alarms`]: the alarm list and its EMCY codes (§1.5);
 //! * [`pdc`]: the Process Data Channel mapping rules (§1.3) and their Opt Bus Fault codes;
 //! * [`ds402`]: the CiA 402 power state machine (chapter 2);
+//! * [`devicenet`]: the DeviceNet personality (chapter 3);
 //! * [`od`]: the card's object dictionary for the CANopen and DS402 personalities;
 //! * [`eds`]: their EDS files, generated from the dictionary;
 //! * [`card`]: the drive and its card as one sans-IO [`cantwin_can::Node`];
@@ -33,6 +34,7 @@
 
 pub mod alarms;
 pub mod card;
+pub mod devicenet;
 pub mod drive;
 pub mod ds402;
 pub mod eds;

@@ -1,0 +1,146 @@
+//! Chapter 3: the DeviceNet personality on a 500 kbit/s virtual bus with the stack's scanner.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use cantwin_adv200::params::par;
+use cantwin_adv200::{Adv200, Adv200Config, example};
+use cantwin_bus::{BusConfig, PortConfig, Recorder, Simulation};
+use cantwin_can::{BitRate, Duration, Instant};
+use cantwin_devicenet::scanner::ScannerConfig;
+use cantwin_devicenet::wire::{BodyFormat, choice};
+use cantwin_devicenet::{Led, MacId, Scanner, ScannerEvent};
+
+const MS: u64 = 1_000_000;
+
+fn at(ms: u64) -> Instant {
+    Instant::from_nanos(ms * MS)
+}
+
+/// §3.9: the example of §1.6 with Fieldbus type DeviceNet.
+fn drive() -> Adv200 {
+    let mut d = Adv200::new(Adv200Config {
+        bus_bit_rate: Some(500_000),
+        ..Adv200Config::default()
+    });
+    example::configure(&mut d).unwrap();
+    d.set_param_str(par::FIELDBUS_TYPE, "DeviceNet").unwrap();
+    d
+}
+
+#[test]
+fn manual_3_9_example_polls_4_bytes_out_6_bytes_in_and_runs_the_motor() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let mac = MacId::new(12).unwrap();
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    let pd = sim.attach(bus, drive(), PortConfig::default()).unwrap();
+    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+    sim.run_until(at(2100));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(
+        node.param(par::FIELDBUS_STATE),
+        Ok(0),
+        "Stop: no master yet"
+    );
+    assert_eq!(node.devicenet_leds(), Some((Led::Blink, Led::Off)));
+    {
+        let m = sim.node_mut::<Scanner>(pm).unwrap();
+        assert_eq!(m.poll_event(), Some(ScannerEvent::Online));
+        m.allocate(mac, choice::EXPLICIT | choice::POLLED).unwrap();
+        m.set_expected_packet_rate(mac, 2, 100).unwrap();
+        // Control word enable + start + digital output 3, Ramp ref 1 = 1500 rpm.
+        m.start_polling(
+            mac,
+            Duration::from_millis(10),
+            &[0x03, 0x01, 0xDC, 0x05],
+            6,
+            at(2110),
+        );
+    }
+    sim.run_until(at(4000));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(
+        node.param(par::FIELDBUS_STATE),
+        Ok(2),
+        "Operational: polled I/O"
+    );
+    assert_eq!(node.devicenet_leds(), Some((Led::On, Led::Off)));
+    assert_eq!(node.param(par::MOTOR_SPEED), Ok(1500));
+    assert!(node.digital_output(3));
+    let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+    let frames: Vec<String> = rec.frames().map(|r| r.frame.to_string()).collect();
+    // Poll command on group 2 message 5 (0x465), response on group 1 message 15 (0x3CC):
+    // status word (enable, drive ok), speed 1500, analog input 2.
+    assert_eq!(frames[frames.len() - 2], "465#0301DC05");
+    assert_eq!(frames[frames.len() - 1], "3CC#0300DC050000");
+    assert!(
+        frames.contains(&"3CC#060000000000".to_string()),
+        "first response: at rest"
+    );
+}
+
+#[test]
+fn manual_3_4_2_drive_parameter_access_over_ucmm() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let mac = MacId::new(12).unwrap();
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    sim.attach(bus, drive(), PortConfig::default()).unwrap();
+    sim.run_until(at(2100));
+    let m = sim.node_mut::<Scanner>(pm).unwrap();
+    assert_eq!(m.poll_event(), Some(ScannerEvent::Online));
+    // PAR 600 > 255 needs a 16-bit instance: a UCMM connection with body format 8/16.
+    m.open_ucmm(mac, BodyFormat::F8_16).unwrap();
+    m.request(mac, 0x33, 0x66, 600, &[0xE8, 0x03]).unwrap();
+    m.request(mac, 0x32, 0x66, 600, &[]).unwrap();
+    m.request(mac, 0x33, 0x66, 260, &[0x01, 0x00]).unwrap();
+    sim.run_until(at(2300));
+    let m = sim.node_mut::<Scanner>(pm).unwrap();
+    let mut responses = Vec::new();
+    while let Some(e) = m.poll_event() {
+        if let ScannerEvent::Response { service, data, .. } = e {
+            responses.push((service, data));
+        }
+    }
+    assert_eq!(
+        responses,
+        [
+            (0x33, vec![0x00, 0x00]),
+            (0x32, vec![0x00, 0x00, 0xE8, 0x03]),
+            (0x33, vec![12, 0x00]),
+        ]
+    );
+}
+
+#[test]
+fn manual_3_7_1_configuration_faults() {
+    let cfg = |baud: &str, addr: i64| {
+        let h = common::H::new(Adv200Config::default(), |d| {
+            d.set_param_str(par::FIELDBUS_TYPE, "DeviceNet").unwrap();
+            d.set_param_str(par::FIELDBUS_BAUDRATE, baud).unwrap();
+            d.set_param(par::FIELDBUS_ADDRESS, addr).unwrap();
+        });
+        (h.d.opt_bus_faults(), h.frames().len())
+    };
+    // DeviceNet has no 1 Mbit/s (FFC5) and MAC IDs 1–63 (FFC6).
+    assert_eq!(cfg("1M", 12), (vec![0xFFC5], 0));
+    assert_eq!(cfg("500k", 64), (vec![0xFFC6], 0));
+    assert_eq!(cfg("500k", 0), (vec![0xFFC6], 0));
+    // Configured: the duplicate MAC ID check request goes out at power-up.
+    let (faults, frames) = cfg("125k", 63);
+    assert!(faults.is_empty());
+    assert_eq!(frames, 1);
+}
