@@ -181,6 +181,39 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_devicenet_scenario_checks_its_mac_id_at_power_up() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../scenarios/adv200-devicenet.toml"
+        );
+        let text = std::fs::read_to_string(path).unwrap();
+        let scenario = Scenario::parse(&text, path).unwrap();
+        let mut built = scenario
+            .build(&Registry::builtin(), &Default::default())
+            .unwrap();
+        let bus = built.bus("can0").unwrap();
+        let drive = built.device("drive").unwrap().port;
+        let tap = built.sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+        built.sim.run_until(Instant::from_nanos(3_000_000_000));
+        let node = built.sim.node::<Adv200>(drive).unwrap();
+        assert_eq!(node.param(par::FIELDBUS_TYPE), Ok(2));
+        assert!(node.devicenet().is_some());
+        let frames: Vec<String> = built
+            .sim
+            .bus(bus)
+            .unwrap()
+            .tap::<Recorder>(tap)
+            .unwrap()
+            .frames()
+            .map(|f| f.frame.to_string())
+            .collect();
+        // Two duplicate MAC ID check requests (group 2 message 7 of MAC 12 = 0x467), 1 s
+        // apart, then the node is on-line and silent until a master allocates it.
+        assert_eq!(frames.len(), 2, "{frames:?}");
+        assert!(frames.iter().all(|f| f.starts_with("467#")), "{frames:?}");
+    }
+
+    #[test]
     fn params_by_number_and_name_reach_the_drive() {
         let text = DEVICE.to_string()
             + "params = { 4000 = \"DS402\", 4004 = \"500k\", 4006 = 7, 600 = -100 }\ndigital_inputs = [3]\nanalog_inputs = [1.0]\n";
