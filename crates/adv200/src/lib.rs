@@ -11,6 +11,24 @@
 //! * [`card`]: the drive and its card as one sans-IO [`cantwin_can::Node`];
 //! * [`example`]: the worked example of §1.6 as a ready network.
 //!
+//! # Decisions where the manual is garbled or not standard
+//!
+//! * **Parameter numbers** the manual does not print (channel blocks, commands, I/O, motor):
+//!   see [`params`]; channel M2S *n* at 4020 + 10(n−1), S2M *n* at 4180 + 10(n−1) so that
+//!   `Dig Fieldbus S->Mn` lands on 4184 + 10(n−1) as §1.3.3 prints it.
+//! * **SDO abort codes**: the §1.4 table is OCR-damaged; the CiA 301 codes with the same
+//!   meanings are used ([`params::ParamError::abort_code`]).
+//! * **§1.4 byte order**: the manual prints the index high byte first (22h 58h); on the wire
+//!   it is little-endian, `23 58 22 01 E8 03 00 00` for PAR 600 = 1000.
+//! * **Opt Bus Fault** travels as EMCY 0xFF11 with its sub-code in manufacturer bytes 0–1;
+//!   alarms listed with a bare number n use 0xFF00 + n ([`alarms`]).
+//! * **PDC**: a value-format placeholder (`ipa` = 0) closes the PDO; Fill is inserted; a
+//!   32-bit item that would straddle two PDOs raises the channel's size code ([`pdc`]).
+//! * **Bus loss from 0x1006**: no SYNC within 1.5 communication cycle periods ([`card`]).
+//! * **TPDO RTR**: COB-ID bit 30 set (no RTR), the meaning of §1.1.7 ([`od`]).
+//! * **LEDs**: AL on in every NMT state but Operational (the §1.6.2.1 table) and with Opt
+//!   Bus Fault; PWR/+5VC on while the card is powered ([`card`]).
+//!
 //! ```
 //! use cantwin_adv200::{Adv200, Adv200Config, params::par};
 //! use cantwin_can::{Frame, Instant, Node, Outbox};

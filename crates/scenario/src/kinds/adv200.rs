@@ -1,5 +1,5 @@
-//! `kind = "adv200"`: a Gefran ADV200 drive with the EXP-CAN/DN-ADV card (CANopen or CiA 402
-//! personality), configured through its parameters as the manual tells a commissioning
+//! `kind = "adv200"`: a Gefran ADV200 drive with the EXP-CAN/DN-ADV card (CANopen, CiA 402
+//! or DeviceNet personality, PAR 4000), configured through its parameters as the manual tells a commissioning
 //! engineer to, then powered up (the drive reset that makes fieldbus parameters effective).
 //!
 //! Keys (all optional):
