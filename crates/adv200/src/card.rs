@@ -568,7 +568,7 @@ impl Adv200 {
             let Some(v) = raw_i64(c.dev.od(), d.sdo_index(), 1) else {
                 continue;
             };
-            if v == c.pushed[i] {
+            if v == c.pushed[i] || c.pushed[i] == i64::MIN {
                 continue;
             }
             let m2s = (1..=16u16).find(|n| par::m2s_mon(*n) == d.par);
@@ -806,6 +806,12 @@ impl Adv200 {
                         to: State::Operational,
                         ..
                     } => c.last_sync = Some(now),
+                    // Reset node/communication restored the dictionary's defaults: the
+                    // drive's parameters are the truth, write them all back (they are kept
+                    // by the drive, not by the card).
+                    Event::ResetApplication | Event::ResetCommunication => {
+                        c.pushed.fill(i64::MIN);
+                    }
                     _ => {}
                 }
             }
@@ -868,6 +874,7 @@ impl Node for Adv200 {
             && let Some(c) = &mut self.card
         {
             c.dev.on_frame(frame, now, out);
+            self.card_events(now);
             self.pull();
         }
         self.card_events(now);

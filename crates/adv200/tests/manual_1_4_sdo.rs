@@ -131,3 +131,23 @@ fn manual_1_1_7_tpdos_do_not_answer_remote_requests() {
     assert_eq!(h.send("18C#R"), Vec::<String>::new());
     assert_eq!(h.send("080#"), ["18C#0000"]);
 }
+
+#[test]
+fn manual_1_1_2_nmt_reset_node_keeps_the_drive_parameters() {
+    let mut h = H::canopen(|d| {
+        d.set_param_str(par::s2m_sys(1), "Count 16").unwrap();
+        d.set_param(par::s2m_ipa(1), i64::from(par::DIG_RAMP_REF_1))
+            .unwrap();
+    });
+    assert_eq!(h.send("60C#2B58220164000000"), ["58C#6058220100000000"]);
+    // Reset node: boot-up again; the drive's parameters stay, the PDC mapping comes back.
+    assert_eq!(h.send("000#810C"), ["70C#00"]);
+    assert_eq!(h.d.param(par::DIG_RAMP_REF_1), Ok(100));
+    assert_eq!(h.d.param(par::FIELDBUS_ADDRESS), Ok(12));
+    assert_eq!(h.send("60C#4058220100000000"), ["58C#4B58220164000000"]);
+    h.send("000#010C");
+    assert_eq!(h.send("080#"), ["18C#6400"]);
+    // Reset communication likewise.
+    assert_eq!(h.send("000#820C"), ["70C#00"]);
+    assert_eq!(h.d.param(par::DIG_RAMP_REF_1), Ok(100));
+}
