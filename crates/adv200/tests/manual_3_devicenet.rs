@@ -144,3 +144,40 @@ fn manual_3_7_1_configuration_faults() {
     assert!(faults.is_empty());
     assert_eq!(frames, 1);
 }
+
+#[test]
+fn manual_3_7_1_connection_timeout_is_bus_loss() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let mac = MacId::new(12).unwrap();
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    let mut d = drive();
+    d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap();
+    let pd = sim.attach(bus, d, PortConfig::default()).unwrap();
+    sim.run_until(at(2100));
+    {
+        let m = sim.node_mut::<Scanner>(pm).unwrap();
+        m.allocate(mac, choice::EXPLICIT | choice::POLLED).unwrap();
+        m.set_expected_packet_rate(mac, 2, 50).unwrap();
+        m.start_polling(mac, Duration::from_millis(10), &[0, 0, 0, 0], 6, at(2110));
+    }
+    sim.run_until(at(2500));
+    assert_eq!(
+        sim.node::<Adv200>(pd).unwrap().param(par::FIELDBUS_STATE),
+        Ok(2)
+    );
+    assert!(sim.node::<Adv200>(pd).unwrap().opt_bus_faults().is_empty());
+    sim.node_mut::<Scanner>(pm).unwrap().stop_polling(mac);
+    // The polled connection's watchdog (4 × 50 ms) expires: Opt Bus Fault 0 (bus loss).
+    sim.run_until(at(2800));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.opt_bus_faults(), [0x0000]);
+    assert_eq!(node.param(par::FIELDBUS_STATE), Ok(1));
+    assert_eq!(node.devicenet_leds(), Some((Led::Off, Led::Blink)));
+}
