@@ -24,10 +24,6 @@
 #![forbid(unsafe_code)]
 
 pub mod abort;
-pub mod objects;
-pub mod od;
-pub mod pdo;
-pub mod sdo;
 pub mod device;
 pub mod emcy;
 pub mod error_behaviour;
@@ -35,8 +31,12 @@ pub mod guarding;
 pub mod heartbeat;
 pub mod master;
 pub mod nmt;
-pub mod sync;
+pub mod objects;
+pub mod od;
+pub mod pdo;
+pub mod sdo;
 pub mod storage;
+pub mod sync;
 pub mod time;
 pub mod wire;
 

@@ -233,7 +233,8 @@ fn print_state(data: &[u8]) -> Result<()> {
     Ok(())
 }
 
-fn describe_flags(data: &[u8]) -> String {
+/// The alarm flags of a message 1 notification, in words.
+pub(crate) fn describe_flags(data: &[u8]) -> String {
     match ErrorFlags::decode(data) {
         Some(f) => {
             let mut parts = Vec::new();

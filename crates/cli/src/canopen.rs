@@ -567,15 +567,11 @@ pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
         Message::Time(t) => format!("TIME {}", t.0),
         Message::Pdo { kind, node, .. } => format!("PDO {kind:?} node {node}"),
         Message::SdoRequest { node, .. } => match msg.sdo_request() {
-            Some(Ok(r)) => format!("SDO request to node {node}: {r:?}"),
+            Some(Ok(r)) => format!("SDO request to node {node}: {r}"),
             _ => format!("SDO request to node {node} (segment or malformed)"),
         },
         Message::SdoResponse { node, .. } => match msg.sdo_response() {
-            Some(Ok(cantwin_canopen::sdo::wire::Response::Abort { mux, code })) => format!(
-                "SDO abort from node {node} {:#06X}sub{}: {code}",
-                mux.index, mux.sub
-            ),
-            Some(Ok(r)) => format!("SDO response from node {node}: {r:?}"),
+            Some(Ok(r)) => format!("SDO response from node {node}: {r}"),
             _ => format!("SDO response from node {node} (segment or malformed)"),
         },
         Message::ErrorControl(ec) => match ec {

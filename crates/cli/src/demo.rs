@@ -17,9 +17,48 @@ use cantwin_can::{
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Print every frame, not only the first cycle and the interesting events.
+    /// Print every frame of the physical-layer part, not only the first cycle and the
+    /// interesting events.
     #[arg(long, short)]
     verbose: bool,
+    /// Run only these parts (default: all, in this order).
+    #[arg(long, value_enum, value_delimiter = ',')]
+    only: Vec<Part>,
+}
+
+/// The parts of the demo.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Part {
+    /// Arbitration, timing, errors and faults on the virtual bus.
+    Physical,
+    /// A CiA 301 device twin and cantwin's CANopen master.
+    Canopen,
+    /// The OPEN DRIVE twin under a CAL master.
+    Opendrive,
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let parts = if args.only.is_empty() {
+        vec![Part::Physical, Part::Canopen, Part::Opendrive]
+    } else {
+        args.only.clone()
+    };
+    let wall = std::time::Instant::now();
+    for (i, part) in parts.iter().enumerate() {
+        if i > 0 {
+            println!("\n{}\n", "-".repeat(78));
+        }
+        match part {
+            Part::Physical => physical(args)?,
+            Part::Canopen => crate::demo_canopen::run()?,
+            Part::Opendrive => crate::demo_opendrive::run()?,
+        }
+    }
+    println!(
+        "\nDemo finished in {:.0} ms of wall time. Next: `cantwin sim scenarios/cia301-device.toml --socketcand 29536`.",
+        wall.elapsed().as_secs_f64() * 1e3
+    );
+    Ok(())
 }
 
 /// Sends a counter on its identifier every `period`, starting at power-up.
@@ -289,7 +328,7 @@ fn port_named(net: &Network, name: &str) -> Result<PortId> {
         .with_context(|| format!("no node {name}"))
 }
 
-pub fn run(args: &Args) -> Result<()> {
+fn physical(args: &Args) -> Result<()> {
     let wall = std::time::Instant::now();
     let mut net = build()?;
     let ms = |v: u64| Instant::ZERO + Duration::from_millis(v);
@@ -298,7 +337,7 @@ pub fn run(args: &Args) -> Result<()> {
     let sensor_a = port_named(&net, "sensor-a")?;
     let sensor_b = port_named(&net, "sensor-b")?;
 
-    println!("cantwin demo: two virtual CAN buses, 1 s of bus time in virtual time");
+    println!("The physical layer: two virtual CAN buses, 1 s of bus time in virtual time.");
     println!(
         "  can0 500 kbit/s: sensor-a (0x182) and sensor-b (0x181) every 100 ms, beacon (0x701)"
     );

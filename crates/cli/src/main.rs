@@ -7,6 +7,8 @@ mod canopen;
 mod capture_tap;
 mod connect;
 mod demo;
+mod demo_canopen;
+mod demo_opendrive;
 mod dump;
 mod eds;
 mod sim;

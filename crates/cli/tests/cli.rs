@@ -35,6 +35,17 @@ fn demo_runs_without_arguments_and_tells_the_story() {
     assert!(out.contains("controller BUS-OFF"));
     assert!(out.contains("recovered from bus-off"));
     assert!(out.contains("lonely     controller error-passive (TEC 128)"));
+    // CANopen: boot-up, NMT, SDO with an abort and its meaning, SYNC and TPDOs, EMCY,
+    // heartbeat loss and a new boot-up.
+    assert!(out.contains("705#00                 BOOT-UP node 5"), "{out}");
+    assert!(out.contains("\"cantwin generic CiA 301 device\" (30 bytes"), "{out}");
+    assert!(out.contains("ABORT 0x2002sub0: 0x06090031"), "{out}");
+    assert!(out.contains("EMCY node 5 code 0x5000 (device hardware)"), "{out}");
+    assert!(out.contains("heartbeat of node 5 lost"), "{out}");
+    assert!(out.contains("node 5 booted"), "{out}");
+    // CAL: the OPEN DRIVE ramps to 50 Hz and trips on overload.
+    assert!(out.contains("50.00 Hz"), "{out}");
+    assert!(out.contains("alarm notification 00 80: OVERLOAD (A2/A3)"), "{out}");
 }
 
 #[test]

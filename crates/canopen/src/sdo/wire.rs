@@ -599,3 +599,151 @@ mod tests {
         }
     }
 }
+
+fn hex(data: &[u8]) -> String {
+    data.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+impl core::fmt::Display for Mux {
+    /// `0x1018sub1`, as traces and CiA 306 section names write it.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "0x{:04X}sub{}", self.index, self.sub)
+    }
+}
+
+impl core::fmt::Display for Initiate {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Initiate::Expedited { data, len: Some(n) } => {
+                write!(f, "expedited [{}]", hex(&data[..usize::from(*n).min(4)]))
+            }
+            Initiate::Expedited { data, len: None } => {
+                write!(f, "expedited [{}] (size not indicated)", hex(data))
+            }
+            Initiate::Segmented { size: Some(n) } => write!(f, "segmented, {n} bytes"),
+            Initiate::Segmented { size: None } => f.write_str("segmented, size not indicated"),
+        }
+    }
+}
+
+impl core::fmt::Display for Request {
+    /// One line for traces: the service and its fields, with the multiplexer as
+    /// `0xINDEXsubN` and data in hex.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let t = |toggle: &bool| u8::from(*toggle);
+        match self {
+            Request::InitiateDownload { mux, init } => write!(f, "download {mux}: {init}"),
+            Request::DownloadSegment {
+                toggle,
+                last,
+                len,
+                data,
+            } => write!(
+                f,
+                "download segment t={} [{}]{}",
+                t(toggle),
+                hex(&data[..usize::from(*len).min(7)]),
+                if *last { " last" } else { "" }
+            ),
+            Request::InitiateUpload { mux } => write!(f, "upload {mux}"),
+            Request::UploadSegment { toggle } => write!(f, "upload segment t={}", t(toggle)),
+            Request::BlockDownloadInitiate { mux, crc, size } => write!(
+                f,
+                "block download {mux}{}{}",
+                size.map(|s| format!(", {s} bytes")).unwrap_or_default(),
+                if *crc { ", CRC" } else { "" }
+            ),
+            Request::BlockDownloadEnd { unused, crc } => {
+                write!(
+                    f,
+                    "block download end, {unused} unused bytes, CRC 0x{crc:04X}"
+                )
+            }
+            Request::BlockUploadInitiate {
+                mux,
+                crc,
+                blksize,
+                pst,
+            } => write!(
+                f,
+                "block upload {mux}, blksize {blksize}, pst {pst}{}",
+                if *crc { ", CRC" } else { "" }
+            ),
+            Request::BlockUploadStart => f.write_str("block upload start"),
+            Request::BlockUploadAck { ackseq, blksize } => {
+                write!(f, "block upload ack seq {ackseq}, next blksize {blksize}")
+            }
+            Request::BlockUploadEnd => f.write_str("block upload end"),
+            Request::Abort { mux, code } => write!(f, "abort {mux}: {code}"),
+        }
+    }
+}
+
+impl core::fmt::Display for Response {
+    /// One line for traces (see [`Request`]'s `Display`).
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let t = |toggle: &bool| u8::from(*toggle);
+        match self {
+            Response::InitiateDownload { mux } => write!(f, "download {mux} accepted"),
+            Response::DownloadSegment { toggle } => {
+                write!(f, "download segment t={} accepted", t(toggle))
+            }
+            Response::InitiateUpload { mux, init } => write!(f, "upload {mux}: {init}"),
+            Response::UploadSegment {
+                toggle,
+                last,
+                len,
+                data,
+            } => write!(
+                f,
+                "upload segment t={} [{}]{}",
+                t(toggle),
+                hex(&data[..usize::from(*len).min(7)]),
+                if *last { " last" } else { "" }
+            ),
+            Response::BlockDownloadInitiate { mux, crc, blksize } => write!(
+                f,
+                "block download {mux} accepted, blksize {blksize}{}",
+                if *crc { ", CRC" } else { "" }
+            ),
+            Response::BlockDownloadAck { ackseq, blksize } => {
+                write!(f, "block download ack seq {ackseq}, next blksize {blksize}")
+            }
+            Response::BlockDownloadEnd => f.write_str("block download end accepted"),
+            Response::BlockUploadInitiate { mux, crc, size } => write!(
+                f,
+                "block upload {mux}{}{}",
+                size.map(|s| format!(", {s} bytes")).unwrap_or_default(),
+                if *crc { ", CRC" } else { "" }
+            ),
+            Response::BlockUploadEnd { unused, crc } => {
+                write!(
+                    f,
+                    "block upload end, {unused} unused bytes, CRC 0x{crc:04X}"
+                )
+            }
+            Response::Abort { mux, code } => write!(f, "ABORT {mux}: {code}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod display_tests {
+    use super::*;
+
+    #[test]
+    fn trace_lines_name_the_object_and_the_data() {
+        let r = Request::decode(&[0x40, 0x08, 0x10, 0x00, 0, 0, 0, 0]).unwrap();
+        assert_eq!(r.to_string(), "upload 0x1008sub0");
+        let r = Response::decode(&[0x43, 0x18, 0x10, 0x01, 0xA7, 0x0C, 0, 0]).unwrap();
+        assert_eq!(r.to_string(), "upload 0x1018sub1: expedited [A7 0C 00 00]");
+        let r = Response::decode(&[0x80, 0x00, 0x60, 0x00, 0x00, 0x00, 0x02, 0x06]).unwrap();
+        assert_eq!(
+            r.to_string(),
+            "ABORT 0x6000sub0: 0x06020000 (Object does not exist in the object dictionary)"
+        );
+    }
+}
