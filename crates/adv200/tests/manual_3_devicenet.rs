@@ -181,3 +181,39 @@ fn manual_3_7_1_connection_timeout_is_bus_loss() {
     assert_eq!(node.param(par::FIELDBUS_STATE), Ok(1));
     assert_eq!(node.devicenet_leds(), Some((Led::Off, Led::Blink)));
 }
+
+#[test]
+fn manual_3_3_2_identity_reset_restarts_the_link_and_keeps_the_parameters() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let mac = MacId::new(12).unwrap();
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    let pd = sim.attach(bus, drive(), PortConfig::default()).unwrap();
+    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+    sim.run_until(at(2100));
+    {
+        let m = sim.node_mut::<Scanner>(pm).unwrap();
+        m.allocate(mac, choice::EXPLICIT).unwrap();
+        // Identity (class 1, instance 1) Reset, type 0.
+        m.request(mac, 0x05, 0x01, 0x01, &[0]).unwrap();
+    }
+    sim.run_until(at(2200));
+    let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+    let dup: Vec<Instant> = rec
+        .frames()
+        .filter(|r| r.frame.id().as_raw() == 0x467)
+        .map(|r| r.start)
+        .collect();
+    // Two duplicate MAC ID checks after power-up; the Reset restarts the link (a third
+    // check) while the drive keeps its parameters.
+    assert_eq!(dup.len(), 3, "{dup:?}");
+    assert!(dup[2] > at(2100));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.param(par::FIELDBUS_ADDRESS), Ok(12), "parameters kept");
+}
