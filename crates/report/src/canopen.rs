@@ -1,0 +1,212 @@
+//! One-line descriptions of CANopen frames and the meanings of EMCY codes, shared by the
+//! live trace (`cantwin trace`) and the capture report; PDO decoders built from EDS files.
+
+use std::sync::Arc;
+
+use cantwin_can::Frame;
+use cantwin_canopen::master::pdo::{PdoDecoder, PdoParams};
+use cantwin_canopen::od::{ObjectDictionary, Value};
+use cantwin_canopen::pdo::MapEntry;
+use cantwin_canopen::sdo::wire::Response;
+use cantwin_canopen::wire::{self, ErrorControl, Message};
+
+/// Why an EDS could not be turned into PDO decoders.
+#[derive(Debug, thiserror::Error)]
+pub enum EdsError {
+    /// The file is not a valid EDS/DCF.
+    #[error("{0}")]
+    Parse(#[from] cantwin_eds::ParseError),
+    /// The EDS does not convert to an object dictionary.
+    #[error("{0}")]
+    Convert(#[from] cantwin_eds::ConvertError),
+}
+
+/// Meaning of an EMCY error code (CiA 301 §7.2.7.1, table 21), most specific first.
+pub fn emcy_meaning(code: u16) -> &'static str {
+    match code {
+        0x0000 => "error reset or no error",
+        0x1000 => "generic error",
+        0x8110 => "CAN overrun (objects lost)",
+        0x8120 => "CAN in error passive mode",
+        0x8130 => "life guard error or heartbeat error",
+        0x8140 => "recovered from bus off",
+        0x8150 => "CAN-ID collision",
+        0x8210 => "PDO not processed due to length error",
+        0x8220 => "PDO length exceeded",
+        0x8230 => "DAM MPDO not processed, destination object not available",
+        0x8240 => "unexpected SYNC data length",
+        0x8250 => "RPDO timeout",
+        _ => match code >> 12 {
+            0x2 => "current",
+            0x3 => "voltage",
+            0x4 => "temperature",
+            0x5 => "device hardware",
+            0x6 => "device software",
+            0x7 => "additional modules",
+            0x8 => "monitoring",
+            0x9 => "external error",
+            0xF if code >> 8 == 0xFF => "device specific",
+            0xF => "additional functions",
+            _ => "unknown error code",
+        },
+    }
+}
+
+/// The name of an NMT state code (CiA 301 §7.2.8.3.2, table 51).
+pub fn state_name(state: u8) -> &'static str {
+    match state {
+        0 => "boot-up",
+        4 => "stopped",
+        5 => "operational",
+        127 => "pre-operational",
+        _ => "unknown state",
+    }
+}
+
+/// Adds to `decoder` the PDOs that the EDS/DCF `bytes` declares for `node`: their COB-IDs
+/// (0x1400.. / 0x1800.. sub 1, with `$NODEID` resolved) and mappings (0x1600.. / 0x1A00..).
+pub fn add_eds_pdos(decoder: &mut PdoDecoder, node: u8, bytes: &[u8]) -> Result<(), EdsError> {
+    let eds = cantwin_eds::parse_bytes(bytes)?;
+    let desc = Arc::new(cantwin_eds::to_od(&eds)?);
+    let mut od = ObjectDictionary::new(desc.clone(), node);
+    cantwin_eds::apply_parameter_values(&eds, &mut od)?;
+    let u32_of = |index, sub| match od.get(index, sub) {
+        Ok(Value::Unsigned32(v)) => Some(v),
+        _ => None,
+    };
+    let u8_of = |index, sub| match od.get(index, sub) {
+        Ok(Value::Unsigned8(v)) => Some(v),
+        _ => None,
+    };
+    // CiA 301 §7.5.2.35–38: RPDO communication/mapping at 0x1400/0x1600, TPDO at
+    // 0x1800/0x1A00, 512 of each.
+    for (comm_base, map_base) in [(0x1400u16, 0x1600u16), (0x1800, 0x1A00)] {
+        for n in 0..512u16 {
+            let (comm, map) = (comm_base + n, map_base + n);
+            let Some(cob_id) = u32_of(comm, 1) else {
+                continue;
+            };
+            let count = u8_of(map, 0).unwrap_or(0);
+            let mapping: Vec<MapEntry> = (1..=count)
+                .filter_map(|s| u32_of(map, s).map(MapEntry::from_u32))
+                .collect();
+            let params = PdoParams {
+                cob_id,
+                transmission_type: u8_of(comm, 2).unwrap_or(0),
+                inhibit_time: None,
+                event_timer: None,
+                mapping,
+            };
+            decoder.add(&params, desc.clone());
+        }
+    }
+    Ok(())
+}
+
+/// Bytes as spaced hex, `01 02 0A`.
+pub fn hex_bytes(data: &[u8]) -> String {
+    data.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The decoded values of a PDO `decoder` knows, as `name=value` pairs.
+pub fn describe_pdo(frame: &Frame, pdos: &PdoDecoder) -> Option<String> {
+    pdos.decode(frame).map(|values| match values {
+        Ok(values) => {
+            let parts: Vec<String> = values
+                .iter()
+                .map(|v| format!("{}={}", v.name, v.value))
+                .collect();
+            format!("PDO {}", parts.join(" "))
+        }
+        Err(e) => format!("PDO (cannot decode: {e})"),
+    })
+}
+
+/// One line for a frame: the service and its decoded content (empty for frames outside
+/// the pre-defined connection set that no PDO of `pdos` claims).
+pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
+    if let Some(text) = describe_pdo(frame, pdos) {
+        return text;
+    }
+    let msg = wire::decode(frame);
+    match msg {
+        Message::Nmt(cmd) => {
+            let target = if cmd.node == 0 {
+                "all nodes".to_string()
+            } else {
+                format!("node {}", cmd.node)
+            };
+            format!("NMT {:?} {target}", cmd.cs)
+        }
+        Message::Sync(s) => match s.counter {
+            Some(c) => format!("SYNC counter {c}"),
+            None => "SYNC".to_string(),
+        },
+        Message::Emcy { node, emcy } => format!(
+            "EMCY node {node} code 0x{:04X} ({}) register 0x{:02X} data {}",
+            emcy.code,
+            emcy_meaning(emcy.code),
+            emcy.register,
+            hex_bytes(&emcy.manufacturer)
+        ),
+        Message::Time(t) => format!("TIME {}", t.0),
+        Message::Pdo { kind, node, .. } => format!("PDO {kind:?} node {node}"),
+        Message::SdoRequest { node, .. } => match msg.sdo_request() {
+            Some(Ok(r)) => format!("SDO request to node {node}: {r:?}"),
+            _ => format!("SDO request to node {node} (segment or malformed)"),
+        },
+        Message::SdoResponse { node, .. } => match msg.sdo_response() {
+            Some(Ok(Response::Abort { mux, code })) => format!(
+                "SDO abort from node {node} {:#06X}sub{}: {code}",
+                mux.index, mux.sub
+            ),
+            Some(Ok(r)) => format!("SDO response from node {node}: {r:?}"),
+            _ => format!("SDO response from node {node} (segment or malformed)"),
+        },
+        Message::ErrorControl(ec) => match ec {
+            ErrorControl::GuardRequest { node } => format!("NODE GUARD request node {node}"),
+            ErrorControl::State { node, state: 0, .. } => format!("BOOT-UP node {node}"),
+            ErrorControl::State {
+                node,
+                toggle,
+                state,
+            } => format!(
+                "HEARTBEAT/GUARD node {node} {} (toggle {})",
+                state_name(state),
+                u8::from(toggle)
+            ),
+        },
+        Message::Malformed { error, .. } => format!("malformed: {error}"),
+        Message::Other(_) => String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use cantwin_can::Id;
+
+    #[test]
+    fn cia301_table_21_emcy_meanings() {
+        assert_eq!(emcy_meaning(0x8130), "life guard error or heartbeat error");
+        assert_eq!(emcy_meaning(0x4210), "temperature");
+        assert_eq!(emcy_meaning(0xFF01), "device specific");
+        assert_eq!(emcy_meaning(0xF001), "additional functions");
+        assert_eq!(emcy_meaning(0x0000), "error reset or no error");
+    }
+
+    #[test]
+    fn describe_boot_up_and_heartbeat() {
+        let none = PdoDecoder::new();
+        let boot = Frame::data(Id::standard(0x705).unwrap(), &[0]).unwrap();
+        assert_eq!(describe(&boot, &none), "BOOT-UP node 5");
+        let hb = Frame::data(Id::standard(0x705).unwrap(), &[0x7F]).unwrap();
+        assert_eq!(
+            describe(&hb, &none),
+            "HEARTBEAT/GUARD node 5 pre-operational (toggle 0)"
+        );
+    }
+}

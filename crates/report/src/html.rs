@@ -1,0 +1,227 @@
+//! The HTML page: one file, inline CSS and SVG, a few lines of inline script for the
+//! timeline filter, everything from the capture escaped.
+
+use std::fmt::Write as _;
+
+use crate::{Report, id_raw};
+
+/// Escapes text for HTML element content and quoted attribute values.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+/// Seconds since the capture start, with microseconds.
+fn rel(report: &Report, t_ns: u64) -> String {
+    let d = t_ns.saturating_sub(report.start_ns);
+    format!("{}.{:06}", d / 1_000_000_000, (d % 1_000_000_000) / 1_000)
+}
+
+fn ms(ns: Option<u64>) -> String {
+    ns.map_or_else(|| "–".to_string(), |v| format!("{:.3}", v as f64 / 1e6))
+}
+
+const STYLE: &str = "body{font-family:sans-serif;margin:1.5em;color:#222}\
+table{border-collapse:collapse;font-size:0.9em}\
+td,th{border:1px solid #ccc;padding:2px 6px;text-align:left}\
+th{background:#eee}td.n{text-align:right;font-family:monospace}\
+td.t{font-family:monospace}tr.anomaly td{background:#fee}\
+svg{background:#fafafa;border:1px solid #ccc}.note{color:#a40}";
+
+const SCRIPT: &str = "function cantwinFilter(){\
+var k=document.getElementById('kind').value;\
+var q=document.getElementById('q').value.toLowerCase();\
+var rows=document.querySelectorAll('#timeline tbody tr');\
+for(var i=0;i<rows.length;i++){var r=rows[i];\
+var ok=(k===''||r.dataset.kind===k)&&(q===''||r.textContent.toLowerCase().indexOf(q)>=0);\
+r.style.display=ok?'':'none';}}";
+
+/// Chart size in SVG user units.
+const W: f64 = 800.0;
+const H: f64 = 200.0;
+
+fn load_chart(out: &mut String, c: &crate::Channel) {
+    let n = c.load.len().max(1);
+    let top = c.peak_load().max(0.01);
+    // Scale to the next 10 % above the peak so small loads stay readable.
+    let top = ((top * 10.0).ceil() / 10.0).min(top.max(1.0));
+    let _ = write!(
+        out,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{}\" viewBox=\"0 0 {W} {}\" role=\"img\">",
+        H + 30.0,
+        H + 30.0
+    );
+    let _ = write!(out, "<title>bus load of {}</title>", escape(&c.name));
+    for q in 0..=4 {
+        let y = H - H * f64::from(q) / 4.0;
+        let _ = write!(
+            out,
+            "<line x1=\"40\" x2=\"{W}\" y1=\"{y:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>\
+             <text x=\"0\" y=\"{:.1}\" font-size=\"10\">{:.0}%</text>",
+            y + 3.0,
+            top * 100.0 * f64::from(q) / 4.0
+        );
+    }
+    let mut points = String::new();
+    for (i, l) in c.load.iter().enumerate() {
+        let x = 40.0 + (W - 40.0) * i as f64 / n as f64;
+        let x2 = 40.0 + (W - 40.0) * (i + 1) as f64 / n as f64;
+        let y = H - H * (l / top).min(1.0);
+        let _ = write!(points, "{x:.1},{y:.1} {x2:.1},{y:.1} ");
+    }
+    let _ = write!(
+        out,
+        "<polyline fill=\"none\" stroke=\"#36c\" stroke-width=\"1.5\" points=\"{}\"/>",
+        points.trim_end()
+    );
+    let secs = (c.window_ns as f64 * n as f64) / 1e9;
+    let _ = write!(
+        out,
+        "<text x=\"40\" y=\"{}\" font-size=\"10\">0 s</text>\
+         <text x=\"{}\" y=\"{}\" font-size=\"10\" text-anchor=\"end\">{secs:.1} s</text></svg>",
+        H + 15.0,
+        W,
+        H + 15.0
+    );
+}
+
+/// Renders a report as one self-contained HTML page.
+pub fn render_html(report: &Report) -> String {
+    let mut o = String::new();
+    o.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
+    o.push_str("<title>cantwin capture report</title><style>");
+    o.push_str(STYLE);
+    o.push_str("</style></head><body>\n<h1>Capture report</h1>\n");
+    let dur = report.end_ns.saturating_sub(report.start_ns);
+    let _ = writeln!(
+        o,
+        "<p id=\"summary\">Start {} ns since the Unix epoch, duration {:.3} s, {} channel(s), {} SDO transfer(s), {} anomalies.</p>",
+        report.start_ns,
+        dur as f64 / 1e9,
+        report.channels.len(),
+        report.sdo.len(),
+        report.anomalies.len()
+    );
+
+    o.push_str("<h2>Anomalies</h2>\n");
+    if report.anomalies.is_empty() {
+        o.push_str("<p>None found.</p>\n");
+    } else {
+        o.push_str("<table id=\"anomalies\"><thead><tr><th>time (s)</th><th>channel</th><th>kind</th><th>node</th><th>details</th></tr></thead><tbody>\n");
+        for a in &report.anomalies {
+            let _ = writeln!(
+                o,
+                "<tr class=\"anomaly\" data-kind=\"{}\"><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+                escape(a.kind.name()),
+                rel(report, a.t_ns),
+                escape(&a.channel),
+                escape(a.kind.name()),
+                a.node.map(|n| n.to_string()).unwrap_or_default(),
+                escape(&a.text)
+            );
+        }
+        o.push_str("</tbody></table>\n");
+    }
+
+    o.push_str("<h2>Bus load</h2>\n");
+    for c in &report.channels {
+        let _ = writeln!(
+            o,
+            "<h3>{}</h3><p>{} bit/s, {:?}; {} frames, {} error frames, {} SYNC; mean load {:.2} %, peak {:.2} % (windows of {} ms).</p>",
+            escape(&c.name),
+            c.bit_rate.bits_per_second(),
+            c.protocol,
+            c.frames,
+            c.error_frames,
+            c.syncs,
+            c.mean_load() * 100.0,
+            c.peak_load() * 100.0,
+            c.window_ns / 1_000_000
+        );
+        load_chart(&mut o, c);
+        o.push('\n');
+    }
+
+    o.push_str("<h2>Identifiers</h2>\n<table id=\"ids\"><thead><tr><th>channel</th><th>identifier</th><th>frames</th><th>bytes</th><th>share of bus (%)</th><th>min period (ms)</th><th>avg period (ms)</th><th>max period (ms)</th></tr></thead><tbody>\n");
+    for s in &report.ids {
+        let rate = report
+            .channels
+            .iter()
+            .find(|c| c.name == s.channel)
+            .map_or(1_000_000, |c| c.bit_rate.bits_per_second());
+        let capacity = f64::from(rate) * (dur.max(1) as f64 / 1e9);
+        let id = match s.id {
+            cantwin_can::Id::Standard(_) => format!("0x{:03X}", id_raw(s.id)),
+            cantwin_can::Id::Extended(_) => format!("0x{:08X}", id_raw(s.id)),
+        };
+        let _ = writeln!(
+            o,
+            "<tr><td>{}</td><td class=\"t\">{id}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{:.3}</td><td class=\"n\">{}</td><td class=\"n\">{}</td><td class=\"n\">{}</td></tr>",
+            escape(&s.channel),
+            s.frames,
+            s.bytes,
+            s.bits as f64 / capacity * 100.0,
+            ms(s.min_period_ns),
+            ms(s.avg_period_ns()),
+            ms(s.max_period_ns)
+        );
+    }
+    o.push_str("</tbody></table>\n");
+
+    o.push_str("<h2>Timeline</h2>\n<p><label>kind <select id=\"kind\" onchange=\"cantwinFilter()\"><option value=\"\">all</option>");
+    let mut kinds: Vec<_> = report.timeline.iter().map(|r| r.kind).collect();
+    kinds.sort();
+    kinds.dedup();
+    for k in kinds {
+        let _ = write!(o, "<option>{}</option>", k.name());
+    }
+    o.push_str("</select></label> <label>search <input id=\"q\" oninput=\"cantwinFilter()\"></label></p>\n");
+    if report.timeline_dropped > 0 {
+        let _ = writeln!(
+            o,
+            "<p class=\"note\">The timeline shows the first {} rows; {} more were left out.</p>",
+            report.timeline.len(),
+            report.timeline_dropped
+        );
+    }
+    o.push_str("<table id=\"timeline\"><thead><tr><th>time (s)</th><th>channel</th><th>kind</th><th>node</th><th>event</th></tr></thead><tbody>\n");
+    for r in &report.timeline {
+        let _ = writeln!(
+            o,
+            "<tr data-kind=\"{}\"><td class=\"n\">{}</td><td>{}</td><td>{}</td><td class=\"n\">{}</td><td>{}</td></tr>",
+            r.kind.name(),
+            rel(report, r.t_ns),
+            escape(&r.channel),
+            r.kind.name(),
+            r.node.map(|n| n.to_string()).unwrap_or_default(),
+            escape(&r.text)
+        );
+    }
+    o.push_str("</tbody></table>\n<script>");
+    o.push_str(SCRIPT);
+    o.push_str("</script>\n</body></html>\n");
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escape_markup_and_quotes() {
+        assert_eq!(
+            escape("<b a=\"x\">&'"),
+            "&lt;b a=&quot;x&quot;&gt;&amp;&#39;"
+        );
+    }
+}

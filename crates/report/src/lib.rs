@@ -1,0 +1,819 @@
+//! Reports of CAN captures: [`analyse`] turns the records of a capture (pcap, pcapng or
+//! candump, read with `cantwin-capture`) into a [`Report`] — bus load over time, statistics
+//! per identifier, a decoded timeline and anomalies — and [`render_html`] writes it as one
+//! self-contained HTML page (inline CSS and SVG, a few lines of inline script to filter the
+//! timeline; nothing fetched from anywhere, so it opens offline).
+//!
+//! The timeline decodes CANopen (NMT, SDO transfers reassembled into one row each with
+//! their value or abort code, heartbeat state changes, EMCY with meanings, PDOs named from an
+//! EDS), DeviceNet identifiers and CAL CMS frames, by the protocol each channel is said to
+//! carry. Anomalies: heartbeat gaps and stops, SDO aborts, SDO requests without response,
+//! error frames and unexpected boot-ups.
+//!
+//! ```
+//! use cantwin_can::{Frame, Id};
+//! use cantwin_capture::Record;
+//! use cantwin_report::{Options, analyse, render_html};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let t0 = 1_700_000_000_000_000_000;
+//! let records = [
+//!     Record::new(t0, "can0", Frame::data(Id::standard(0x705)?, &[0x00])?),
+//!     Record::new(t0 + 1_000_000, "can0", Frame::data(Id::standard(0x605)?, &[0x40, 0x08, 0x10, 0, 0, 0, 0, 0])?),
+//!     Record::new(t0 + 2_000_000, "can0", Frame::data(Id::standard(0x585)?, &[0x43, 0x08, 0x10, 0, b'T', b'w', b'i', b'n'])?),
+//! ];
+//! let report = analyse(&records, &Options::default());
+//! assert_eq!(report.sdo[0].data, b"Twin");
+//! let html = render_html(&report);
+//! assert!(html.contains("&quot;Twin&quot;"));
+//! # Ok(())
+//! # }
+//! ```
+#![forbid(unsafe_code)]
+
+pub mod canopen;
+mod html;
+pub mod sdo;
+
+use std::collections::{BTreeMap, HashMap};
+
+use cantwin_can::{BitRate, Frame, Id};
+use cantwin_canopen::master::pdo::PdoDecoder;
+use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
+use cantwin_capture::{Event, Record};
+
+pub use html::{escape, render_html};
+
+/// The protocol a channel carries, which decides how its frames are decoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Protocol {
+    /// CANopen (CiA 301 pre-defined connection set).
+    #[default]
+    CanOpen,
+    /// DeviceNet (identifier groups 1–4).
+    DeviceNet,
+    /// CAL CMS (DS 202): control byte and data.
+    Cal,
+}
+
+impl std::str::FromStr for Protocol {
+    type Err = String;
+
+    /// `canopen`, `devicenet` or `cal` (any case).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "canopen" => Ok(Protocol::CanOpen),
+            "devicenet" => Ok(Protocol::DeviceNet),
+            "cal" => Ok(Protocol::Cal),
+            _ => Err(format!(
+                "unknown protocol {s:?}: use canopen, devicenet or cal"
+            )),
+        }
+    }
+}
+
+/// How to analyse a capture.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Bit rate of channels not named in `bit_rates` (for the bus load).
+    pub default_bit_rate: BitRate,
+    /// Bit rate per channel name.
+    pub bit_rates: BTreeMap<String, BitRate>,
+    /// Protocol per channel name (others: CANopen).
+    pub protocols: BTreeMap<String, Protocol>,
+    /// PDO mappings that name PDO values (see [`canopen::add_eds_pdos`]).
+    pub pdos: PdoDecoder,
+    /// Width of a bus load window; `None` chooses 100 ms, widened so a capture has at most
+    /// [`MAX_WINDOWS`] windows.
+    pub window_ns: Option<u64>,
+    /// At most this many timeline rows are kept; the rest are counted.
+    pub max_timeline: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            default_bit_rate: BitRate::R1M,
+            bit_rates: BTreeMap::new(),
+            protocols: BTreeMap::new(),
+            pdos: PdoDecoder::new(),
+            window_ns: None,
+            max_timeline: 20_000,
+        }
+    }
+}
+
+impl Options {
+    fn bit_rate(&self, channel: &str) -> BitRate {
+        self.bit_rates
+            .get(channel)
+            .copied()
+            .unwrap_or(self.default_bit_rate)
+    }
+
+    fn protocol(&self, channel: &str) -> Protocol {
+        self.protocols.get(channel).copied().unwrap_or_default()
+    }
+}
+
+/// The most bus load windows per channel when the width is chosen automatically.
+pub const MAX_WINDOWS: u64 = 2_000;
+const DEFAULT_WINDOW_NS: u64 = 100_000_000;
+
+/// Bus load and totals of one channel.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// The channel name.
+    pub name: String,
+    /// The bit rate used for the load.
+    pub bit_rate: BitRate,
+    /// Protocol used for decoding.
+    pub protocol: Protocol,
+    /// Data and remote frames.
+    pub frames: u64,
+    /// Error frames.
+    pub error_frames: u64,
+    /// Bits on the bus: the sum of every frame's exact length (stuff bits, intermission).
+    pub bits: u64,
+    /// Width of a load window.
+    pub window_ns: u64,
+    /// Bus load of each window from the capture start, 0.0–1.0 (and more if the
+    /// capture's timestamps crowd more bits into a window than it can hold).
+    pub load: Vec<f64>,
+    /// SYNC messages seen (CANopen).
+    pub syncs: u64,
+}
+
+impl Channel {
+    /// The mean load over the capture (bits over capacity of the covered windows).
+    pub fn mean_load(&self) -> f64 {
+        if self.load.is_empty() {
+            return 0.0;
+        }
+        self.load.iter().sum::<f64>() / self.load.len() as f64
+    }
+
+    /// The highest window load.
+    pub fn peak_load(&self) -> f64 {
+        self.load.iter().copied().fold(0.0, f64::max)
+    }
+}
+
+/// Traffic of one identifier on one channel.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct IdStats {
+    /// The channel.
+    pub channel: String,
+    /// The identifier.
+    pub id: Id,
+    /// Frames.
+    pub frames: u64,
+    /// Data bytes.
+    pub bytes: u64,
+    /// Bits on the bus.
+    pub bits: u64,
+    /// First and last time seen.
+    pub first_ns: u64,
+    /// Last time seen.
+    pub last_ns: u64,
+    /// Shortest gap between two frames, if seen twice.
+    pub min_period_ns: Option<u64>,
+    /// Longest gap between two frames.
+    pub max_period_ns: Option<u64>,
+}
+
+impl IdStats {
+    /// The mean gap between two frames.
+    pub fn avg_period_ns(&self) -> Option<u64> {
+        (self.frames > 1).then(|| (self.last_ns - self.first_ns) / (self.frames - 1))
+    }
+}
+
+/// What a timeline row is about (the filter of the HTML page).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Kind {
+    /// NMT module control.
+    Nmt,
+    /// Boot-up and heartbeat/guarding state changes.
+    Heartbeat,
+    /// A reassembled SDO transfer.
+    Sdo,
+    /// An emergency message.
+    Emcy,
+    /// A PDO.
+    Pdo,
+    /// TIME stamp.
+    Time,
+    /// A DeviceNet frame.
+    DeviceNet,
+    /// A CAL frame.
+    Cal,
+    /// A controller error frame.
+    Error,
+    /// Anything else.
+    Other,
+}
+
+impl Kind {
+    /// Short lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Nmt => "nmt",
+            Kind::Heartbeat => "heartbeat",
+            Kind::Sdo => "sdo",
+            Kind::Emcy => "emcy",
+            Kind::Pdo => "pdo",
+            Kind::Time => "time",
+            Kind::DeviceNet => "devicenet",
+            Kind::Cal => "cal",
+            Kind::Error => "error",
+            Kind::Other => "other",
+        }
+    }
+}
+
+/// One line of the decoded timeline.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Row {
+    /// Capture time (ns since the Unix epoch).
+    pub t_ns: u64,
+    /// The channel.
+    pub channel: String,
+    /// The service.
+    pub kind: Kind,
+    /// The node concerned, if any.
+    pub node: Option<u8>,
+    /// What happened.
+    pub text: String,
+}
+
+/// What kind of anomaly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum AnomalyKind {
+    /// A heartbeat came more than 1.5× the node's median period after the previous one.
+    HeartbeatGap,
+    /// A node's heartbeats stopped before the end of the capture.
+    HeartbeatStopped,
+    /// An SDO transfer was aborted.
+    SdoAbort,
+    /// An SDO request got no response.
+    SdoNoResponse,
+    /// A controller error frame.
+    ErrorFrame,
+    /// A node booted again without an NMT reset addressed to it.
+    UnexpectedBootUp,
+    /// An EMCY other than "error reset".
+    Emergency,
+}
+
+impl AnomalyKind {
+    /// Human-readable name.
+    pub fn name(self) -> &'static str {
+        match self {
+            AnomalyKind::HeartbeatGap => "heartbeat gap",
+            AnomalyKind::HeartbeatStopped => "heartbeat stopped",
+            AnomalyKind::SdoAbort => "SDO abort",
+            AnomalyKind::SdoNoResponse => "SDO without response",
+            AnomalyKind::ErrorFrame => "error frame",
+            AnomalyKind::UnexpectedBootUp => "unexpected boot-up",
+            AnomalyKind::Emergency => "emergency",
+        }
+    }
+}
+
+/// Something worth a look.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Anomaly {
+    /// When.
+    pub t_ns: u64,
+    /// Where.
+    pub channel: String,
+    /// What.
+    pub kind: AnomalyKind,
+    /// The node concerned, if any.
+    pub node: Option<u8>,
+    /// Details.
+    pub text: String,
+}
+
+/// The analysis of a capture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Report {
+    /// Timestamp of the first record (0 for an empty capture).
+    pub start_ns: u64,
+    /// Timestamp of the last record.
+    pub end_ns: u64,
+    /// Per channel, by name.
+    pub channels: Vec<Channel>,
+    /// Per identifier, by channel then identifier.
+    pub ids: Vec<IdStats>,
+    /// SDO transfers in the order they ended.
+    pub sdo: Vec<sdo::Transfer>,
+    /// The decoded timeline, in time order, at most [`Options::max_timeline`] rows.
+    pub timeline: Vec<Row>,
+    /// Rows left out of the timeline by the cap.
+    pub timeline_dropped: u64,
+    /// Anomalies in time order.
+    pub anomalies: Vec<Anomaly>,
+}
+
+#[derive(Debug, Default)]
+struct NodeHb {
+    state: Option<u8>,
+    last_ns: Option<u64>,
+    times: Vec<u64>,
+    /// An NMT reset addressed to the node since its last message.
+    reset_pending: bool,
+    heard: bool,
+}
+
+struct Analyser<'o> {
+    opts: &'o Options,
+    start: u64,
+    end: u64,
+    channels: BTreeMap<String, Channel>,
+    /// (channel, id) → stats.
+    ids: HashMap<(String, Id), IdStats>,
+    bits_at: Vec<(String, u64, u32)>,
+    sdo: HashMap<(String, u8), sdo::Tracker>,
+    hb: BTreeMap<(String, u8), NodeHb>,
+    transfers: Vec<sdo::Transfer>,
+    rows: Vec<Row>,
+    anomalies: Vec<Anomaly>,
+}
+
+/// Analyses the records of a capture (in capture order; timestamps that go backwards are
+/// taken as they come).
+pub fn analyse<'r>(records: impl IntoIterator<Item = &'r Record>, opts: &Options) -> Report {
+    let mut a = Analyser {
+        opts,
+        start: u64::MAX,
+        end: 0,
+        channels: BTreeMap::new(),
+        ids: HashMap::new(),
+        bits_at: Vec::new(),
+        sdo: HashMap::new(),
+        hb: BTreeMap::new(),
+        transfers: Vec::new(),
+        rows: Vec::new(),
+        anomalies: Vec::new(),
+    };
+    for r in records {
+        a.record(r);
+    }
+    a.finish()
+}
+
+fn fmt_mux(index: u16, sub: u8) -> String {
+    format!("0x{index:04X}sub{sub}")
+}
+
+/// A transfer's value for display: quoted text when it is printable, otherwise the
+/// little-endian number (up to 8 bytes) and the bytes in hex.
+pub fn value_text(data: &[u8], size: usize) -> String {
+    let printable = data.len() >= 2 && data.iter().all(|&b| b.is_ascii_graphic() || b == b' ');
+    let mut s = if printable {
+        format!("\"{}\"", String::from_utf8_lossy(data))
+    } else if !data.is_empty() && data.len() <= 8 {
+        let mut v = 0u64;
+        for (i, b) in data.iter().enumerate() {
+            v |= u64::from(*b) << (8 * i);
+        }
+        format!("0x{v:0w$X} ({v})", w = data.len() * 2)
+    } else {
+        canopen::hex_bytes(data)
+    };
+    if size > data.len() {
+        s.push_str(&format!(" … ({size} bytes)"));
+    }
+    s
+}
+
+impl Analyser<'_> {
+    fn channel(&mut self, name: &str) -> &mut Channel {
+        let opts = self.opts;
+        self.channels
+            .entry(name.to_string())
+            .or_insert_with(|| Channel {
+                name: name.to_string(),
+                bit_rate: opts.bit_rate(name),
+                protocol: opts.protocol(name),
+                frames: 0,
+                error_frames: 0,
+                bits: 0,
+                window_ns: 0,
+                load: Vec::new(),
+                syncs: 0,
+            })
+    }
+
+    fn row(&mut self, t_ns: u64, channel: &str, kind: Kind, node: Option<u8>, text: String) {
+        self.rows.push(Row {
+            t_ns,
+            channel: channel.to_string(),
+            kind,
+            node,
+            text,
+        });
+    }
+
+    fn anomaly(&mut self, t_ns: u64, ch: &str, kind: AnomalyKind, node: Option<u8>, text: String) {
+        self.anomalies.push(Anomaly {
+            t_ns,
+            channel: ch.to_string(),
+            kind,
+            node,
+            text,
+        });
+    }
+
+    fn record(&mut self, r: &Record) {
+        let t = r.timestamp_ns;
+        self.start = self.start.min(t);
+        self.end = self.end.max(t);
+        let ch = r.channel.as_str();
+        match &r.event {
+            Event::Error(e) => {
+                self.channel(ch).error_frames += 1;
+                let text = format!("error frame: class {}", e);
+                self.row(t, ch, Kind::Error, None, text.clone());
+                self.anomaly(t, ch, AnomalyKind::ErrorFrame, None, text);
+            }
+            Event::Frame(f) => {
+                let bits = f.bit_length();
+                let c = self.channel(ch);
+                c.frames += 1;
+                c.bits += u64::from(bits);
+                let protocol = c.protocol;
+                self.bits_at.push((ch.to_string(), t, bits));
+                let s = self
+                    .ids
+                    .entry((ch.to_string(), f.id()))
+                    .or_insert_with(|| IdStats {
+                        channel: ch.to_string(),
+                        id: f.id(),
+                        frames: 0,
+                        bytes: 0,
+                        bits: 0,
+                        first_ns: t,
+                        last_ns: t,
+                        min_period_ns: None,
+                        max_period_ns: None,
+                    });
+                if s.frames > 0 {
+                    let gap = t.saturating_sub(s.last_ns);
+                    s.min_period_ns = Some(s.min_period_ns.map_or(gap, |m| m.min(gap)));
+                    s.max_period_ns = Some(s.max_period_ns.map_or(gap, |m| m.max(gap)));
+                }
+                s.frames += 1;
+                s.bytes += f.data_bytes().len() as u64;
+                s.bits += u64::from(bits);
+                s.last_ns = t;
+                match protocol {
+                    Protocol::CanOpen => self.canopen(t, ch, f),
+                    Protocol::DeviceNet => self.devicenet(t, ch, f),
+                    Protocol::Cal => self.cal(t, ch, f),
+                }
+            }
+        }
+    }
+
+    fn sdo_done(&mut self, done: Vec<sdo::Transfer>) {
+        for tr in done {
+            let dir = match tr.direction {
+                Some(sdo::Direction::Upload) => "read",
+                Some(sdo::Direction::Download) => "write",
+                None => "transfer",
+            };
+            let mode = match tr.mode {
+                Some(sdo::Mode::Expedited) => " (expedited)",
+                Some(sdo::Mode::Segmented) => " (segmented)",
+                Some(sdo::Mode::Block) => " (block)",
+                None => "",
+            };
+            let what = format!(
+                "SDO {dir} node {} {}{mode}",
+                tr.node,
+                fmt_mux(tr.index, tr.sub)
+            );
+            let text = match tr.outcome {
+                sdo::Outcome::Done => {
+                    format!(
+                        "{what}: {} bytes = {}",
+                        tr.size,
+                        value_text(&tr.data, tr.size)
+                    )
+                }
+                sdo::Outcome::Aborted { code, by_server } => {
+                    let by = if by_server { "server" } else { "client" };
+                    let text = format!("{what}: aborted by {by}, {code}");
+                    self.anomaly(
+                        tr.end_ns,
+                        &tr.channel,
+                        AnomalyKind::SdoAbort,
+                        Some(tr.node),
+                        text.clone(),
+                    );
+                    text
+                }
+                sdo::Outcome::NoResponse => {
+                    let text = format!("{what}: no response");
+                    self.anomaly(
+                        tr.end_ns,
+                        &tr.channel,
+                        AnomalyKind::SdoNoResponse,
+                        Some(tr.node),
+                        text.clone(),
+                    );
+                    text
+                }
+            };
+            self.row(
+                tr.start_ns,
+                &tr.channel.clone(),
+                Kind::Sdo,
+                Some(tr.node),
+                text,
+            );
+            self.transfers.push(tr);
+        }
+    }
+
+    fn canopen(&mut self, t: u64, ch: &str, f: &Frame) {
+        if let Some(text) = canopen::describe_pdo(f, &self.opts.pdos) {
+            self.row(t, ch, Kind::Pdo, None, text);
+            return;
+        }
+        match wire::decode(f) {
+            Message::Nmt(cmd) => {
+                if matches!(cmd.cs, NmtCs::ResetNode | NmtCs::ResetCommunication) {
+                    for ((c, n), hb) in self.hb.iter_mut() {
+                        if c == ch && (cmd.node == 0 || cmd.node == *n) {
+                            hb.reset_pending = true;
+                        }
+                    }
+                }
+                let node = (cmd.node != 0).then_some(cmd.node);
+                let text = canopen::describe(f, &self.opts.pdos);
+                self.row(t, ch, Kind::Nmt, node, text);
+            }
+            Message::Sync(_) => self.channel(ch).syncs += 1,
+            Message::Emcy { node, emcy } => {
+                let text = canopen::describe(f, &self.opts.pdos);
+                if emcy.code != 0 {
+                    self.anomaly(t, ch, AnomalyKind::Emergency, Some(node), text.clone());
+                }
+                self.row(t, ch, Kind::Emcy, Some(node), text);
+            }
+            Message::Time(_) => {
+                let text = canopen::describe(f, &self.opts.pdos);
+                self.row(t, ch, Kind::Time, None, text);
+            }
+            Message::Pdo { kind, node, frame } => {
+                let text = format!(
+                    "PDO {kind:?} node {node}: {}",
+                    canopen::hex_bytes(frame.data_bytes())
+                );
+                self.row(t, ch, Kind::Pdo, Some(node), text);
+            }
+            Message::SdoRequest { node, data, len } => {
+                if len == 8 {
+                    let done = self
+                        .sdo
+                        .entry((ch.to_string(), node))
+                        .or_default()
+                        .on_request(t, ch, node, &data);
+                    self.sdo_done(done);
+                }
+            }
+            Message::SdoResponse { node, data, len } => {
+                if len == 8 {
+                    let done = self
+                        .sdo
+                        .entry((ch.to_string(), node))
+                        .or_default()
+                        .on_response(t, ch, node, &data);
+                    self.sdo_done(done);
+                }
+            }
+            Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
+                self.error_control(t, ch, node, state);
+            }
+            Message::ErrorControl(ErrorControl::GuardRequest { .. }) => {}
+            Message::Malformed { error, .. } => {
+                self.row(t, ch, Kind::Other, None, format!("{f}: malformed: {error}"));
+            }
+            Message::Other(_) => {}
+        }
+    }
+
+    /// Boot-up and heartbeat (CiA 301 §7.2.8.3.2): a row on every change of state, not on
+    /// every heartbeat.
+    fn error_control(&mut self, t: u64, ch: &str, node: u8, state: u8) {
+        let hb = self.hb.entry((ch.to_string(), node)).or_default();
+        let changed = hb.state != Some(state);
+        let unexpected = state == 0 && hb.heard && !hb.reset_pending;
+        hb.state = Some(state);
+        hb.last_ns = Some(t);
+        hb.times.push(t);
+        hb.heard = true;
+        hb.reset_pending = false;
+        if state == 0 {
+            self.row(
+                t,
+                ch,
+                Kind::Heartbeat,
+                Some(node),
+                format!("BOOT-UP node {node}"),
+            );
+            if unexpected {
+                self.anomaly(
+                    t,
+                    ch,
+                    AnomalyKind::UnexpectedBootUp,
+                    Some(node),
+                    format!("node {node} booted again without an NMT reset"),
+                );
+            }
+        } else if changed {
+            let text = format!("node {node} heartbeat: {}", canopen::state_name(state));
+            self.row(t, ch, Kind::Heartbeat, Some(node), text);
+        }
+    }
+
+    fn devicenet(&mut self, t: u64, ch: &str, f: &Frame) {
+        use cantwin_devicenet::wire::DnId;
+        let data = canopen::hex_bytes(f.data_bytes());
+        let text = match DnId::decode(f.id()) {
+            Ok(DnId::Group1 { msg, mac }) => {
+                format!("group 1 message {msg} from MAC {mac}: {data}")
+            }
+            Ok(DnId::Group2 { mac, msg }) => {
+                // Predefined master/slave connection set (DeviceNet vol. 3 §3-9).
+                let what = match msg {
+                    0 => "bit-strobe command",
+                    1 => "multicast poll",
+                    2 => "change of state / cyclic acknowledge",
+                    3 => "slave explicit/unconnected response",
+                    4 => "master explicit request",
+                    5 => "master I/O poll command / COS / cyclic",
+                    6 => "unconnected explicit request",
+                    _ => "duplicate MAC ID check",
+                };
+                format!("group 2 MAC {mac} {what}: {data}")
+            }
+            Ok(DnId::Group3 { msg, mac }) => {
+                format!("group 3 message {msg} from MAC {mac}: {data}")
+            }
+            Ok(DnId::Group4 { msg }) => format!("group 4 message 0x{msg:02X}: {data}"),
+            Err(e) => format!("{e}: {data}"),
+        };
+        self.row(t, ch, Kind::DeviceNet, None, text);
+    }
+
+    fn cal(&mut self, t: u64, ch: &str, f: &Frame) {
+        // DS 202-2: byte 0 is the CMS control byte; which COB is which is the
+        // application's choice, so the row names the COB and splits the control byte.
+        let text = match f.data_bytes().split_first() {
+            _ if f.is_remote() => format!("COB 0x{:X} remote read request", id_raw(f.id())),
+            Some((c, rest)) => format!(
+                "COB 0x{:X} control 0x{c:02X} (bit 7 {}, multiplexor {}) data {}",
+                id_raw(f.id()),
+                c >> 7,
+                c & 0x7F,
+                canopen::hex_bytes(rest)
+            ),
+            None => format!("COB 0x{:X} (no data)", id_raw(f.id())),
+        };
+        self.row(t, ch, Kind::Cal, None, text);
+    }
+
+    fn finish(mut self) -> Report {
+        let mut trackers: Vec<_> = std::mem::take(&mut self.sdo).into_iter().collect();
+        trackers.sort_by(|a, b| a.0.cmp(&b.0));
+        for (_, mut tr) in trackers {
+            if let Some(t) = tr.finish() {
+                self.sdo_done(vec![t]);
+            }
+        }
+        let (start, end) = if self.start > self.end {
+            (0, 0)
+        } else {
+            (self.start, self.end)
+        };
+        self.heartbeat_anomalies(end);
+        // Bus load per window.
+        let span = end - start;
+        let window = self.opts.window_ns.unwrap_or_else(|| {
+            let min = span.div_ceil(MAX_WINDOWS);
+            DEFAULT_WINDOW_NS.max(min.div_ceil(DEFAULT_WINDOW_NS) * DEFAULT_WINDOW_NS)
+        });
+        let window = window.max(1);
+        let n = usize::try_from(span / window + 1)
+            .unwrap_or(usize::MAX)
+            .min(1 << 20);
+        let mut bits: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+        for (ch, t, b) in &self.bits_at {
+            let v = bits.entry(ch.as_str()).or_insert_with(|| vec![0; n]);
+            let i = usize::try_from(t.saturating_sub(start) / window).unwrap_or(usize::MAX);
+            if let Some(slot) = v.get_mut(i.min(n - 1)) {
+                *slot += u64::from(*b);
+            }
+        }
+        let mut channels = Vec::new();
+        for (name, mut c) in std::mem::take(&mut self.channels) {
+            c.window_ns = window;
+            let capacity = c.bit_rate.bits_per_second() as f64 * window as f64 / 1e9;
+            c.load = bits
+                .get(name.as_str())
+                .map(|v| v.iter().map(|&b| b as f64 / capacity).collect())
+                .unwrap_or_default();
+            channels.push(c);
+        }
+        let mut ids: Vec<IdStats> = self.ids.into_values().collect();
+        ids.sort_by(|a, b| (&a.channel, id_key(a.id)).cmp(&(&b.channel, id_key(b.id))));
+        self.rows.sort_by_key(|r| r.t_ns);
+        let dropped = self.rows.len().saturating_sub(self.opts.max_timeline);
+        self.rows.truncate(self.opts.max_timeline);
+        self.anomalies.sort_by_key(|a| a.t_ns);
+        Report {
+            start_ns: start,
+            end_ns: end,
+            channels,
+            ids,
+            sdo: self.transfers,
+            timeline: self.rows,
+            timeline_dropped: dropped as u64,
+            anomalies: self.anomalies,
+        }
+    }
+
+    /// Heartbeat supervision from the outside: a gap longer than 1.5× the node's median
+    /// interval, or no heartbeat for that long before the end of the capture.
+    fn heartbeat_anomalies(&mut self, end: u64) {
+        let mut found = Vec::new();
+        for ((ch, node), hb) in &self.hb {
+            let mut gaps: Vec<u64> = hb
+                .times
+                .windows(2)
+                .map(|w| w[1].saturating_sub(w[0]))
+                .collect();
+            if gaps.len() < 2 {
+                continue;
+            }
+            let pairs: Vec<(u64, u64)> = hb
+                .times
+                .windows(2)
+                .map(|w| (w[1], w[1].saturating_sub(w[0])))
+                .collect();
+            gaps.sort_unstable();
+            let median = gaps[gaps.len() / 2];
+            if median == 0 {
+                continue;
+            }
+            let limit = median + median / 2;
+            for (t, gap) in pairs {
+                if gap > limit {
+                    found.push(Anomaly {
+                        t_ns: t,
+                        channel: ch.clone(),
+                        kind: AnomalyKind::HeartbeatGap,
+                        node: Some(*node),
+                        text: format!(
+                            "node {node}: {} ms without heartbeat (median period {} ms)",
+                            gap / 1_000_000,
+                            median / 1_000_000
+                        ),
+                    });
+                }
+            }
+            if let Some(last) = hb.last_ns
+                && end.saturating_sub(last) > limit
+            {
+                found.push(Anomaly {
+                    t_ns: last,
+                    channel: ch.clone(),
+                    kind: AnomalyKind::HeartbeatStopped,
+                    node: Some(*node),
+                    text: format!(
+                        "node {node}: last heartbeat {} ms before the end of the capture (median period {} ms)",
+                        (end - last) / 1_000_000,
+                        median / 1_000_000
+                    ),
+                });
+            }
+        }
+        self.anomalies.extend(found);
+    }
+}
+
+fn id_raw(id: Id) -> u32 {
+    match id {
+        Id::Standard(s) => u32::from(s.as_raw()),
+        Id::Extended(e) => e.as_raw(),
+    }
+}
+
+fn id_key(id: Id) -> (bool, u32) {
+    (matches!(id, Id::Extended(_)), id_raw(id))
+}
