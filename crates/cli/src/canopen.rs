@@ -468,6 +468,8 @@ pub fn emcy_meaning(code: u16) -> &'static str {
         0x8240 => "unexpected SYNC data length",
         0x8250 => "RPDO timeout",
         _ => match code >> 12 {
+            0x0 if code >> 8 == 0 => "error reset or no error class (device-specific detail)",
+            0x1 => "generic error",
             0x2 => "current",
             0x3 => "voltage",
             0x4 => "temperature",

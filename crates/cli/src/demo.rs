@@ -33,13 +33,15 @@ pub enum Part {
     Physical,
     /// A CiA 301 device twin and cantwin's CANopen master.
     Canopen,
+    /// The TM3 I/O coupler twin under cantwin's CANopen master.
+    Tm3,
     /// The OPEN DRIVE twin under a CAL master.
     Opendrive,
 }
 
 pub fn run(args: &Args) -> Result<()> {
     let parts = if args.only.is_empty() {
-        vec![Part::Physical, Part::Canopen, Part::Opendrive]
+        vec![Part::Physical, Part::Canopen, Part::Tm3, Part::Opendrive]
     } else {
         args.only.clone()
     };
@@ -51,6 +53,7 @@ pub fn run(args: &Args) -> Result<()> {
         match part {
             Part::Physical => physical(args)?,
             Part::Canopen => crate::demo_canopen::run()?,
+            Part::Tm3 => crate::demo_tm3::run()?,
             Part::Opendrive => crate::demo_opendrive::run()?,
         }
     }

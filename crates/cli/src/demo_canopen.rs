@@ -34,10 +34,11 @@ product_code = 301
 domain_size = 65536
 "#;
 
-struct Net {
-    sim: Simulation,
-    bus: BusId,
-    device: PortId,
+/// A simulation with cantwin's CANopen master on one bus, and helpers to drive it and print
+/// what happens, shared by the demo's CANopen parts.
+pub(crate) struct Net {
+    pub(crate) sim: Simulation,
+    pub(crate) bus: BusId,
     master: PortId,
     tap: TapId,
     shown: usize,
@@ -46,7 +47,31 @@ struct Net {
 }
 
 impl Net {
-    fn master<R>(&mut self, f: impl FnOnce(&mut Master, Instant, &mut Outbox) -> R) -> Result<R> {
+    /// Attach the master to `bus` of `sim` and record the bus.
+    pub(crate) fn new(mut sim: Simulation, bus: BusId) -> Result<Net> {
+        let tap = sim.bus_mut(bus).context("bus")?.add_tap(Recorder::new());
+        let master = sim.attach(
+            bus,
+            Master::new(),
+            PortConfig::default()
+                .with_queue_depth(256)
+                .with_order(TxOrder::Fifo),
+        )?;
+        Ok(Net {
+            sim,
+            bus,
+            master,
+            tap,
+            shown: 0,
+            pending: Vec::new(),
+        })
+    }
+
+    /// Call the master with the current time; the frames it queues are transmitted.
+    pub(crate) fn master<R>(
+        &mut self,
+        f: impl FnOnce(&mut Master, Instant, &mut Outbox) -> R,
+    ) -> Result<R> {
         let now = self.sim.now();
         let mut out = Outbox::new();
         let m = self
@@ -60,7 +85,13 @@ impl Net {
         Ok(r)
     }
 
-    fn events(&mut self) -> Result<Vec<(Instant, MasterEvent)>> {
+    /// The master's port, for frames sent outside the master (RPDOs).
+    pub(crate) fn master_port(&self) -> Option<PortId> {
+        Some(self.master)
+    }
+
+    /// The master's events since the last call.
+    pub(crate) fn events(&mut self) -> Result<Vec<(Instant, MasterEvent)>> {
         let m = self
             .sim
             .node_mut::<Master>(self.master)
@@ -71,7 +102,7 @@ impl Net {
     }
 
     /// Print the frames since the last call, decoded, at most `limit` of them.
-    fn frames(&mut self, limit: usize) -> Result<()> {
+    pub(crate) fn frames(&mut self, limit: usize) -> Result<()> {
         let bus = self.sim.bus(self.bus).context("bus")?;
         let rec = bus.tap::<Recorder>(self.tap).context("recorder")?;
         let new: Vec<_> = rec.events[self.shown..]
@@ -97,8 +128,11 @@ impl Net {
         Ok(())
     }
 
-    /// Run until the transfer ends; returns its data.
-    fn sdo(&mut self, give_up: Duration) -> Result<std::result::Result<Vec<u8>, String>> {
+    /// Run until the transfer ends; returns its data, or the abort in words.
+    pub(crate) fn sdo(
+        &mut self,
+        give_up: Duration,
+    ) -> Result<std::result::Result<Vec<u8>, String>> {
         let until = self.sim.now() + give_up;
         while self.sim.now() < until {
             let step = self.sim.now() + Duration::from_millis(1);
@@ -128,30 +162,10 @@ impl Net {
 
 pub fn run() -> Result<()> {
     let scenario = Scenario::parse(SCENARIO, "demo (embedded)")?;
-    let mut built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+    let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let bus = built.bus("canopen").context("bus")?;
     let device = built.device("node5").context("device")?.port;
-    let tap = built
-        .sim
-        .bus_mut(bus)
-        .context("bus")?
-        .add_tap(Recorder::new());
-    let master = built.sim.attach(
-        bus,
-        Master::new(),
-        PortConfig::default()
-            .with_queue_depth(256)
-            .with_order(TxOrder::Fifo),
-    )?;
-    let mut net = Net {
-        sim: built.sim,
-        bus,
-        device,
-        master,
-        tap,
-        shown: 0,
-        pending: Vec::new(),
-    };
+    let mut net = Net::new(built.sim, bus)?;
     let ms = |v: u64| Instant::ZERO + Duration::from_millis(v);
 
     println!("CANopen: a CiA 301 device twin (node 5) and cantwin's master on a 500 kbit/s bus.\n");
@@ -260,23 +274,23 @@ pub fn run() -> Result<()> {
     net.sim
         .bus_mut(bus)
         .context("bus")?
-        .set_connected(net.device, false)?;
+        .set_connected(device, false)?;
     let t = net.sim.now() + Duration::from_millis(400);
     net.sim.run_until(t);
     net.sim
         .bus_mut(bus)
         .context("bus")?
-        .set_connected(net.device, true)?;
+        .set_connected(device, true)?;
     net.sim
         .bus_mut(bus)
         .context("bus")?
-        .set_powered(net.device, false)?;
+        .set_powered(device, false)?;
     let t = net.sim.now() + Duration::from_millis(10);
     net.sim.run_until(t);
     net.sim
         .bus_mut(bus)
         .context("bus")?
-        .set_powered(net.device, true)?;
+        .set_powered(device, true)?;
     let t = net.sim.now() + Duration::from_millis(50);
     net.sim.run_until(t);
     for (at, ev) in net.events()? {

@@ -9,6 +9,7 @@ mod connect;
 mod demo;
 mod demo_canopen;
 mod demo_opendrive;
+mod demo_tm3;
 mod dump;
 mod eds;
 mod sim;
