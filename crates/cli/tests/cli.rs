@@ -179,6 +179,47 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
+    let dir = std::env::temp_dir().join(format!("cantwin-bench-co-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("BENCHMARKS.md");
+    let (ok, out, err) = cantwin(&[
+        "bench",
+        "network",
+        "fleet",
+        "sdo",
+        "memory",
+        "--seconds",
+        "0.05",
+        "--buses",
+        "2",
+        "--write",
+        "--file",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("real-time factor"), "{out}");
+    assert!(
+        out.contains("expedited round trips per wall second"),
+        "{out}"
+    );
+    assert!(out.contains("heap per device, CiA 301 defaults"), "{out}");
+    assert!(err.contains("bench fleet: 2 networks"), "{err}");
+    let md = std::fs::read_to_string(&file).unwrap();
+    for name in ["network", "fleet", "sdo", "memory"] {
+        assert!(
+            md.contains(&format!("<!-- bench:{name} -->")),
+            "{name}: {md}"
+        );
+        assert!(
+            md.contains(&format!("cantwin -- bench {name} --write")),
+            "{name}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 fn temp_dir(tag: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("cantwin-cli-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
