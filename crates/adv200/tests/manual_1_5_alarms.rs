@@ -190,3 +190,23 @@ fn manual_leds_follow_nmt_and_alarm() {
     // Not powered: all off.
     assert_eq!(Adv200::new(Default::default()).leds(), Leds::default());
 }
+
+#[test]
+fn manual_1_5_enable_outside_operational_is_bus_loss() {
+    let mut h = H::canopen(|_| {});
+    // Pre-operational; the terminal enable (digital input 1) comes on.
+    h.run_to(MS);
+    let from = h.log.len();
+    h.d.set_digital_input(1, true);
+    h.run_to(2 * MS);
+    assert_eq!(h.since(from), [(MS, emcy(0xFF11, 0x81, [0, 0, 0, 0, 0]))]);
+    assert_eq!(h.d.opt_bus_faults(), [0x0000]);
+    assert_eq!(h.d.param(par::ENABLE_STATE), Ok(0));
+    // In Operational the same enable is accepted.
+    let mut h = H::canopen(|_| {});
+    h.send("000#010C");
+    h.d.set_digital_input(1, true);
+    h.run_to(2 * MS);
+    assert!(h.d.opt_bus_faults().is_empty());
+    assert_eq!(h.d.param(par::ENABLE_STATE), Ok(1));
+}
