@@ -185,7 +185,7 @@ pub struct IdStats {
 impl IdStats {
     /// The mean gap between two frames.
     pub fn avg_period_ns(&self) -> Option<u64> {
-        (self.frames > 1).then(|| (self.last_ns - self.first_ns) / (self.frames - 1))
+        (self.frames > 1).then(|| self.last_ns.saturating_sub(self.first_ns) / (self.frames - 1))
     }
 }
 
