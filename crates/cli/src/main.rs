@@ -5,6 +5,7 @@ mod benchmarks_md;
 mod cal;
 mod canopen;
 mod capture_tap;
+mod check;
 mod connect;
 mod demo;
 mod demo_canopen;

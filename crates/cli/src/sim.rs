@@ -50,6 +50,10 @@ pub struct Args {
     /// Directory where devices keep what they store (CANopen 0x1010) between runs.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
+    /// Run the scenario's script in virtual time instead, print each expectation's verdict
+    /// and exit non-zero on a failure.
+    #[arg(long, conflicts_with_all = ["socketcand", "slcan", "duration", "pcap", "candump"])]
+    check: bool,
 }
 
 /// `[ADDR:]PORT` with ADDR defaulting to loopback.
@@ -63,6 +67,14 @@ fn parse_listen(spec: &str, flag: &str) -> Result<SocketAddr> {
 }
 
 pub fn run(args: &Args) -> Result<()> {
+    if args.check {
+        return crate::check::run(
+            &args.scenario,
+            &BuildEnv {
+                state_dir: args.state_dir.clone(),
+            },
+        );
+    }
     let scenario = Scenario::load(&args.scenario)?;
     if let Some(dir) = &args.state_dir {
         std::fs::create_dir_all(dir)

@@ -47,8 +47,10 @@ mod error;
 pub mod kinds;
 mod model;
 mod registry;
+pub mod script;
 
 pub use build::{BuildEnv, Built, BuiltDevice};
 pub use error::{Located, ScenarioError};
 pub use model::{BusSpec, DeviceSpec, Scenario};
 pub use registry::{DeviceKind, Registry, Settings};
+pub use script::{CheckReport, Script, check};

@@ -19,6 +19,11 @@ struct RawScenario {
     bus: Vec<Spanned<RawBus>>,
     #[serde(default)]
     device: Vec<Spanned<BTreeMap<String, Spanned<toml::Value>>>>,
+    check: Option<crate::script::RawCheck>,
+    #[serde(default)]
+    at: Vec<Spanned<crate::script::RawAt>>,
+    #[serde(default)]
+    expect: Vec<Spanned<crate::script::RawExpect>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -71,6 +76,9 @@ pub struct Scenario {
     pub buses: Vec<BusSpec>,
     /// The devices, in file order.
     pub devices: Vec<DeviceSpec>,
+    /// Timed stimuli and expectations (`[[at]]`, `[[expect]]`, `[check]`), run by
+    /// `cantwin sim --check`.
+    pub script: crate::script::Script,
 }
 
 impl Scenario {
@@ -198,7 +206,15 @@ impl Scenario {
                 settings,
             });
         }
+        let script = crate::script::ScriptParser {
+            text,
+            file: &file,
+            buses: &buses,
+            devices: &devices,
+        }
+        .parse(raw.check.as_ref(), &raw.at, &raw.expect)?;
         Ok(Scenario {
+            script,
             name: raw.name.unwrap_or_else(|| {
                 file.file_stem()
                     .map(|s| s.to_string_lossy().into_owned())

@@ -3,7 +3,7 @@
 use std::cell::RefCell;
 use std::collections::BTreeSet;
 
-use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
 use serde::de::DeserializeOwned;
 
 use crate::build::BuildEnv;
@@ -24,6 +24,14 @@ pub trait DeviceKind: Send + Sync {
         bus: &BusSpec,
         env: &BuildEnv,
     ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError>;
+
+    /// The little-endian bytes of object `index`/`sub` of the node this kind built on
+    /// `port`, for `[[expect]] value = …` in scenario scripts. `None` (the default) when the
+    /// kind has no object dictionary or not that object.
+    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
+        let _ = (sim, port, index, sub);
+        None
+    }
 }
 
 /// The device kinds a scenario may use.

@@ -269,6 +269,21 @@ impl DeviceKind for Cia301 {
         "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs"
     }
 
+    fn read_object(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+        index: u16,
+        sub: u8,
+    ) -> Option<Vec<u8>> {
+        let node = sim.node::<Cia301Node>(port)?;
+        node.device
+            .od()
+            .get(index, sub)
+            .ok()
+            .map(|v| v.to_le_bytes())
+    }
+
     fn build(
         &self,
         s: &Settings<'_>,
