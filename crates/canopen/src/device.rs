@@ -1124,8 +1124,18 @@ impl<H: OdHooks> ObjectAccess for Core<H> {
         Ok(())
     }
 
+    fn fixed_size(&mut self, index: u16, sub: u8) -> Option<usize> {
+        self.od.fixed_size(index, sub)
+    }
+
     fn write_begin(&mut self, index: u16, sub: u8, size: Option<usize>) -> Result<(), AbortCode> {
-        self.od.stage_begin(index, sub, size).map(|_| ())
+        if index < 0x2000 {
+            // Communication objects are checked as a whole by `write_comm` at the end.
+            return self.od.stage_begin(index, sub, size).map(|_| ());
+        }
+        // Application objects: the device's hooks may refuse a download at its initiate
+        // (e.g. 0x08000022 in the wrong state), as for the bare dictionary.
+        Hooked::new(&mut self.od, &mut self.hooks).write_begin(index, sub, size)
     }
 
     fn write_segment(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
@@ -1160,6 +1170,10 @@ impl<H: OdHooks> ObjectAccess for Device<H> {
         buf: &mut [u8],
     ) -> Result<ReadInfo, AbortCode> {
         self.core.read(index, sub, offset, buf)
+    }
+
+    fn fixed_size(&mut self, index: u16, sub: u8) -> Option<usize> {
+        self.core.fixed_size(index, sub)
     }
 
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {

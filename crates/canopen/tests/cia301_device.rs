@@ -837,3 +837,16 @@ fn cia301_7_5_2_15_emcy_cob_id_bit_30_is_reserved() {
     );
     assert_eq!(h.read_u32(0x1014, 0).unwrap(), 0x85);
 }
+
+#[test]
+fn cia301_7_2_4_3_3_expedited_download_without_size_through_the_device_takes_the_type_size() {
+    // e = 1, s = 0 (command 0x22): the server takes the object's type size, so an
+    // UNSIGNED16 object is written with its 2 bytes, not refused for a 4-byte length.
+    let mut h = Harness::booted();
+    h.rx(ms(1), "605#2217100064000000");
+    h.rx(ms(2), "605#4017100000000000");
+    assert_eq!(
+        h.take(),
+        at_ms(&[(1, "585#6017100000000000"), (2, "585#4B17100064000000")])
+    );
+}
