@@ -63,10 +63,23 @@ pub fn pdo_4_4_description() -> Result<OdDescription> {
         .map_err(|e| anyhow!("4+4 PDO dictionary: {e}"))
 }
 
+/// Which frames reach a network device's `on_frame`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Filtering {
+    /// Every frame on the bus, as with a controller whose acceptance filter is open.
+    Open,
+    /// Only the identifiers this device consumes, as firmware would program the controller's
+    /// acceptance filter: NMT (0x000), SYNC (0x080), TIME (0x100), its SDO request
+    /// (0x600 + node) and node guarding remote request (0x700 + node). The network devices
+    /// have no RPDO, no heartbeat consumer and no EMCY consumer, so nothing else is for them.
+    Firmware,
+}
+
 /// A network device: a CiA 301 [`Device`] whose 0x1017 is set to [`HEARTBEAT_MS`] at
 /// power-up, and whose events are drained after every call as an application would.
 struct NetDevice {
     device: Device,
+    filtering: Filtering,
 }
 
 impl NetDevice {
@@ -94,7 +107,17 @@ impl Node for NetDevice {
         self.device.next_deadline()
     }
     fn accepts(&self, id: Id) -> bool {
-        self.device.accepts(id)
+        match self.filtering {
+            Filtering::Open => self.device.accepts(id),
+            Filtering::Firmware => {
+                let Id::Standard(id) = id else {
+                    return false;
+                };
+                let node = u16::from(self.device.node_id());
+                let raw = id.as_raw();
+                matches!(raw, 0x000 | 0x080 | 0x100) || raw == 0x600 + node || raw == 0x700 + node
+            }
+        }
     }
 }
 
@@ -135,6 +158,7 @@ fn add_networks(
     sim: &mut Simulation,
     desc: &Arc<OdDescription>,
     buses: usize,
+    filtering: Filtering,
 ) -> Result<Vec<BusId>> {
     let mut ids = Vec::with_capacity(buses);
     for b in 0..buses {
@@ -149,7 +173,7 @@ fn add_networks(
         )?;
         for node in 1..=NETWORK_DEVICES {
             let device = Device::new(Arc::clone(desc), DeviceConfig::new(node))?;
-            sim.attach(bus, NetDevice { device }, PortConfig::default())?;
+            sim.attach(bus, NetDevice { device, filtering }, PortConfig::default())?;
         }
         ids.push(bus);
     }
@@ -188,11 +212,15 @@ impl NetworkReport {
 }
 
 /// Simulate `buses` networks in one [`Simulation`] for `duration`.
-pub fn run_networks(buses: usize, duration: Duration) -> Result<NetworkReport> {
+pub fn run_networks(
+    buses: usize,
+    duration: Duration,
+    filtering: Filtering,
+) -> Result<NetworkReport> {
     let desc = Arc::new(network_description()?);
     let started = std::time::Instant::now();
     let mut sim = Simulation::new();
-    let ids = add_networks(&mut sim, &desc, buses)?;
+    let ids = add_networks(&mut sim, &desc, buses, filtering)?;
     let build_time = started.elapsed();
     let end = Instant::ZERO + duration;
     let started = std::time::Instant::now();
@@ -223,6 +251,7 @@ pub fn run_networks_threaded(
     buses: usize,
     threads: usize,
     duration: Duration,
+    filtering: Filtering,
 ) -> Result<NetworkReport> {
     let threads = threads.clamp(1, buses.max(1));
     let shares: Vec<usize> = (0..threads)
@@ -231,7 +260,7 @@ pub fn run_networks_threaded(
     let reports: Vec<Result<NetworkReport>> = std::thread::scope(|s| {
         let handles: Vec<_> = shares
             .iter()
-            .map(|&n| s.spawn(move || run_networks(n, duration)))
+            .map(|&n| s.spawn(move || run_networks(n, duration, filtering)))
             .collect();
         handles
             .into_iter()
@@ -269,6 +298,7 @@ pub fn find_fleet(
     single_rtf: f64,
     threads: usize,
     duration: Duration,
+    filtering: Filtering,
     mut progress: impl FnMut(&NetworkReport),
 ) -> Result<(Option<NetworkReport>, Vec<NetworkReport>)> {
     let mut trials = Vec::new();
@@ -277,7 +307,7 @@ pub fn find_fleet(
     // A little below the linear estimate: more buses mean more cache misses.
     let mut n = ((single_rtf * threads as f64 * 0.9) as usize).max(1);
     for _ in 0..8 {
-        let r = run_networks_threaded(n, threads, duration)?;
+        let r = run_networks_threaded(n, threads, duration, filtering)?;
         progress(&r);
         trials.push(r);
         let rtf = r.real_time_factor();
@@ -566,7 +596,14 @@ fn sdo_bus<C: Node + Send + 'static>(
         .with_queue_depth(256)
         .with_order(TxOrder::Fifo);
     let device = Device::new(desc, DeviceConfig::new(SDO_NODE))?;
-    sim.attach(bus, NetDevice { device }, port)?;
+    sim.attach(
+        bus,
+        NetDevice {
+            device,
+            filtering: Filtering::Open,
+        },
+        port,
+    )?;
     let client = sim.attach(bus, client, port)?;
     let tap = if record {
         sim.bus_mut(bus).map(|b| b.add_tap(Recorder::new()))
@@ -775,11 +812,13 @@ mod tests {
 
     #[test]
     fn network_devices_send_a_tpdo_per_sync_and_heartbeats() {
-        let r = run_networks(1, Duration::from_millis(1000)).unwrap();
-        // One NMT, 64 boot-ups, then SYNCs at 10..990 ms with 64 TPDOs each and heartbeats
-        // at 100..900 ms: what falls due at 1000 ms is not on the bus yet when the run ends.
-        assert_eq!(r.frames, 1 + 64 + 99 * 65 + 9 * 64);
-        assert!(r.bus_load_percent > 70.0 && r.bus_load_percent < 95.0);
+        for filtering in [Filtering::Open, Filtering::Firmware] {
+            let r = run_networks(1, Duration::from_millis(1000), filtering).unwrap();
+            // One NMT, 64 boot-ups, then SYNCs at 10..990 ms with 64 TPDOs each and heartbeats
+            // at 100..900 ms: what falls due at 1000 ms is not on the bus yet when the run ends.
+            assert_eq!(r.frames, 1 + 64 + 99 * 65 + 9 * 64);
+            assert!(r.bus_load_percent > 70.0 && r.bus_load_percent < 95.0);
+        }
     }
 
     #[test]
