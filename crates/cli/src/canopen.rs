@@ -3,17 +3,15 @@
 
 use std::io::Write as _;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
-use cantwin_can::{Frame, Outbox};
-use cantwin_canopen::master::pdo::{PdoDecoder, PdoParams};
+use cantwin_can::Outbox;
+use cantwin_canopen::master::pdo::PdoDecoder;
 use cantwin_canopen::master::{Master, MasterEvent, Mode, SdoEvent, TransferId};
-use cantwin_canopen::od::{DataType, ObjectDictionary, Value};
-use cantwin_canopen::pdo::MapEntry;
+use cantwin_canopen::od::{DataType, Value};
 use cantwin_canopen::sdo::wire::Mux;
-use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
+use cantwin_canopen::wire::NmtCs;
 
 use crate::connect::{Link, Target};
 
@@ -452,38 +450,7 @@ pub struct TraceArgs {
     count: Option<u64>,
 }
 
-/// Meaning of an EMCY error code (CiA 301 table 21), most specific first.
-pub fn emcy_meaning(code: u16) -> &'static str {
-    match code {
-        0x0000 => "error reset or no error",
-        0x1000 => "generic error",
-        0x8110 => "CAN overrun (objects lost)",
-        0x8120 => "CAN in error passive mode",
-        0x8130 => "life guard error or heartbeat error",
-        0x8140 => "recovered from bus off",
-        0x8150 => "CAN-ID collision",
-        0x8210 => "PDO not processed due to length error",
-        0x8220 => "PDO length exceeded",
-        0x8230 => "DAM MPDO not processed, destination object not available",
-        0x8240 => "unexpected SYNC data length",
-        0x8250 => "RPDO timeout",
-        _ => match code >> 12 {
-            0x0 if code >> 8 == 0 => "error reset or no error class (device-specific detail)",
-            0x1 => "generic error",
-            0x2 => "current",
-            0x3 => "voltage",
-            0x4 => "temperature",
-            0x5 => "device hardware",
-            0x6 => "device software",
-            0x7 => "additional modules",
-            0x8 => "monitoring",
-            0x9 => "external error",
-            0xF if code >> 8 == 0xFF => "device specific",
-            0xF => "additional functions",
-            _ => "unknown error code",
-        },
-    }
-}
+pub use cantwin_report::canopen::{describe, emcy_meaning};
 
 /// The PDOs an EDS declares for `node`, with their default COB-IDs and mappings.
 fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
@@ -494,111 +461,10 @@ fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
             .with_context(|| format!("--eds {spec:?}: expected NODE=FILE"))?;
         let node = node_id(node)?;
         let bytes = std::fs::read(file).with_context(|| format!("reading {file}"))?;
-        let eds = cantwin_eds::parse_bytes(&bytes).map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
-        let desc = Arc::new(cantwin_eds::to_od(&eds).map_err(|e| anyhow::anyhow!("{file}: {e}"))?);
-        let mut od = ObjectDictionary::new(desc.clone(), node);
-        cantwin_eds::apply_parameter_values(&eds, &mut od)
+        cantwin_report::canopen::add_eds_pdos(&mut decoder, node, &bytes)
             .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
-        let u32_of = |index, sub| match od.get(index, sub) {
-            Ok(Value::Unsigned32(v)) => Some(v),
-            _ => None,
-        };
-        let u8_of = |index, sub| match od.get(index, sub) {
-            Ok(Value::Unsigned8(v)) => Some(v),
-            _ => None,
-        };
-        for (comm_base, map_base) in [(0x1400u16, 0x1600u16), (0x1800, 0x1A00)] {
-            for n in 0..512u16 {
-                let (comm, map) = (comm_base + n, map_base + n);
-                let Some(cob_id) = u32_of(comm, 1) else {
-                    continue;
-                };
-                let count = u8_of(map, 0).unwrap_or(0);
-                let mapping: Vec<MapEntry> = (1..=count)
-                    .filter_map(|s| u32_of(map, s).map(MapEntry::from_u32))
-                    .collect();
-                let params = PdoParams {
-                    cob_id,
-                    transmission_type: u8_of(comm, 2).unwrap_or(0),
-                    inhibit_time: None,
-                    event_timer: None,
-                    mapping,
-                };
-                decoder.add(&params, desc.clone());
-            }
-        }
     }
     Ok(decoder)
-}
-
-/// One line for a frame: the service and its decoded content.
-pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
-    if let Some(values) = pdos.decode(frame) {
-        return match values {
-            Ok(values) => {
-                let parts: Vec<String> = values
-                    .iter()
-                    .map(|v| format!("{}={}", v.name, v.value))
-                    .collect();
-                format!("PDO {}", parts.join(" "))
-            }
-            Err(e) => format!("PDO (cannot decode: {e})"),
-        };
-    }
-    let msg = wire::decode(frame);
-    match msg {
-        Message::Nmt(cmd) => {
-            let target = if cmd.node == 0 {
-                "all nodes".to_string()
-            } else {
-                format!("node {}", cmd.node)
-            };
-            format!("NMT {:?} {target}", cmd.cs)
-        }
-        Message::Sync(s) => match s.counter {
-            Some(c) => format!("SYNC counter {c}"),
-            None => "SYNC".to_string(),
-        },
-        Message::Emcy { node, emcy } => format!(
-            "EMCY node {node} code 0x{:04X} ({}) register 0x{:02X} data {}",
-            emcy.code,
-            emcy_meaning(emcy.code),
-            emcy.register,
-            hex_bytes(&emcy.manufacturer)
-        ),
-        Message::Time(t) => format!("TIME {}", t.0),
-        Message::Pdo { kind, node, .. } => format!("PDO {kind:?} node {node}"),
-        Message::SdoRequest { node, .. } => match msg.sdo_request() {
-            Some(Ok(r)) => format!("SDO request to node {node}: {r}"),
-            _ => format!("SDO request to node {node} (segment or malformed)"),
-        },
-        Message::SdoResponse { node, .. } => match msg.sdo_response() {
-            Some(Ok(r)) => format!("SDO response from node {node}: {r}"),
-            _ => format!("SDO response from node {node} (segment or malformed)"),
-        },
-        Message::ErrorControl(ec) => match ec {
-            ErrorControl::GuardRequest { node } => format!("NODE GUARD request node {node}"),
-            ErrorControl::State { node, state: 0, .. } => format!("BOOT-UP node {node}"),
-            ErrorControl::State {
-                node,
-                toggle,
-                state,
-            } => {
-                let name = match state {
-                    4 => "stopped",
-                    5 => "operational",
-                    127 => "pre-operational",
-                    _ => "unknown state",
-                };
-                format!(
-                    "HEARTBEAT/GUARD node {node} {name} (toggle {})",
-                    u8::from(toggle)
-                )
-            }
-        },
-        Message::Malformed { error, .. } => format!("malformed: {error}"),
-        Message::Other(_) => String::new(),
-    }
 }
 
 pub fn run_trace(args: &TraceArgs) -> Result<()> {

@@ -33,6 +33,8 @@ pub enum Part {
     Physical,
     /// A CiA 301 device twin and cantwin's CANopen master.
     Canopen,
+    /// The ADV200 drive twin in the manual's worked example.
+    Adv200,
     /// The TM3 I/O coupler twin under cantwin's CANopen master.
     Tm3,
     /// The OPEN DRIVE twin under a CAL master.
@@ -41,7 +43,13 @@ pub enum Part {
 
 pub fn run(args: &Args) -> Result<()> {
     let parts = if args.only.is_empty() {
-        vec![Part::Physical, Part::Canopen, Part::Tm3, Part::Opendrive]
+        vec![
+            Part::Physical,
+            Part::Canopen,
+            Part::Adv200,
+            Part::Tm3,
+            Part::Opendrive,
+        ]
     } else {
         args.only.clone()
     };
@@ -53,6 +61,7 @@ pub fn run(args: &Args) -> Result<()> {
         match part {
             Part::Physical => physical(args)?,
             Part::Canopen => crate::demo_canopen::run()?,
+            Part::Adv200 => crate::demo_adv200::run()?,
             Part::Tm3 => crate::demo_tm3::run()?,
             Part::Opendrive => crate::demo_opendrive::run()?,
         }

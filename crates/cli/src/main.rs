@@ -8,6 +8,7 @@ mod capture_tap;
 mod check;
 mod connect;
 mod demo;
+mod demo_adv200;
 mod demo_canopen;
 mod demo_opendrive;
 mod demo_tm3;

@@ -45,13 +45,15 @@ fn demo_runs_without_arguments_and_tells_the_story() {
         out.contains("\"cantwin generic CiA 301 device\" (30 bytes"),
         "{out}"
     );
-    assert!(out.contains("ABORT 0x2002sub0: 0x06090031"), "{out}");
+    assert!(out.contains("0x2002sub0: 0x06090031"), "{out}");
     assert!(
         out.contains("EMCY node 5 code 0x5000 (device hardware)"),
         "{out}"
     );
     assert!(out.contains("heartbeat of node 5 lost"), "{out}");
     assert!(out.contains("node 5 booted"), "{out}");
+    // The ADV200 worked example ramps to 1500 rpm.
+    assert!(out.contains("0x0003   1500 rpm"), "{out}");
     // CiA 401 I/O: outputs by RPDO, an input change by TPDO, a module pulled out.
     assert!(
         out.contains("module 2 outputs 0..3: [true, false, true, false]"),
@@ -135,47 +137,6 @@ fn bench_bus_short_run_prints_figures_and_records_them() {
     let md = std::fs::read_to_string(&file).unwrap();
     assert!(md.contains("<!-- bench:bus -->") && md.contains("<!-- /bench:bus -->"));
     assert!(md.contains("cantwin -- bench bus --write"));
-    std::fs::remove_dir_all(&dir).unwrap();
-}
-
-#[test]
-fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
-    let dir = std::env::temp_dir().join(format!("cantwin-bench-co-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let file = dir.join("BENCHMARKS.md");
-    let (ok, out, err) = cantwin(&[
-        "bench",
-        "network",
-        "fleet",
-        "sdo",
-        "memory",
-        "--seconds",
-        "0.05",
-        "--buses",
-        "2",
-        "--write",
-        "--file",
-        file.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
-    assert!(out.contains("real-time factor"), "{out}");
-    assert!(
-        out.contains("expedited round trips per wall second"),
-        "{out}"
-    );
-    assert!(out.contains("heap per device, CiA 301 defaults"), "{out}");
-    assert!(err.contains("bench fleet: 2 networks"), "{err}");
-    let md = std::fs::read_to_string(&file).unwrap();
-    for name in ["network", "fleet", "sdo", "memory"] {
-        assert!(
-            md.contains(&format!("<!-- bench:{name} -->")),
-            "{name}: {md}"
-        );
-        assert!(
-            md.contains(&format!("cantwin -- bench {name} --write")),
-            "{name}"
-        );
-    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

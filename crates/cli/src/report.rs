@@ -1,0 +1,95 @@
+//! `cantwin report CAPTURE`: one self-contained HTML page about a capture (bus load,
+//! identifiers, decoded timeline, anomalies), built by `cantwin-report`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use cantwin_can::BitRate;
+use cantwin_report::{Options, Protocol};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The capture: pcap, pcapng or candump log.
+    capture: PathBuf,
+    /// Where to write the page (default: CAPTURE.html beside the capture).
+    #[arg(short, long, value_name = "FILE")]
+    output: Option<PathBuf>,
+    /// Bit rate of a channel for the bus load: CHANNEL=RATE, or RATE for every channel
+    /// (default 1M). Repeatable.
+    #[arg(long = "bit-rate", value_name = "[CHANNEL=]RATE")]
+    bit_rate: Vec<String>,
+    /// Protocol of a channel: CHANNEL=canopen|devicenet|cal (default canopen). Repeatable.
+    #[arg(long = "protocol", value_name = "CHANNEL=PROTOCOL")]
+    protocol: Vec<String>,
+    /// Name PDO values from a node's EDS or DCF: NODE=FILE (repeatable).
+    #[arg(long = "eds", value_name = "NODE=FILE")]
+    eds: Vec<String>,
+    /// Channel name of a pcap file's records (pcap has none).
+    #[arg(long, value_name = "NAME", default_value = "can0")]
+    pcap_channel: String,
+}
+
+fn options(args: &Args) -> Result<Options> {
+    let mut opts = Options::default();
+    for spec in &args.bit_rate {
+        match spec.split_once('=') {
+            Some((ch, rate)) => {
+                let rate: BitRate = rate.parse().with_context(|| format!("--bit-rate {spec}"))?;
+                opts.bit_rates.insert(ch.to_string(), rate);
+            }
+            None => {
+                opts.default_bit_rate =
+                    spec.parse().with_context(|| format!("--bit-rate {spec}"))?;
+            }
+        }
+    }
+    for spec in &args.protocol {
+        let Some((ch, p)) = spec.split_once('=') else {
+            bail!("--protocol {spec:?}: expected CHANNEL=canopen|devicenet|cal");
+        };
+        let p: Protocol = p
+            .parse()
+            .map_err(|e| anyhow::anyhow!("--protocol {spec}: {e}"))?;
+        opts.protocols.insert(ch.to_string(), p);
+    }
+    for spec in &args.eds {
+        let (node, file) = spec
+            .split_once('=')
+            .with_context(|| format!("--eds {spec:?}: expected NODE=FILE"))?;
+        let node: u8 = match node.parse() {
+            Ok(n @ 1..=127) => n,
+            _ => bail!("--eds {spec:?}: node-ID must be 1..127"),
+        };
+        let bytes = std::fs::read(file).with_context(|| format!("reading {file}"))?;
+        cantwin_report::canopen::add_eds_pdos(&mut opts.pdos, node, &bytes)
+            .with_context(|| file.to_string())?;
+    }
+    Ok(opts)
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let opts = options(args)?;
+    let path = &args.capture;
+    let reader = cantwin_capture::open(path)
+        .with_context(|| format!("opening {}", path.display()))?
+        .with_pcap_channel(args.pcap_channel.clone());
+    let records = reader
+        .collect::<Result<Vec<_>, _>>()
+        .with_context(|| format!("reading {}", path.display()))?;
+    let report = cantwin_report::analyse(&records, &opts);
+    let out = args.output.clone().unwrap_or_else(|| {
+        let mut name = path.as_os_str().to_owned();
+        name.push(".html");
+        PathBuf::from(name)
+    });
+    std::fs::write(&out, cantwin_report::render_html(&report))
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: {} records, {} SDO transfers, {} anomalies",
+        out.display(),
+        records.len(),
+        report.sdo.len(),
+        report.anomalies.len()
+    );
+    Ok(())
+}
