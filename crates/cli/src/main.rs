@@ -14,6 +14,7 @@ mod demo_opendrive;
 mod demo_tm3;
 mod dump;
 mod eds;
+mod report;
 mod sim;
 
 use anyhow::Result;
@@ -86,6 +87,11 @@ enum Command {
                             cantwin trace --socketcand 127.0.0.1:29536 --eds 5=device.eds --seconds 10"
     )]
     Trace(canopen::TraceArgs),
+    /// Write one self-contained HTML page about a capture: bus load, identifiers, decoded timeline, anomalies.
+    #[command(after_help = "Examples:\n  cantwin report capture.pcap\n  \
+                            cantwin report run.log --bit-rate can0=500k --eds 5=device.eds -o run.html\n  \
+                            cantwin report dnet.log --protocol can0=devicenet --bit-rate 125k")]
+    Report(report::Args),
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
@@ -106,6 +112,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Nmt(args) => canopen::run_nmt(&args),
         Command::Scan(args) => canopen::run_scan(&args),
         Command::Trace(args) => canopen::run_trace(&args),
+        Command::Report(args) => report::run(&args),
     }
 }
 
