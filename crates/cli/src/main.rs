@@ -116,10 +116,40 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
+/// Ends the process quietly when standard output is a closed pipe (`cantwin trace | head`),
+/// as command-line tools do, instead of panicking in `println!`.
+fn exit_quietly_on_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.contains("failed printing to stdout") && message.contains("Broken pipe") {
+            // 128 + SIGPIPE, what a shell reports for a process ended by a closed pipe.
+            std::process::exit(141);
+        }
+        default(info);
+    }));
+}
+
+fn is_broken_pipe(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            || c.to_string().ends_with("Broken pipe (os error 32)")
+    })
+}
+
 fn main() -> std::process::ExitCode {
+    exit_quietly_on_broken_pipe();
     // Errors are for the person at the terminal: the message and its causes, no backtrace.
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
+        // Output into a closed pipe is the reader's choice, not a failure worth a message.
+        Err(e) if is_broken_pipe(&e) => std::process::ExitCode::from(141),
         Err(e) => {
             eprintln!("error: {e:#}");
             std::process::ExitCode::FAILURE
