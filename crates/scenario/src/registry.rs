@@ -53,6 +53,7 @@ impl Registry {
         r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
         r.register(Box::new(crate::kinds::adv200::Adv200Kind));
         r.register(Box::new(crate::kinds::tm3::Tm3Kind));
+        r.register(Box::new(crate::kinds::eds::EdsKind));
         r
     }
 
@@ -96,6 +97,12 @@ impl<'a> Settings<'a> {
             file,
             read: RefCell::new(BTreeSet::new()),
         }
+    }
+
+    /// The scenario file the device is defined in (kinds resolve relative paths against
+    /// its directory).
+    pub fn file(&self) -> &std::path::Path {
+        self.file
     }
 
     /// The device these settings belong to.

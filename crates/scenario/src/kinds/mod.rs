@@ -2,6 +2,7 @@
 
 pub mod adv200;
 pub mod cia301;
+pub mod eds;
 pub mod generator;
 pub mod opendrive;
 pub mod tm3;

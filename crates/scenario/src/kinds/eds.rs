@@ -1,0 +1,193 @@
+//! `kind = "eds"`: a CiA 301 device whose object dictionary is a user's EDS or DCF file
+//! (CiA 306).
+//!
+//! Keys:
+//!
+//! | key | default | meaning |
+//! |---|---|---|
+//! | `file` | required | the EDS or DCF, relative to the scenario file's directory |
+//! | `node_id` | the DCF's `[DeviceComissioning] NodeID` | 1–127; required when the file gives none |
+//! | `heartbeat_ms` | the file's 0x1017 default | overrides the default of 0x1017 |
+//! | `sdo_timeout_ms` | 1000 | SDO server timeout |
+//!
+//! The file is the device's truth: every VAR, ARRAY and RECORD object of the file becomes an
+//! object of the dictionary with the file's data type, access, limits and default value
+//! (`$NODEID` resolved with the node-ID). A DCF's `ParameterValue`s replace the defaults, so
+//! the device comes up configured after power-up and after every reset, as a commissioned
+//! device would (CiA 306 DCF: the values the device is configured with).
+//!
+//! The device offers the CiA 301 services whose objects the file has, and only those:
+//!
+//! * without 0x1017 it produces no heartbeat, and `heartbeat_ms` is an error;
+//! * without 0x1200 it still answers SDO on the default connection (0x600/0x580 + node-ID),
+//!   which CiA 301 §7.2.4.1 requires of every device;
+//! * PDOs are the 0x1400–0x15FF/0x1800–0x19FF communication objects with their mapping
+//!   objects 0x1600–0x17FF/0x1A00–0x1BFF; a file without them has no PDOs;
+//! * without 0x1014 the EMCY producer uses 0x80 + node-ID; without 0x1010/0x1011 nothing is
+//!   stored.
+//!
+//! With `--state-dir`, the device keeps what 0x1010 stores in `STATE_DIR/<device name>/`.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_can::Duration;
+use cantwin_canopen::device::{Device, DeviceConfig};
+use cantwin_canopen::storage::FileStorage;
+use cantwin_eds::{EdsValue, parse_bytes, to_od};
+
+use crate::build::BuildEnv;
+use crate::error::ScenarioError;
+use crate::model::BusSpec;
+use crate::registry::{DeviceKind, Settings};
+
+/// The device's transmit queue: a full SDO upload block (127 segments, CiA 301
+/// §7.2.4.3.10) plus the frames other services queue meanwhile.
+pub const TX_QUEUE_DEPTH: usize = 256;
+
+/// The `eds` kind.
+pub struct EdsKind;
+
+/// `file` resolved against the directory of the scenario file.
+fn resolve(scenario: &Path, file: &str) -> PathBuf {
+    let file = Path::new(file);
+    if file.is_absolute() {
+        return file.to_path_buf();
+    }
+    match scenario.parent() {
+        Some(dir) => dir.join(file),
+        None => file.to_path_buf(),
+    }
+}
+
+impl DeviceKind for EdsKind {
+    fn name(&self) -> &'static str {
+        "eds"
+    }
+
+    fn summary(&self) -> &'static str {
+        "CiA 301 device from an EDS/DCF file: file, node_id, heartbeat_ms, sdo_timeout_ms"
+    }
+
+    fn read_object(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+        index: u16,
+        sub: u8,
+    ) -> Option<Vec<u8>> {
+        let device = sim.node::<Device>(port)?;
+        device.od().get(index, sub).ok().map(|v| v.to_le_bytes())
+    }
+
+    fn build(
+        &self,
+        s: &Settings<'_>,
+        _bus: &BusSpec,
+        env: &BuildEnv,
+    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+        let file: String = s.require("file")?;
+        let path = resolve(s.file(), &file);
+        let bytes = std::fs::read(&path)
+            .map_err(|e| s.error("file", format!("cannot read {}: {e}", path.display())))?;
+        let mut eds =
+            parse_bytes(&bytes).map_err(|e| s.error("file", format!("{}: {e}", path.display())))?;
+
+        let from_dcf = eds.commissioning.as_ref().and_then(|c| c.node_id);
+        let node_id: u8 = match (s.get::<u8>("node_id")?, from_dcf) {
+            (Some(n), _) | (None, Some(n)) => n,
+            (None, None) => {
+                return Err(s.error(
+                    "node_id",
+                    format!(
+                        "an eds device needs `node_id` ({} has no [DeviceComissioning] NodeID)",
+                        path.display()
+                    ),
+                ));
+            }
+        };
+        if !(1..=127).contains(&node_id) {
+            return Err(s.error(
+                "node_id",
+                format!("`node_id` is 1–127 (CiA 301 §7.3.2.1), not {node_id}"),
+            ));
+        }
+
+        // A DCF's ParameterValues are the values the device is configured with: they become
+        // the power-on values, so that resets come back to them too.
+        for o in eds.objects.values_mut() {
+            let entries = std::iter::once(&mut o.entry).chain(o.subs.values_mut());
+            for e in entries {
+                if let Some(v) = e.parameter_value.clone() {
+                    e.default_value = Some(v);
+                }
+            }
+        }
+        if let Some(ms) = s.get::<u16>("heartbeat_ms")? {
+            let Some(hb) = eds.objects.get_mut(&0x1017) else {
+                return Err(s.error(
+                    "heartbeat_ms",
+                    format!(
+                        "{} has no object 0x1017 (producer heartbeat time): the device cannot send heartbeats",
+                        path.display()
+                    ),
+                ));
+            };
+            hb.entry.default_value = Some(EdsValue::Integer(i128::from(ms)));
+        }
+        let sdo_timeout_ms: u64 = s.get_or("sdo_timeout_ms", 1000)?;
+        if sdo_timeout_ms == 0 {
+            return Err(s.error("sdo_timeout_ms", "`sdo_timeout_ms` must be greater than 0"));
+        }
+
+        let desc = to_od(&eds).map_err(|e| {
+            s.error(
+                "file",
+                format!("{}: not a usable object dictionary: {e}", path.display()),
+            )
+        })?;
+        let config = DeviceConfig {
+            sdo_timeout: Duration::from_millis(sdo_timeout_ms),
+            ..DeviceConfig::new(node_id)
+        };
+        let mut device =
+            Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
+        if let Some(dir) = &env.state_dir {
+            let dir = dir.join(&s.device().name);
+            let storage = FileStorage::new(&dir).map_err(|e| {
+                s.error(
+                    "name",
+                    format!("cannot keep stored parameters in {}: {e}", dir.display()),
+                )
+            })?;
+            device.set_storage(Box::new(storage));
+        }
+        let port = PortConfig {
+            queue_depth: TX_QUEUE_DEPTH,
+            ..PortConfig::default()
+        };
+        Ok((Box::new(device), port))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_is_relative_to_the_scenario_directory() {
+        assert_eq!(
+            resolve(Path::new("scenarios/x.toml"), "eds/a.eds"),
+            PathBuf::from("scenarios/eds/a.eds")
+        );
+        assert_eq!(
+            resolve(Path::new("x.toml"), "a.eds"),
+            PathBuf::from("a.eds")
+        );
+        assert_eq!(
+            resolve(Path::new("scenarios/x.toml"), "/abs/a.eds"),
+            PathBuf::from("/abs/a.eds")
+        );
+    }
+}

@@ -1,0 +1,261 @@
+//! The `eds` device kind: a CiA 301 device whose dictionary is an EDS/DCF file (CiA 306).
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+
+use cantwin_bus::{PortId, Recorder, TapId};
+use cantwin_can::{Duration, Frame, Id, Instant};
+use cantwin_scenario::{BuildEnv, Built, Registry, Scenario};
+
+fn scenarios() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios")
+}
+
+/// A built scenario with a recorder on its bus; `listener` sends the test's frames.
+struct Rig {
+    built: Built,
+    tap: TapId,
+    peer: PortId,
+    dev: PortId,
+}
+
+impl Rig {
+    fn load(path: &Path, dev: &str) -> Rig {
+        let mut built = Scenario::load(path)
+            .unwrap()
+            .build(&Registry::builtin(), &BuildEnv::default())
+            .unwrap();
+        let bus = built.bus("can0").unwrap();
+        let tap = built.sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+        let peer = built.device("listener").unwrap().port;
+        let dev = built.device(dev).unwrap().port;
+        Rig {
+            built,
+            tap,
+            peer,
+            dev,
+        }
+    }
+
+    fn send(&mut self, id: u16, data: &[u8]) {
+        self.built
+            .sim
+            .transmit(self.peer, Frame::std(id, data).unwrap())
+            .unwrap();
+        self.built.sim.run_for(Duration::from_millis(10));
+    }
+
+    /// Every frame the device sent: (id, data, start of frame).
+    fn device_frames(&self) -> Vec<(u16, Vec<u8>, Instant)> {
+        let bus = self.built.bus("can0").unwrap();
+        self.built
+            .sim
+            .bus(bus)
+            .unwrap()
+            .tap::<Recorder>(self.tap)
+            .unwrap()
+            .frames()
+            .filter(|f| f.sender == self.dev)
+            .map(|f| {
+                let Id::Standard(id) = f.frame.id() else {
+                    panic!("extended frame from the device");
+                };
+                (id.as_raw(), f.frame.data_bytes().to_vec(), f.start)
+            })
+            .collect()
+    }
+
+    /// The data of the last SDO response (0x580 + `node`).
+    fn sdo_response(&self, node: u16) -> Vec<u8> {
+        self.device_frames()
+            .into_iter()
+            .filter(|(id, _, _)| *id == 0x580 + node)
+            .map(|(_, d, _)| d)
+            .next_back()
+            .unwrap()
+    }
+
+    fn read_object(&self, name: &str, index: u16, sub: u8) -> Option<Vec<u8>> {
+        let kind = Registry::builtin();
+        let kind = kind.get("eds").unwrap();
+        kind.read_object(
+            &self.built.sim,
+            self.built.device(name).unwrap().port,
+            index,
+            sub,
+        )
+    }
+}
+
+/// A fresh directory for files a test writes.
+fn temp_dir(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cantwin-eds-kind-{}-{test}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A scenario with one `eds` device (`keys` added) and a listener, written next to files.
+fn scenario_in(dir: &Path, keys: &str) -> PathBuf {
+    let text = format!(
+        "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+         [[device]]\nname = \"dev\"\nkind = \"eds\"\nbus = \"can0\"\n{keys}\n\n\
+         [[device]]\nname = \"listener\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x7FF\nperiod_ms = 1000\ncount = 0\n"
+    );
+    let path = dir.join("s.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn build_error(path: &Path) -> String {
+    match Scenario::load(path)
+        .unwrap()
+        .build(&Registry::builtin(), &BuildEnv::default())
+    {
+        Ok(_) => panic!("{} was accepted", path.display()),
+        Err(e) => e.to_string(),
+    }
+}
+
+/// CiA 301 §7.2.8.3.2.1 boot-up, then SDO expedited uploads (§7.2.4.3.4) answering with the
+/// EDS's `DefaultValue`s, `$NODEID` resolved.
+#[test]
+fn cia306_example_eds_boots_and_answers_sdo_with_its_defaults() {
+    let mut rig = Rig::load(&scenarios().join("eds-device.toml"), "io6");
+    rig.built.sim.run_for(Duration::from_millis(10));
+    let frames = rig.device_frames();
+    assert_eq!(frames[0], (0x706, vec![0], Instant::from_nanos(0)));
+
+    // 0x2000 "Filter time", UNSIGNED16 default 0x0BB8.
+    rig.send(0x606, &[0x40, 0x00, 0x20, 0x00, 0, 0, 0, 0]);
+    assert_eq!(
+        rig.sdo_response(6),
+        [0x4B, 0x00, 0x20, 0x00, 0xB8, 0x0B, 0, 0]
+    );
+    // 0x1200 sub 2: $NODEID+0x580.
+    rig.send(0x606, &[0x40, 0x00, 0x12, 0x02, 0, 0, 0, 0]);
+    assert_eq!(
+        rig.sdo_response(6),
+        [0x43, 0x00, 0x12, 0x02, 0x86, 0x05, 0, 0]
+    );
+    // An object the EDS does not define: abort 0x06020000.
+    rig.send(0x606, &[0x40, 0x34, 0x12, 0x00, 0, 0, 0, 0]);
+    assert_eq!(
+        rig.sdo_response(6),
+        [0x80, 0x34, 0x12, 0x00, 0x00, 0x00, 0x02, 0x06]
+    );
+    assert_eq!(
+        rig.read_object("io6", 0x1018, 2),
+        Some(vec![0x06, 0x03, 0, 0])
+    );
+    // heartbeat_ms overrides the EDS's 0x1017 default of 0.
+    assert_eq!(rig.read_object("io6", 0x1017, 0), Some(vec![0xF4, 0x01]));
+}
+
+/// CiA 301 §7.2.2: after NMT start, TPDO1 (0x180 + node-ID, event-driven type 254) carries
+/// 0x6000 sub 1 and 0x2000 as 0x1A00 maps them, every 100 ms of event timer (0x1800 sub 5).
+#[test]
+fn cia306_example_eds_sends_tpdo1_as_mapped_every_event_timer() {
+    let mut rig = Rig::load(&scenarios().join("eds-device.toml"), "io6");
+    rig.built.sim.run_for(Duration::from_millis(10));
+    rig.send(0x000, &[0x01, 0x06]);
+    rig.built.sim.run_for(Duration::from_millis(400));
+    let tpdos: Vec<(Vec<u8>, Instant)> = rig
+        .device_frames()
+        .into_iter()
+        .filter(|(id, _, _)| *id == 0x186)
+        .map(|(_, d, t)| (d, t))
+        .collect();
+    assert!(tpdos.len() >= 4, "{tpdos:?}");
+    for (data, _) in &tpdos {
+        assert_eq!(data, &[0xA5, 0xB8, 0x0B]);
+    }
+    let starts: Vec<u64> = tpdos.iter().map(|(_, t)| t.as_nanos()).collect();
+    // The NMT frame sent at 10 ms is received at 10.132 ms (its end of frame at 500 kbit/s):
+    // the device enters Operational and sends TPDO1 at once, after the 3-bit intermission
+    // (6 µs); the event timer runs from the transition, so the next ones are 100 ms apart
+    // from 10.132 ms.
+    assert_eq!(
+        starts,
+        [
+            10_138_000,
+            110_132_000,
+            210_132_000,
+            310_132_000,
+            410_132_000
+        ]
+    );
+}
+
+/// CiA 306 DCF: `ParameterValue`s are the device's configured values and
+/// `[DeviceComissioning] NodeID` its node-ID when the scenario gives none.
+#[test]
+fn cia306_dcf_parameter_values_and_node_id_are_applied() {
+    let dir = temp_dir("dcf");
+    let eds = std::fs::read_to_string(scenarios().join("eds/example-io.eds")).unwrap();
+    let dcf = eds
+        .replace(
+            "DefaultValue=0x0BB8\n",
+            "DefaultValue=0x0BB8\nParameterValue=250\n",
+        )
+        .replace(
+            "[FileInfo]\n",
+            "[DeviceComissioning]\nNodeID=9\nNodeName=io9\nBaudrate=500\n\n[FileInfo]\n",
+        );
+    assert_ne!(dcf, eds);
+    std::fs::write(dir.join("io9.dcf"), dcf).unwrap();
+    let path = scenario_in(&dir, "file = \"io9.dcf\"");
+    let mut rig = Rig::load(&path, "dev");
+    rig.built.sim.run_for(Duration::from_millis(10));
+    assert_eq!(rig.device_frames()[0].0, 0x709);
+    rig.send(0x609, &[0x40, 0x00, 0x20, 0x00, 0, 0, 0, 0]);
+    assert_eq!(rig.sdo_response(9), [0x4B, 0x00, 0x20, 0x00, 250, 0, 0, 0]);
+    // Reset node comes back to the configured value, not the EDS default.
+    rig.send(0x609, &[0x2B, 0x00, 0x20, 0x00, 7, 0, 0, 0]);
+    assert_eq!(rig.read_object("dev", 0x2000, 0), Some(vec![7, 0]));
+    rig.send(0x000, &[0x81, 9]);
+    assert_eq!(rig.read_object("dev", 0x2000, 0), Some(vec![250, 0]));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn malformed_eds_is_reported_with_its_line() {
+    let dir = temp_dir("malformed");
+    std::fs::write(
+        dir.join("bad.eds"),
+        "[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=rx\n",
+    )
+    .unwrap();
+    let e = build_error(&scenario_in(&dir, "file = \"bad.eds\"\nnode_id = 3"));
+    assert!(e.contains("file"), "{e}");
+    assert!(e.contains("line 4 [1000] AccessType"), "{e}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn missing_file_node_id_and_heartbeat_object_are_reported_by_key() {
+    let dir = temp_dir("keys");
+    let e = build_error(&scenario_in(&dir, "node_id = 3"));
+    assert!(e.contains("needs `file`"), "{e}");
+    let e = build_error(&scenario_in(&dir, "file = \"absent.eds\"\nnode_id = 3"));
+    assert!(e.contains(".file") && e.contains("absent.eds"), "{e}");
+    std::fs::write(
+        dir.join("min.eds"),
+        "[1000]\nParameterName=Device type\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0\n",
+    )
+    .unwrap();
+    let e = build_error(&scenario_in(&dir, "file = \"min.eds\""));
+    assert!(e.contains(".node_id") && e.contains("NodeID"), "{e}");
+    let e = build_error(&scenario_in(&dir, "file = \"min.eds\"\nnode_id = 128"));
+    assert!(e.contains("1–127"), "{e}");
+    let e = build_error(&scenario_in(
+        &dir,
+        "file = \"min.eds\"\nnode_id = 3\nheartbeat_ms = 100",
+    ));
+    assert!(e.contains(".heartbeat_ms") && e.contains("0x1017"), "{e}");
+    // Without 0x1200 the device still answers on the default SDO connection.
+    let mut rig = Rig::load(&scenario_in(&dir, "file = \"min.eds\"\nnode_id = 3"), "dev");
+    rig.built.sim.run_for(Duration::from_millis(10));
+    rig.send(0x603, &[0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0]);
+    assert_eq!(rig.sdo_response(3), [0x43, 0x00, 0x10, 0x00, 0, 0, 0, 0]);
+    let _ = std::fs::remove_dir_all(dir);
+}
