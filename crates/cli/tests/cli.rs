@@ -588,3 +588,42 @@ fn canopen_commands_against_the_cia301_twin_through_socketcand() {
     child.kill().ok();
     child.wait().ok();
 }
+
+#[test]
+fn a_closed_pipe_ends_output_quietly() {
+    use std::io::Read;
+    // A capture whose listing is far larger than a pipe's buffer.
+    let dir = temp_dir("pipe");
+    let log = dir.join("big.log");
+    let lines: String = (0..20_000)
+        .map(|i| {
+            format!(
+                "({}.{:06}) can0 123#{:08X}\n",
+                1_700_000_000 + i / 1000,
+                i % 1000,
+                i
+            )
+        })
+        .collect();
+    std::fs::write(&log, lines).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["dump", log.to_str().unwrap()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read one chunk, then close the pipe as `| head` does.
+    let mut first = [0u8; 64];
+    child.stdout.take().unwrap().read_exact(&mut first).unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let status = child.wait().unwrap();
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(status.code(), Some(141), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
