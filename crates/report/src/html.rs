@@ -52,9 +52,13 @@ const H: f64 = 200.0;
 
 fn load_chart(out: &mut String, c: &crate::Channel) {
     let n = c.load.len().max(1);
-    let top = c.peak_load().max(0.01);
-    // Scale to the next 10 % above the peak so small loads stay readable.
-    let top = ((top * 10.0).ceil() / 10.0).min(top.max(1.0));
+    // The smallest of 1, 2, 5, 10, 20, 50, 100 % (and whole multiples of 100 % beyond,
+    // for captures whose timestamps crowd frames) that holds the peak.
+    let peak = c.peak_load();
+    let top = [0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0]
+        .into_iter()
+        .find(|&t| peak <= t)
+        .unwrap_or_else(|| peak.ceil());
     let _ = write!(
         out,
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{}\" viewBox=\"0 0 {W} {}\" role=\"img\">",
@@ -67,7 +71,7 @@ fn load_chart(out: &mut String, c: &crate::Channel) {
         let _ = write!(
             out,
             "<line x1=\"40\" x2=\"{W}\" y1=\"{y:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>\
-             <text x=\"0\" y=\"{:.1}\" font-size=\"10\">{:.0}%</text>",
+             <text x=\"0\" y=\"{:.1}\" font-size=\"10\">{:.2}%</text>",
             y + 3.0,
             top * 100.0 * f64::from(q) / 4.0
         );
@@ -95,6 +99,30 @@ fn load_chart(out: &mut String, c: &crate::Channel) {
     );
 }
 
+/// `YYYY-MM-DD hh:mm:ss.uuuuuu` of nanoseconds since the Unix epoch (proleptic Gregorian
+/// calendar, days to civil date as in the well-known era/day-of-era decomposition).
+fn utc(ns: u64) -> String {
+    let secs = ns / 1_000_000_000;
+    let micros = (ns % 1_000_000_000) / 1_000;
+    let days = secs / 86_400;
+    let rem = secs % 86_400;
+    let z = days + 719_468;
+    let era = z / 146_097;
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1_460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + u64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02} {:02}:{:02}:{:02}.{micros:06}",
+        rem / 3_600,
+        rem % 3_600 / 60,
+        rem % 60
+    )
+}
+
 /// Renders a report as one self-contained HTML page.
 pub fn render_html(report: &Report) -> String {
     let mut o = String::new();
@@ -105,8 +133,8 @@ pub fn render_html(report: &Report) -> String {
     let dur = report.end_ns.saturating_sub(report.start_ns);
     let _ = writeln!(
         o,
-        "<p id=\"summary\">Start {} ns since the Unix epoch, duration {:.3} s, {} channel(s), {} SDO transfer(s), {} anomalies.</p>",
-        report.start_ns,
+        "<p id=\"summary\">Start {} UTC, duration {:.3} s, {} channel(s), {} SDO transfer(s), {} anomalies. Times below are seconds from the start.</p>",
+        utc(report.start_ns),
         dur as f64 / 1e9,
         report.channels.len(),
         report.sdo.len(),
@@ -216,6 +244,14 @@ pub fn render_html(report: &Report) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn utc_dates() {
+        assert_eq!(utc(0), "1970-01-01 00:00:00.000000");
+        assert_eq!(utc(1_700_000_000_000_123_456), "2023-11-14 22:13:20.000123");
+        // 29 February of a leap year.
+        assert_eq!(utc(951_782_400_000_000_000), "2000-02-29 00:00:00.000000");
+    }
 
     #[test]
     fn escape_markup_and_quotes() {
