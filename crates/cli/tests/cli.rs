@@ -627,3 +627,54 @@ fn a_closed_pipe_ends_output_quietly() {
     assert_eq!(status.code(), Some(141), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn cal_remote_frame_read_through_the_slcan_gateway() {
+    use std::io::{BufRead, Read, Write};
+    // DS 202-2 read of a basic variable by remote frame: the OPEN DRIVE answers message 0 on
+    // its response COB (P181 = 439 = 0x1B7) to a remote frame with the same identifier.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args([
+            "sim",
+            &scenario_file("opendrive.toml"),
+            "--slcan",
+            "0",
+            "--duration",
+            "20",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr: std::net::SocketAddr = line.split_whitespace().nth(1).unwrap().parse().unwrap();
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(5)))
+        .unwrap();
+    // python-can's slcan open sequence, then the remote frame.
+    s.write_all(b"C\rS6\rO\r").unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    s.write_all(b"r1B74\r").unwrap();
+    let mut got = Vec::new();
+    let mut buf = [0u8; 256];
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(5);
+    while std::time::Instant::now() < until {
+        match s.read(&mut buf) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&buf[..n]),
+            Err(_) => break,
+        }
+        if String::from_utf8_lossy(&got).contains("t1B7") {
+            break;
+        }
+    }
+    let text = String::from_utf8_lossy(&got).into_owned();
+    // Control byte 00 (success), the state byte with every pair reset (0x55) and the
+    // reference 0.00 Hz.
+    assert!(text.contains("t1B7400550000\r"), "{text:?}");
+    child.kill().ok();
+    child.wait().ok();
+}
