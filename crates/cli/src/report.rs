@@ -70,13 +70,20 @@ fn options(args: &Args) -> Result<Options> {
 pub fn run(args: &Args) -> Result<()> {
     let opts = options(args)?;
     let path = &args.capture;
-    let reader = cantwin_capture::open(path)
+    let mut reader = cantwin_capture::open(path)
         .with_context(|| format!("opening {}", path.display()))?
         .with_pcap_channel(args.pcap_channel.clone());
-    let records = reader
-        .collect::<Result<Vec<_>, _>>()
-        .with_context(|| format!("reading {}", path.display()))?;
-    let report = cantwin_report::analyse(&records, &opts);
+    // Streamed: a capture larger than memory is analysed as it is read.
+    let mut analysis = cantwin_report::Analysis::new(&opts);
+    let mut records = 0u64;
+    while let Some(record) = reader
+        .read_record()
+        .with_context(|| format!("reading {}", path.display()))?
+    {
+        analysis.push(&record);
+        records += 1;
+    }
+    let report = analysis.finish();
     let out = args.output.clone().unwrap_or_else(|| {
         let mut name = path.as_os_str().to_owned();
         name.push(".html");
@@ -87,7 +94,7 @@ pub fn run(args: &Args) -> Result<()> {
     println!(
         "{}: {} records, {} SDO transfers, {} anomalies",
         out.display(),
-        records.len(),
+        records,
         report.sdo.len(),
         report.anomalies.len()
     );

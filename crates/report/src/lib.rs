@@ -309,7 +309,8 @@ pub struct Report {
     pub ids: Vec<IdStats>,
     /// SDO transfers in the order they ended.
     pub sdo: Vec<sdo::Transfer>,
-    /// The decoded timeline, in time order, at most [`Options::max_timeline`] rows.
+    /// The decoded timeline, in time order: the first [`Options::max_timeline`] rows in
+    /// capture order.
     pub timeline: Vec<Row>,
     /// Rows left out of the timeline by the cap.
     pub timeline_dropped: u64,
@@ -327,39 +328,41 @@ struct NodeHb {
     heard: bool,
 }
 
-struct Analyser<'o> {
+/// The most bins of [`Options::window_ns`] (or 100 ms) a channel's load is counted in
+/// before windows are merged; later frames count in the last bin (a capture whose clock
+/// jumps by years stays bounded in memory).
+const MAX_BINS: usize = 1 << 22;
+
+/// A capture analysis fed one record at a time, so that captures larger than memory can be
+/// analysed as they are read; [`analyse`] does it for records already in memory.
+#[derive(Debug)]
+pub struct Analysis<'o> {
     opts: &'o Options,
     start: u64,
     end: u64,
+    /// Time of the first record: bin 0 of the load.
+    origin: Option<u64>,
     channels: BTreeMap<String, Channel>,
-    /// (channel, id) → stats.
-    ids: HashMap<(String, Id), IdStats>,
-    bits_at: Vec<(String, u64, u32)>,
-    sdo: HashMap<(String, u8), sdo::Tracker>,
+    /// Channel name → index in `bins` and the keys below (no allocation per frame).
+    chan_ix: HashMap<String, usize>,
+    /// Bits per load bin, per channel index.
+    bins: Vec<Vec<u64>>,
+    /// (channel index, id) → stats.
+    ids: HashMap<(usize, Id), IdStats>,
+    sdo: HashMap<(usize, u8), sdo::Tracker>,
     hb: BTreeMap<(String, u8), NodeHb>,
     transfers: Vec<sdo::Transfer>,
     rows: Vec<Row>,
+    dropped: u64,
     anomalies: Vec<Anomaly>,
 }
 
 /// Analyses the records of a capture (in capture order; timestamps that go backwards are
 /// taken as they come).
 pub fn analyse<'r>(records: impl IntoIterator<Item = &'r Record>, opts: &Options) -> Report {
-    let mut a = Analyser {
-        opts,
-        start: u64::MAX,
-        end: 0,
-        channels: BTreeMap::new(),
-        ids: HashMap::new(),
-        bits_at: Vec::new(),
-        sdo: HashMap::new(),
-        hb: BTreeMap::new(),
-        transfers: Vec::new(),
-        rows: Vec::new(),
-        anomalies: Vec::new(),
-    };
+    let mut a = Analysis::new(opts);
     for r in records {
-        a.record(r);
+        a.push(r);
     }
     a.finish()
 }
@@ -389,7 +392,51 @@ pub fn value_text(data: &[u8], size: usize) -> String {
     s
 }
 
-impl Analyser<'_> {
+impl<'o> Analysis<'o> {
+    /// An empty analysis.
+    pub fn new(opts: &'o Options) -> Self {
+        Analysis {
+            opts,
+            start: u64::MAX,
+            end: 0,
+            origin: None,
+            channels: BTreeMap::new(),
+            chan_ix: HashMap::new(),
+            bins: Vec::new(),
+            ids: HashMap::new(),
+            sdo: HashMap::new(),
+            hb: BTreeMap::new(),
+            transfers: Vec::new(),
+            rows: Vec::new(),
+            dropped: 0,
+            anomalies: Vec::new(),
+        }
+    }
+
+    fn bin_ns(&self) -> u64 {
+        self.opts.window_ns.unwrap_or(DEFAULT_WINDOW_NS).max(1)
+    }
+
+    fn channel_index(&mut self, name: &str) -> usize {
+        if let Some(&i) = self.chan_ix.get(name) {
+            return i;
+        }
+        let i = self.bins.len();
+        self.chan_ix.insert(name.to_string(), i);
+        self.bins.push(Vec::new());
+        i
+    }
+
+    /// The timeline is full: further rows are only counted.
+    fn full(&mut self) -> bool {
+        if self.rows.len() >= self.opts.max_timeline {
+            self.dropped += 1;
+            true
+        } else {
+            false
+        }
+    }
+
     fn channel(&mut self, name: &str) -> &mut Channel {
         let opts = self.opts;
         self.channels
@@ -408,6 +455,9 @@ impl Analyser<'_> {
     }
 
     fn row(&mut self, t_ns: u64, channel: &str, kind: Kind, node: Option<u8>, text: String) {
+        if self.full() {
+            return;
+        }
         self.rows.push(Row {
             t_ns,
             channel: channel.to_string(),
@@ -427,8 +477,10 @@ impl Analyser<'_> {
         });
     }
 
-    fn record(&mut self, r: &Record) {
+    /// Adds one record.
+    pub fn push(&mut self, r: &Record) {
         let t = r.timestamp_ns;
+        let origin = *self.origin.get_or_insert(t);
         self.start = self.start.min(t);
         self.end = self.end.max(t);
         let ch = r.channel.as_str();
@@ -445,21 +497,26 @@ impl Analyser<'_> {
                 c.frames += 1;
                 c.bits += u64::from(bits);
                 let protocol = c.protocol;
-                self.bits_at.push((ch.to_string(), t, bits));
-                let s = self
-                    .ids
-                    .entry((ch.to_string(), f.id()))
-                    .or_insert_with(|| IdStats {
-                        channel: ch.to_string(),
-                        id: f.id(),
-                        frames: 0,
-                        bytes: 0,
-                        bits: 0,
-                        first_ns: t,
-                        last_ns: t,
-                        min_period_ns: None,
-                        max_period_ns: None,
-                    });
+                let ix = self.channel_index(ch);
+                let bin = usize::try_from(t.saturating_sub(origin) / self.bin_ns())
+                    .unwrap_or(usize::MAX)
+                    .min(MAX_BINS - 1);
+                let v = &mut self.bins[ix];
+                if v.len() <= bin {
+                    v.resize(bin + 1, 0);
+                }
+                v[bin] += u64::from(bits);
+                let s = self.ids.entry((ix, f.id())).or_insert_with(|| IdStats {
+                    channel: ch.to_string(),
+                    id: f.id(),
+                    frames: 0,
+                    bytes: 0,
+                    bits: 0,
+                    first_ns: t,
+                    last_ns: t,
+                    min_period_ns: None,
+                    max_period_ns: None,
+                });
                 if s.frames > 0 {
                     let gap = t.saturating_sub(s.last_ns);
                     s.min_period_ns = Some(s.min_period_ns.map_or(gap, |m| m.min(gap)));
@@ -540,11 +597,21 @@ impl Analyser<'_> {
     }
 
     fn canopen(&mut self, t: u64, ch: &str, f: &Frame) {
+        let msg = wire::decode(f);
+        if matches!(msg, Message::Pdo { .. } | Message::Other(_))
+            && self.rows.len() >= self.opts.max_timeline
+        {
+            // PDOs are most of the traffic: once the timeline is full, count them only.
+            if matches!(msg, Message::Pdo { .. }) || self.opts.pdos.decode(f).is_some() {
+                self.dropped += 1;
+            }
+            return;
+        }
         if let Some(text) = canopen::describe_pdo(f, &self.opts.pdos) {
             self.row(t, ch, Kind::Pdo, None, text);
             return;
         }
-        match wire::decode(f) {
+        match msg {
             Message::Nmt(cmd) => {
                 if matches!(cmd.cs, NmtCs::ResetNode | NmtCs::ResetCommunication) {
                     for ((c, n), hb) in self.hb.iter_mut() {
@@ -578,9 +645,10 @@ impl Analyser<'_> {
             }
             Message::SdoRequest { node, data, len } => {
                 if len == 8 {
+                    let ix = self.channel_index(ch);
                     let done = self
                         .sdo
-                        .entry((ch.to_string(), node))
+                        .entry((ix, node))
                         .or_default()
                         .on_request(t, ch, node, &data);
                     self.sdo_done(done);
@@ -588,9 +656,10 @@ impl Analyser<'_> {
             }
             Message::SdoResponse { node, data, len } => {
                 if len == 8 {
+                    let ix = self.channel_index(ch);
                     let done = self
                         .sdo
-                        .entry((ch.to_string(), node))
+                        .entry((ix, node))
                         .or_default()
                         .on_response(t, ch, node, &data);
                     self.sdo_done(done);
@@ -643,6 +712,9 @@ impl Analyser<'_> {
 
     fn devicenet(&mut self, t: u64, ch: &str, f: &Frame) {
         use cantwin_devicenet::wire::DnId;
+        if self.full() {
+            return;
+        }
         let data = canopen::hex_bytes(f.data_bytes());
         let text = match DnId::decode(f.id()) {
             Ok(DnId::Group1 { msg, mac }) => {
@@ -672,6 +744,9 @@ impl Analyser<'_> {
     }
 
     fn cal(&mut self, t: u64, ch: &str, f: &Frame) {
+        if self.full() {
+            return;
+        }
         // DS 202-2: byte 0 is the CMS control byte; which COB is which is the
         // application's choice, so the row names the COB and splits the control byte.
         let text = match f.data_bytes().split_first() {
@@ -688,9 +763,10 @@ impl Analyser<'_> {
         self.row(t, ch, Kind::Cal, None, text);
     }
 
-    fn finish(mut self) -> Report {
+    /// The end of the capture: closes open SDO transfers and heartbeat supervision.
+    pub fn finish(mut self) -> Report {
         let mut trackers: Vec<_> = std::mem::take(&mut self.sdo).into_iter().collect();
-        trackers.sort_by(|a, b| a.0.cmp(&b.0));
+        trackers.sort_by_key(|t| t.0);
         for (_, mut tr) in trackers {
             if let Some(t) = tr.finish() {
                 self.sdo_done(vec![t]);
@@ -702,39 +778,36 @@ impl Analyser<'_> {
             (self.start, self.end)
         };
         self.heartbeat_anomalies(end);
-        // Bus load per window.
-        let span = end - start;
-        let window = self.opts.window_ns.unwrap_or_else(|| {
-            let min = span.div_ceil(MAX_WINDOWS);
-            DEFAULT_WINDOW_NS.max(min.div_ceil(DEFAULT_WINDOW_NS) * DEFAULT_WINDOW_NS)
-        });
-        let window = window.max(1);
-        let n = usize::try_from(span / window + 1)
-            .unwrap_or(usize::MAX)
-            .min(1 << 20);
-        let mut bits: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
-        for (ch, t, b) in &self.bits_at {
-            let v = bits.entry(ch.as_str()).or_insert_with(|| vec![0; n]);
-            let i = usize::try_from(t.saturating_sub(start) / window).unwrap_or(usize::MAX);
-            if let Some(slot) = v.get_mut(i.min(n - 1)) {
-                *slot += u64::from(*b);
-            }
-        }
+        // Bus load per window: bins merged k at a time so that at most MAX_WINDOWS remain
+        // (unless the window width was given).
+        let bin = self.bin_ns();
+        let n_bins = self.bins.iter().map(Vec::len).max().unwrap_or(0).max(1);
+        let k = match self.opts.window_ns {
+            Some(_) => 1,
+            None => n_bins.div_ceil(MAX_WINDOWS as usize).max(1),
+        };
+        let window = bin.saturating_mul(k as u64);
         let mut channels = Vec::new();
         for (name, mut c) in std::mem::take(&mut self.channels) {
             c.window_ns = window;
             let capacity = c.bit_rate.bits_per_second() as f64 * window as f64 / 1e9;
-            c.load = bits
-                .get(name.as_str())
-                .map(|v| v.iter().map(|&b| b as f64 / capacity).collect())
+            let mut v = self
+                .chan_ix
+                .get(&name)
+                .and_then(|&i| self.bins.get(i))
+                .cloned()
                 .unwrap_or_default();
+            v.resize(n_bins, 0);
+            c.load = v
+                .chunks(k)
+                .map(|w| w.iter().sum::<u64>() as f64 / capacity)
+                .collect();
             channels.push(c);
         }
-        let mut ids: Vec<IdStats> = self.ids.into_values().collect();
+        let mut ids: Vec<IdStats> = std::mem::take(&mut self.ids).into_values().collect();
         ids.sort_by(|a, b| (&a.channel, id_key(a.id)).cmp(&(&b.channel, id_key(b.id))));
         self.rows.sort_by_key(|r| r.t_ns);
-        let dropped = self.rows.len().saturating_sub(self.opts.max_timeline);
-        self.rows.truncate(self.opts.max_timeline);
+        let dropped = self.dropped;
         self.anomalies.sort_by_key(|a| a.t_ns);
         Report {
             start_ns: start,
@@ -743,7 +816,7 @@ impl Analyser<'_> {
             ids,
             sdo: self.transfers,
             timeline: self.rows,
-            timeline_dropped: dropped as u64,
+            timeline_dropped: dropped,
             anomalies: self.anomalies,
         }
     }

@@ -352,8 +352,13 @@ fn window_widens_so_long_captures_keep_at_most_2000_windows() {
     let records = [rec(0, 0x080, &[]), rec(1_000_000, 0x080, &[])];
     let report = analyse(&records, &Options::default());
     let c = &report.channels[0];
-    assert_eq!(c.window_ns, 500 * MS);
-    assert_eq!(c.load.len(), 2001);
+    // 1000 s in 100 ms bins: 10 001 bins, merged 6 at a time.
+    assert_eq!(c.window_ns, 600 * MS);
+    assert_eq!(c.load.len(), 1667);
+    let bits = f64::from(f(0x080, &[]).bit_length());
+    assert_eq!(c.load[0], bits / 600_000.0);
+    assert_eq!(c.load[1666], bits / 600_000.0);
+    assert!(c.load[1..1666].iter().all(|&l| l == 0.0));
 }
 
 #[test]
