@@ -49,6 +49,8 @@ r.style.display=ok?'':'none';}}";
 /// Chart size in SVG user units.
 const W: f64 = 800.0;
 const H: f64 = 200.0;
+/// Room above the plot for the top label.
+const M: f64 = 10.0;
 
 fn load_chart(out: &mut String, c: &crate::Channel) {
     let n = c.load.len().max(1);
@@ -62,25 +64,25 @@ fn load_chart(out: &mut String, c: &crate::Channel) {
     let _ = write!(
         out,
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{}\" viewBox=\"0 0 {W} {}\" role=\"img\">",
-        H + 30.0,
-        H + 30.0
+        M + H + 30.0,
+        M + H + 30.0
     );
     let _ = write!(out, "<title>bus load of {}</title>", escape(&c.name));
     for q in 0..=4 {
-        let y = H - H * f64::from(q) / 4.0;
+        let y = M + H - H * f64::from(q) / 4.0;
         let _ = write!(
             out,
             "<line x1=\"40\" x2=\"{W}\" y1=\"{y:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>\
-             <text x=\"0\" y=\"{:.1}\" font-size=\"10\">{:.2}%</text>",
+             <text x=\"0\" y=\"{:.1}\" font-size=\"10\">{}%</text>",
             y + 3.0,
-            top * 100.0 * f64::from(q) / 4.0
+            percent(top * 100.0 * f64::from(q) / 4.0)
         );
     }
     let mut points = String::new();
     for (i, l) in c.load.iter().enumerate() {
         let x = 40.0 + (W - 40.0) * i as f64 / n as f64;
         let x2 = 40.0 + (W - 40.0) * (i + 1) as f64 / n as f64;
-        let y = H - H * (l / top).min(1.0);
+        let y = M + H - H * (l / top).min(1.0);
         let _ = write!(points, "{x:.1},{y:.1} {x2:.1},{y:.1} ");
     }
     let _ = write!(
@@ -93,9 +95,9 @@ fn load_chart(out: &mut String, c: &crate::Channel) {
         out,
         "<text x=\"40\" y=\"{}\" font-size=\"10\">0 s</text>\
          <text x=\"{}\" y=\"{}\" font-size=\"10\" text-anchor=\"end\">{secs:.1} s</text></svg>",
-        H + 15.0,
+        M + H + 15.0,
         W,
-        H + 15.0
+        M + H + 15.0
     );
 }
 
@@ -121,6 +123,12 @@ fn utc(ns: u64) -> String {
         rem % 3_600 / 60,
         rem % 60
     )
+}
+
+/// A percentage without trailing zeros: `25`, `2.5`, `0.25`.
+fn percent(v: f64) -> String {
+    let s = format!("{v:.2}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// Renders a report as one self-contained HTML page.

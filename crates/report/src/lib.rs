@@ -573,6 +573,9 @@ impl<'o> Analysis<'o> {
                     );
                     text
                 }
+                sdo::Outcome::Incomplete => {
+                    format!("{what}: incomplete, {} bytes seen", tr.size)
+                }
                 sdo::Outcome::NoResponse => {
                     let text = format!("{what}: no response");
                     self.anomaly(

@@ -42,6 +42,9 @@ pub enum Outcome {
     },
     /// A request got no answer before the next request or the end of the capture.
     NoResponse,
+    /// The server had answered the last request, but the transfer did not finish before
+    /// the next one started or the capture ended.
+    Incomplete,
 }
 
 /// One SDO transfer, reassembled.
@@ -93,9 +96,20 @@ struct Open {
     phase: Phase,
     /// Segments of the current block, not yet acknowledged.
     block: Vec<[u8; 7]>,
+    /// The last frame of the transfer came from the server.
+    answered: bool,
 }
 
 impl Open {
+    /// How a transfer ends that is cut short.
+    fn cut_short(&self) -> Outcome {
+        if self.answered {
+            Outcome::Incomplete
+        } else {
+            Outcome::NoResponse
+        }
+    }
+
     fn push(&mut self, bytes: &[u8]) {
         let room = KEPT_BYTES.saturating_sub(self.t.data.len());
         self.t
@@ -148,6 +162,24 @@ fn new_transfer(start_ns: u64, channel: &str, node: u8, index: u16, sub: u8) -> 
 impl Tracker {
     /// A client request frame (0x600 + node, 8 bytes) at `t`; returns the transfers it ended.
     pub fn on_request(&mut self, t: u64, channel: &str, node: u8, b: &[u8; 8]) -> Vec<Transfer> {
+        let done = self.request(t, channel, node, b);
+        if let Some(open) = &mut self.open {
+            open.answered = false;
+        }
+        done
+    }
+
+    /// A server response frame (0x580 + node, 8 bytes) at `t`; returns the transfers it
+    /// ended.
+    pub fn on_response(&mut self, t: u64, channel: &str, node: u8, b: &[u8; 8]) -> Vec<Transfer> {
+        let done = self.response(t, channel, node, b);
+        if let Some(open) = &mut self.open {
+            open.answered = true;
+        }
+        done
+    }
+
+    fn request(&mut self, t: u64, channel: &str, node: u8, b: &[u8; 8]) -> Vec<Transfer> {
         let mut done = Vec::new();
         if let Some(open) = &mut self.open {
             match open.phase {
@@ -182,7 +214,7 @@ impl Tracker {
                 | Request::BlockUploadInitiate { .. }
         );
         if initiate && let Some(mut old) = self.open.take() {
-            old.t.outcome = Outcome::NoResponse;
+            old.t.outcome = old.cut_short();
             done.push(old.t);
         }
         let start = |mux: cantwin_canopen::sdo::wire::Mux, dir, mode| Open {
@@ -193,6 +225,7 @@ impl Tracker {
             },
             phase: Phase::Confirmed,
             block: Vec::new(),
+            answered: false,
         };
         match req {
             Request::InitiateDownload { mux, init } => {
@@ -264,9 +297,7 @@ impl Tracker {
         done
     }
 
-    /// A server response frame (0x580 + node, 8 bytes) at `t`; returns the transfers it
-    /// ended.
-    pub fn on_response(&mut self, t: u64, channel: &str, node: u8, b: &[u8; 8]) -> Vec<Transfer> {
+    fn response(&mut self, t: u64, channel: &str, node: u8, b: &[u8; 8]) -> Vec<Transfer> {
         let mut done = Vec::new();
         if let Some(open) = &mut self.open
             && open.phase == Phase::BlockUpData
@@ -342,10 +373,12 @@ impl Tracker {
         done
     }
 
-    /// The end of the capture: an unanswered request is a transfer without response.
+    /// The end of the capture: the open transfer, if any, as unanswered or incomplete.
     pub fn finish(&mut self) -> Option<Transfer> {
-        let mut t = self.open.take()?.t;
-        t.outcome = Outcome::NoResponse;
+        let open = self.open.take()?;
+        let outcome = open.cut_short();
+        let mut t = open.t;
+        t.outcome = outcome;
         Some(t)
     }
 }

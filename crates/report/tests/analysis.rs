@@ -434,3 +434,24 @@ fn html_escapes_text_from_the_capture_and_loads_nothing() {
         assert!(!html.contains(external), "{external}");
     }
 }
+
+#[test]
+fn transfer_cut_off_by_the_end_of_the_capture_is_incomplete_not_unanswered() {
+    let mut records = segmented_upload(0, b"cantwin generic CiA 301 device");
+    // Keep the initiate, the first segment request and its answer.
+    records.truncate(4);
+    let report = analyse(&records, &Options::default());
+    assert_eq!(report.sdo[0].outcome, Outcome::Incomplete);
+    assert_eq!(report.sdo[0].data, b"cantwin");
+    assert_eq!(
+        report.timeline[0].text,
+        "SDO read node 5 0x1008sub0 (segmented): incomplete, 7 bytes seen"
+    );
+    assert!(report.anomalies.is_empty());
+    // Cut after the second segment request: that request went unanswered.
+    let mut records = segmented_upload(0, b"cantwin generic CiA 301 device");
+    records.truncate(5);
+    let report = analyse(&records, &Options::default());
+    assert_eq!(report.sdo[0].outcome, Outcome::NoResponse);
+    assert_eq!(report.anomalies[0].kind, AnomalyKind::SdoNoResponse);
+}
