@@ -173,10 +173,10 @@ pub fn render_html(report: &Report) -> String {
     for c in &report.channels {
         let _ = writeln!(
             o,
-            "<h3>{}</h3><p>{} bit/s, {:?}; {} frames, {} error frames, {} SYNC; mean load {:.2} %, peak {:.2} % (windows of {} ms).</p>",
+            "<h3>{}</h3><p>{} bit/s, {}; {} frames, {} error frames, {} SYNC; mean load {:.2} %, peak {:.2} % (windows of {} ms).</p>",
             escape(&c.name),
             c.bit_rate.bits_per_second(),
-            c.protocol,
+            c.protocol.name(),
             c.frames,
             c.error_frames,
             c.syncs,

@@ -56,6 +56,17 @@ pub enum Protocol {
     Cal,
 }
 
+impl Protocol {
+    /// The protocol's usual name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Protocol::CanOpen => "CANopen",
+            Protocol::DeviceNet => "DeviceNet",
+            Protocol::Cal => "CAL",
+        }
+    }
+}
+
 impl std::str::FromStr for Protocol {
     type Err = String;
 
