@@ -32,6 +32,7 @@
 #![forbid(unsafe_code)]
 
 pub mod canopen;
+pub mod devicenet;
 mod html;
 pub mod sdo;
 
@@ -725,35 +726,10 @@ impl<'o> Analysis<'o> {
     }
 
     fn devicenet(&mut self, t: u64, ch: &str, f: &Frame) {
-        use cantwin_devicenet::wire::DnId;
         if self.full() {
             return;
         }
-        let data = canopen::hex_bytes(f.data_bytes());
-        let text = match DnId::decode(f.id()) {
-            Ok(DnId::Group1 { msg, mac }) => {
-                format!("group 1 message {msg} from MAC {mac}: {data}")
-            }
-            Ok(DnId::Group2 { mac, msg }) => {
-                // Predefined master/slave connection set (DeviceNet vol. 3 §3-9).
-                let what = match msg {
-                    0 => "bit-strobe command",
-                    1 => "multicast poll",
-                    2 => "change of state / cyclic acknowledge",
-                    3 => "slave explicit/unconnected response",
-                    4 => "master explicit request",
-                    5 => "master I/O poll command / COS / cyclic",
-                    6 => "unconnected explicit request",
-                    _ => "duplicate MAC ID check",
-                };
-                format!("group 2 MAC {mac} {what}: {data}")
-            }
-            Ok(DnId::Group3 { msg, mac }) => {
-                format!("group 3 message {msg} from MAC {mac}: {data}")
-            }
-            Ok(DnId::Group4 { msg }) => format!("group 4 message 0x{msg:02X}: {data}"),
-            Err(e) => format!("{e}: {data}"),
-        };
+        let text = devicenet::describe(f);
         self.row(t, ch, Kind::DeviceNet, None, text);
     }
 

@@ -397,7 +397,7 @@ fn devicenet_and_cal_channels_decode_by_their_protocol() {
         [
             (
                 Kind::DeviceNet,
-                "group 2 MAC 5 master explicit request: 01 0E 01 01 07"
+                "G2 MAC 5 msg 4: master explicit request: Get_Attribute_Single (0x0E) class 0x01 instance 1 attribute 7 [MAC 1]"
             ),
             (
                 Kind::Cal,
