@@ -44,7 +44,7 @@ const TYPES: &[(&str, DataType)] = &[
     ("d", DataType::Domain),
 ];
 
-fn data_type(mnemonic: &str) -> Result<DataType> {
+pub(crate) fn data_type(mnemonic: &str) -> Result<DataType> {
     TYPES
         .iter()
         .find(|(m, _)| m.eq_ignore_ascii_case(mnemonic))
@@ -58,7 +58,7 @@ fn data_type(mnemonic: &str) -> Result<DataType> {
         })
 }
 
-fn number(text: &str, what: &str) -> Result<u32> {
+pub(crate) fn number(text: &str, what: &str) -> Result<u32> {
     let t = text.trim();
     let v = match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
         Some(h) => u32::from_str_radix(h, 16),
@@ -75,7 +75,7 @@ fn node_id(text: &str) -> Result<u8> {
         .with_context(|| format!("node-ID {text} is outside 1–127"))
 }
 
-fn mux(index: &str, sub: &str) -> Result<Mux> {
+pub(crate) fn mux(index: &str, sub: &str) -> Result<Mux> {
     let i = number(index, "index")?;
     let s = number(sub, "sub-index")?;
     Ok(Mux::new(

@@ -1,5 +1,6 @@
 //! `cantwin`: digital twins of CAN fieldbus devices, from the command line.
 
+mod ascii_gateway;
 mod bench;
 mod benchmarks_md;
 mod cal;
@@ -87,6 +88,12 @@ enum Command {
                             cantwin trace --socketcand 127.0.0.1:29536 --eds 5=device.eds --seconds 10"
     )]
     Trace(canopen::TraceArgs),
+    /// A CiA 309-3 ASCII gateway (CANopenNode/cocomm syntax) on stdin/stdout or TCP.
+    #[command(
+        after_help = "Examples:\n  echo '[1] 5 read 0x1008 0 vs' | cantwin gateway --ascii --socketcand 127.0.0.1:29536\n  \
+                            cantwin gateway --ascii --listen 6000 --scenario scenarios/cia301-device.toml"
+    )]
+    Gateway(ascii_gateway::GatewayArgs),
     /// Write one self-contained HTML page about a capture: bus load, identifiers, decoded timeline, anomalies.
     #[command(after_help = "Examples:\n  cantwin report capture.pcap\n  \
                             cantwin report run.log --bit-rate can0=500k --eds 5=device.eds -o run.html\n  \
@@ -112,6 +119,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Nmt(args) => canopen::run_nmt(&args),
         Command::Scan(args) => canopen::run_scan(&args),
         Command::Trace(args) => canopen::run_trace(&args),
+        Command::Gateway(args) => ascii_gateway::run(&args),
         Command::Report(args) => report::run(&args),
     }
 }

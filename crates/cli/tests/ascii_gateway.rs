@@ -1,0 +1,157 @@
+//! `cantwin gateway --ascii` (CiA 309-3 ASCII mapping) against `cantwin sim` running the
+//! generic CiA 301 device of `scenarios/cia301-device.toml` (node 5), over stdin/stdout and
+//! over TCP.
+#![allow(clippy::unwrap_used)]
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, Command, Stdio};
+
+fn sim_with_socketcand(scenario: &str, seconds: &str) -> (Child, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["sim", scenario, "--socketcand", "0", "--duration", seconds])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line.split_whitespace().nth(1).unwrap().to_string();
+    (child, addr)
+}
+
+fn scenario_file(name: &str) -> String {
+    format!("{}/../../scenarios/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+const DEVICE_NAME: &str =
+    "cantwin generic CiA 301 device with a 64 KiB DOMAIN at 0x2000, four RPDOs and four TPDOs";
+
+/// The requests of both tests and the answers expected, in order.
+fn conversation() -> Vec<(String, String)> {
+    let pairs = [
+        ("[1] 5 read 0x1008 0 vs", format!("[1] \"{DEVICE_NAME}\"")),
+        ("[2] 5 write 0x1017 0 u16 250", "[2] OK".into()),
+        ("[3] 5 read 0x1017 0 u16", "[3] 250".into()),
+        ("[4] 5 read 0x1234 0 u8", "[4] ERROR: 0x06020000".into()),
+        ("[5] 5 read 0x1018 1 x32", "[5] 0x00000CA7".into()),
+        // Reset node: 0x1017 back to the power-on value (the scenario's heartbeat_ms).
+        ("[6] 5 reset node", "[6] OK".into()),
+        ("[7] 5 read 0x1017 0 u16", "[7] 100".into()),
+        ("[8] set node 5", "[8] OK".into()),
+        ("[9] set sdo_timeout 200", "[9] OK".into()),
+        // Stopped: the SDO server is silent (CiA 301 §7.3.2.2.1), the client times out.
+        ("[10] stop", "[10] OK".into()),
+        ("[11] read 0x1000 0 u32", "[11] ERROR: 0x05040000".into()),
+        ("[12] start", "[12] OK".into()),
+        ("[13] read 0x2002 0 u8", "[13] 0".into()),
+        ("[14] preop", "[14] OK".into()),
+        (
+            "[15] write 0x2002 0 u8 101",
+            "[15] ERROR: 0x06090031".into(),
+        ),
+        ("[16] reset comm", "[16] OK".into()),
+        ("[17] 5 read", "[17] ERROR: 101".into()),
+        ("[18] 5 jump", "[18] ERROR: 100".into()),
+        ("[19] 2 5 start", "[19] ERROR: 106".into()),
+    ];
+    pairs.into_iter().map(|(q, a)| (q.to_string(), a)).collect()
+}
+
+#[test]
+fn cia309_3_gateway_on_stdin_reads_writes_aborts_and_sends_nmt() {
+    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "60");
+    let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["gateway", "--ascii", "--socketcand", &addr])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let talk = conversation();
+    {
+        let mut stdin = gw.stdin.take().unwrap();
+        for (q, _) in &talk {
+            writeln!(stdin, "{q}").unwrap();
+        }
+        writeln!(stdin, "[20] help").unwrap();
+    }
+    let out = gw.wait_with_output().unwrap();
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8(out.stdout).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    for (i, (q, a)) in talk.iter().enumerate() {
+        assert_eq!(lines[i], a, "answer to {q}");
+    }
+    // help: its text, then the sequence number with OK.
+    let help = &lines[talk.len()..];
+    assert!(help[0].starts_with("Request: [<seq>] [[<net>] <node>] <command>"));
+    assert!(
+        help.iter()
+            .any(|l| l.contains("write <index> <sub> <type> <value>"))
+    );
+    assert_eq!(help.last(), Some(&"[20] OK"));
+}
+
+#[test]
+fn cia309_3_gateway_serves_tcp_clients() {
+    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "60");
+    let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["gateway", "--ascii", "--listen", "0", "--socketcand", &addr])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(gw.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    let gw_addr = first.strip_prefix("gateway ").unwrap().trim().to_string();
+    assert!(gw_addr.starts_with("127.0.0.1:"), "{first}");
+
+    let stream = std::net::TcpStream::connect(&gw_addr).unwrap();
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .unwrap();
+    let mut reader = BufReader::new(stream.try_clone().unwrap());
+    let mut writer = stream;
+    let mut ask = |q: &str| {
+        write!(writer, "{q}\r\n").unwrap();
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        assert!(line.ends_with("\r\n"), "{line:?}");
+        line.trim_end().to_string()
+    };
+    for (q, a) in conversation() {
+        assert_eq!(ask(&q), a, "answer to {q}");
+    }
+    // A line longer than the gateway takes is refused as a syntax error, and the client
+    // stays connected.
+    let long = format!("[30] 5 write 0x1008 0 vs {}", "x".repeat(2000));
+    assert_eq!(ask(&long), "ERROR: 101");
+    assert_eq!(ask("[31] 5 read 0x1017 0 u16"), "[31] 100");
+
+    // A second client has its own default node.
+    let other = std::net::TcpStream::connect(&gw_addr).unwrap();
+    other
+        .set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .unwrap();
+    let mut other_reader = BufReader::new(other.try_clone().unwrap());
+    let mut other_writer = other;
+    write!(other_writer, "[1] read 0x1017 0 u16\r\n").unwrap();
+    let mut line = String::new();
+    other_reader.read_line(&mut line).unwrap();
+    assert_eq!(line, "[1] ERROR: 105\r\n");
+
+    let _ = gw.kill();
+    let _ = gw.wait();
+    let _ = sim.kill();
+    let _ = sim.wait();
+}
