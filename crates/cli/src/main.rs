@@ -13,8 +13,10 @@ mod demo_adv200;
 mod demo_canopen;
 mod demo_opendrive;
 mod demo_tm3;
+mod dnet;
 mod dump;
 mod eds;
+mod fuzz;
 mod report;
 mod sim;
 
@@ -65,6 +67,13 @@ enum Command {
                             cantwin cal --socketcand 127.0.0.1:29536 events watch"
     )]
     Cal(cal::Args),
+    /// A DeviceNet scanner: browse devices, get and set attributes, polled I/O.
+    #[command(
+        after_help = "Examples:\n  cantwin dnet --socketcand 127.0.0.1:29536 browse\n  \
+                            cantwin dnet --socketcand 127.0.0.1:29536 get 12 1 1 7 --type short-string\n  \
+                            cantwin dnet --scenario scenarios/adv200-devicenet.toml poll 12 --out 0300E803"
+    )]
+    Dnet(dnet::Args),
     /// SDO read and write (CiA 309-3 type mnemonics), with progress for large domains.
     #[command(
         after_help = "Examples:\n  cantwin sdo --socketcand 127.0.0.1:29536 read 5 0x1008 0 vs\n  \
@@ -105,16 +114,23 @@ enum Command {
                             cantwin bench bus --write"
     )]
     Bench(bench::Args),
+    /// Fuzz every decoder and state machine that reads outside input; print cases and failures.
+    #[command(
+        after_help = "Examples:\n  cantwin fuzz --cases 100000\n  cantwin fuzz --list\n  cantwin fuzz --cases 5000 eds twin-cia301"
+    )]
+    Fuzz(fuzz::Args),
 }
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::Fuzz(args) => fuzz::run(&args),
         Command::Sim(args) => sim::run(&args),
         Command::Dump(args) => dump::run(&args),
         Command::Eds(args) => eds::run(&args),
         Command::Cal(args) => cal::run(&args),
+        Command::Dnet(args) => dnet::run(&args),
         Command::Sdo(args) => canopen::run_sdo(&args),
         Command::Nmt(args) => canopen::run_nmt(&args),
         Command::Scan(args) => canopen::run_scan(&args),

@@ -1,0 +1,747 @@
+//! `cantwin dnet`: a DeviceNet scanner on a bus: browse the devices by MAC ID, read and
+//! write attributes over an explicit connection, exchange polled I/O.
+//!
+//! Explicit requests go over the Predefined Master/Slave Connection Set (Allocate with the
+//! explicit choice, then Release) when class and instance fit the 8/8 body format the
+//! slave grants on it; a wider class or instance (the ADV200 card's Parameter object with
+//! instance = PAR above 255, EXP-CAN/DN-ADV manual §3.4.2 note 1) opens a UCMM connection
+//! asking for 8/16 or 16/16 and closes it afterwards.
+
+use std::time::Duration as WallDuration;
+
+use anyhow::{Context, Result, bail};
+use cantwin_can::{Duration, Node, Outbox};
+use cantwin_devicenet::wire::{BodyFormat, choice};
+use cantwin_devicenet::{MacId, Scanner, ScannerConfig, ScannerEvent};
+
+use crate::connect::{Link, Target};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    target: Target,
+    /// The scanner's own MAC ID (0–63); it runs the duplicate MAC ID check first.
+    #[arg(long = "mac", default_value_t = 0, global = true)]
+    own_mac: u8,
+    /// How long to wait for each answer, in seconds.
+    #[arg(long, default_value_t = 1.0, global = true)]
+    timeout: f64,
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// How attribute data is shown and parsed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ValueType {
+    /// USINT.
+    U8,
+    /// UINT, little-endian.
+    U16,
+    /// UDINT, little-endian.
+    U32,
+    /// INT, little-endian.
+    I16,
+    /// DINT, little-endian.
+    I32,
+    /// SHORT_STRING: a length byte and the characters.
+    ShortString,
+    /// Raw bytes in hex.
+    Bytes,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Command {
+    /// List the devices by MAC ID with their identity (Identity object, Get_Attributes_All).
+    #[command(
+        after_help = "Examples:\n  cantwin dnet --scenario scenarios/adv200-devicenet.toml browse\n  \
+                            cantwin dnet --socketcand 127.0.0.1:29536 --mac 62 browse --from 1 --to 20"
+    )]
+    Browse {
+        /// First MAC ID to try.
+        #[arg(long, default_value_t = 0)]
+        from: u8,
+        /// Last MAC ID to try.
+        #[arg(long, default_value_t = 63)]
+        to: u8,
+    },
+    /// Get_Attribute_Single over an explicit connection.
+    #[command(
+        after_help = "Examples:\n  cantwin dnet --socketcand 127.0.0.1:29536 get 12 1 1 1 --type u16      (Identity vendor ID)\n  \
+                            cantwin dnet --socketcand 127.0.0.1:29536 get 12 1 1 7 --type short-string (product name)\n  \
+                            cantwin dnet --scenario scenarios/adv200-devicenet.toml get 12 0x0F 600 1 --type i32  (ADV200 PAR 600)"
+    )]
+    Get {
+        /// The device's MAC ID.
+        #[arg(value_name = "MAC")]
+        slave: u8,
+        /// Class ID (decimal or 0x hex).
+        #[arg(value_parser = parse_u16)]
+        class: u16,
+        /// Instance ID.
+        #[arg(value_parser = parse_u16)]
+        instance: u16,
+        /// Attribute ID.
+        #[arg(value_parser = parse_u8)]
+        attribute: u8,
+        /// How to show the value.
+        #[arg(long = "type", value_enum, default_value_t = ValueType::Bytes)]
+        ty: ValueType,
+    },
+    /// Set_Attribute_Single over an explicit connection.
+    #[command(
+        after_help = "Examples:\n  cantwin dnet --socketcand 127.0.0.1:29536 set 12 0x0F 600 1 1000 --type i16  (ADV200 PAR 600)\n  \
+                            cantwin dnet --socketcand 127.0.0.1:29536 set 12 3 1 1 0x0C --type u8\n  \
+                            cantwin dnet --scenario scenarios/adv200-devicenet.toml set 12 0x64 1 3 0A0B --type bytes"
+    )]
+    Set {
+        /// The device's MAC ID.
+        #[arg(value_name = "MAC")]
+        slave: u8,
+        /// Class ID (decimal or 0x hex).
+        #[arg(value_parser = parse_u16)]
+        class: u16,
+        /// Instance ID.
+        #[arg(value_parser = parse_u16)]
+        instance: u16,
+        /// Attribute ID.
+        #[arg(value_parser = parse_u8)]
+        attribute: u8,
+        /// The value, as --type says (bytes: hex digits).
+        #[arg(allow_hyphen_values = true)]
+        value: String,
+        /// How to encode the value.
+        #[arg(long = "type", value_enum)]
+        ty: ValueType,
+    },
+    /// Allocate the polled I/O connection, set its expected packet rate and exchange data.
+    #[command(
+        after_help = "Examples:\n  cantwin dnet --socketcand 127.0.0.1:29536 poll 12 --out 0300E803\n  \
+                            cantwin dnet --scenario scenarios/adv200-devicenet.toml poll 12 --out 03000000 --count 10 --period-ms 50"
+    )]
+    Poll {
+        /// The device's MAC ID.
+        #[arg(value_name = "MAC")]
+        slave: u8,
+        /// Output data in hex (the poll command's bytes).
+        #[arg(long, value_name = "HEX")]
+        out: String,
+        /// How many poll responses to print.
+        #[arg(long, default_value_t = 1)]
+        count: u32,
+        /// Poll period in ms (also the expected packet rate set on the connection).
+        #[arg(long, default_value_t = 100)]
+        period_ms: u16,
+    },
+}
+
+fn parse_u16(s: &str) -> Result<u16, String> {
+    let s = s.trim();
+    let r = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(h) => u16::from_str_radix(h, 16),
+        None => s.parse(),
+    };
+    r.map_err(|_| format!("{s:?} is not a number 0–65535 (decimal or 0x hex)"))
+}
+
+fn parse_u8(s: &str) -> Result<u8, String> {
+    let v = parse_u16(s)?;
+    u8::try_from(v).map_err(|_| format!("{s:?} is not a number 0–255"))
+}
+
+fn parse_hex(s: &str) -> Result<Vec<u8>> {
+    let digits: String = s
+        .chars()
+        .filter(|c| !c.is_whitespace() && *c != ':' && *c != '-')
+        .collect();
+    let digits = digits
+        .strip_prefix("0x")
+        .or_else(|| digits.strip_prefix("0X"))
+        .unwrap_or(&digits);
+    if digits.len() % 2 != 0 {
+        bail!("{s:?}: hex data needs two digits a byte");
+    }
+    (0..digits.len())
+        .step_by(2)
+        .map(|i| {
+            digits
+                .get(i..i + 2)
+                .and_then(|b| u8::from_str_radix(b, 16).ok())
+                .with_context(|| format!("{s:?} is not hex data"))
+        })
+        .collect()
+}
+
+fn hex(data: &[u8]) -> String {
+    data.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+fn parse_int(s: &str) -> Result<i64> {
+    let s = s.trim();
+    let (neg, body) = match s.strip_prefix('-') {
+        Some(b) => (true, b),
+        None => (false, s),
+    };
+    let v = match body.strip_prefix("0x").or_else(|| body.strip_prefix("0X")) {
+        Some(h) => i64::from_str_radix(h, 16),
+        None => body.parse(),
+    }
+    .with_context(|| format!("{s:?} is not a number"))?;
+    Ok(if neg { -v } else { v })
+}
+
+/// Encode `value` as `ty` says.
+fn encode(value: &str, ty: ValueType) -> Result<Vec<u8>> {
+    let range = |lo: i64, hi: i64| -> Result<i64> {
+        let v = parse_int(value)?;
+        if !(lo..=hi).contains(&v) {
+            bail!("{value} is outside {lo}..={hi}");
+        }
+        Ok(v)
+    };
+    Ok(match ty {
+        ValueType::U8 => vec![range(0, 0xFF)? as u8],
+        ValueType::U16 => (range(0, 0xFFFF)? as u16).to_le_bytes().to_vec(),
+        ValueType::U32 => (range(0, 0xFFFF_FFFF)? as u32).to_le_bytes().to_vec(),
+        ValueType::I16 => (range(-0x8000, 0x7FFF)? as i16).to_le_bytes().to_vec(),
+        ValueType::I32 => (range(-0x8000_0000, 0x7FFF_FFFF)? as i32)
+            .to_le_bytes()
+            .to_vec(),
+        ValueType::ShortString => {
+            let n = u8::try_from(value.len())
+                .ok()
+                .context("a SHORT_STRING holds at most 255 characters")?;
+            let mut v = vec![n];
+            v.extend_from_slice(value.as_bytes());
+            v
+        }
+        ValueType::Bytes => parse_hex(value)?,
+    })
+}
+
+/// Show reply `data` as `ty` says; data of the wrong length is shown in hex with a note.
+fn decode(data: &[u8], ty: ValueType) -> String {
+    let fixed = |n: usize| data.len() == n;
+    match ty {
+        ValueType::U8 if fixed(1) => data[0].to_string(),
+        ValueType::U16 if fixed(2) => u16::from_le_bytes([data[0], data[1]]).to_string(),
+        ValueType::I16 if fixed(2) => i16::from_le_bytes([data[0], data[1]]).to_string(),
+        ValueType::U32 if fixed(4) => {
+            u32::from_le_bytes([data[0], data[1], data[2], data[3]]).to_string()
+        }
+        ValueType::I32 if fixed(4) => {
+            i32::from_le_bytes([data[0], data[1], data[2], data[3]]).to_string()
+        }
+        ValueType::ShortString if !data.is_empty() && usize::from(data[0]) == data.len() - 1 => {
+            format!("{:?}", String::from_utf8_lossy(&data[1..]))
+        }
+        ValueType::Bytes => hex(data),
+        _ => format!("{} ({} bytes, not a {ty:?})", hex(data), data.len()),
+    }
+}
+
+/// The meaning of a CIP general status code (CIP Vol. 1 Appendix B, as every CIP network
+/// uses them).
+pub(crate) fn general_status_text(code: u8) -> &'static str {
+    match code {
+        0x00 => "success",
+        0x01 => "connection failure",
+        0x02 => "resource unavailable",
+        0x03 => "invalid parameter value",
+        0x04 => "path segment error",
+        0x05 => "path destination unknown",
+        0x06 => "partial transfer",
+        0x07 => "connection lost",
+        0x08 => "service not supported",
+        0x09 => "invalid attribute value",
+        0x0A => "attribute list error",
+        0x0B => "already in requested mode/state",
+        0x0C => "object state conflict",
+        0x0D => "object already exists",
+        0x0E => "attribute not settable",
+        0x0F => "privilege violation",
+        0x10 => "device state conflict",
+        0x11 => "reply data too large",
+        0x12 => "fragmentation of a primitive value",
+        0x13 => "not enough data",
+        0x14 => "attribute not supported",
+        0x15 => "too much data",
+        0x16 => "object does not exist",
+        0x17 => "service fragmentation sequence not in progress",
+        0x18 => "no stored attribute data",
+        0x19 => "store operation failure",
+        0x1A => "routing failure, request packet too large",
+        0x1B => "routing failure, response packet too large",
+        0x1C => "missing attribute list entry data",
+        0x1D => "invalid attribute value list",
+        0x1E => "embedded service error",
+        0x1F => "vendor specific error",
+        0x20 => "invalid parameter",
+        0x21 => "write-once value or medium already written",
+        0x22 => "invalid reply received",
+        0x25 => "key failure in path",
+        0x26 => "path size invalid",
+        0x27 => "unexpected attribute in list",
+        0x28 => "invalid member ID",
+        0x29 => "member not settable",
+        _ => "reserved or object-specific status",
+    }
+}
+
+fn mac(v: u8, what: &str) -> Result<MacId> {
+    MacId::new(v).map_err(|e| anyhow::anyhow!("{what} {v}: {e}"))
+}
+
+/// A scanner on a link, online.
+struct Session {
+    link: Link,
+    scanner_mac: MacId,
+    scanner: Scanner,
+    timeout: f64,
+}
+
+impl Session {
+    fn open(args: &Args) -> Result<Session> {
+        if !(args.timeout.is_finite() && args.timeout > 0.0) {
+            bail!("--timeout must be a positive number of seconds");
+        }
+        let own = mac(args.own_mac, "--mac")?;
+        let mut config = ScannerConfig::new(own, 0, 0x00C0_FFEE);
+        config.response_timeout = Duration::from_secs_f64(args.timeout);
+        let mut scanner = Scanner::new(config);
+        let link = Link::open(&args.target)?;
+        let mut out = Outbox::new();
+        scanner.on_power_up(link.now(), &mut out);
+        for f in out.drain() {
+            link.send(f)?;
+        }
+        let mut s = Session {
+            link,
+            scanner_mac: own,
+            scanner,
+            timeout: args.timeout,
+        };
+        // The duplicate MAC ID check: two requests 1 s apart (DeviceNet Vol. 3).
+        let mut online = None;
+        s.link.run(
+            &mut s.scanner,
+            |sc| {
+                while let Some(ev) = sc.poll_event() {
+                    match ev {
+                        ScannerEvent::Online => online = Some(true),
+                        ScannerEvent::DuplicateMac => online = Some(false),
+                        _ => {}
+                    }
+                }
+                online.is_some()
+            },
+            WallDuration::from_secs(5),
+        )?;
+        match online {
+            Some(true) => Ok(s),
+            Some(false) => bail!(
+                "another node answered the duplicate MAC ID check of MAC ID {own}: choose another --mac"
+            ),
+            None => bail!("the scanner did not get on line within 5 s"),
+        }
+    }
+
+    /// Run until `n` events came (each queued operation reports exactly one) or the limit.
+    fn collect(&mut self, n: usize) -> Result<Vec<ScannerEvent>> {
+        let mut got = Vec::new();
+        let limit = WallDuration::from_secs_f64(self.timeout * 3.0 * n as f64 + 1.0);
+        self.link.run(
+            &mut self.scanner,
+            |sc| {
+                while let Some(ev) = sc.poll_event() {
+                    got.push(ev);
+                }
+                got.len() >= n
+            },
+            limit,
+        )?;
+        Ok(got)
+    }
+
+    /// One request over a connection opened for it and closed after it.
+    fn request(
+        &mut self,
+        slave: MacId,
+        service: u8,
+        class: u16,
+        instance: u16,
+        data: &[u8],
+    ) -> Result<Vec<u8>> {
+        let s = &mut self.scanner;
+        let ucmm = class > 0xFF || instance > 0xFF;
+        if ucmm {
+            let format = if class > 0xFF {
+                BodyFormat::F16_16
+            } else {
+                BodyFormat::F8_16
+            };
+            s.open_ucmm(slave, format)?;
+        } else {
+            s.allocate(slave, choice::EXPLICIT)?;
+        }
+        s.request(slave, service, class, instance, data)?;
+        if ucmm {
+            s.close_ucmm(slave)?;
+        } else {
+            s.release(slave, choice::EXPLICIT)?;
+        }
+        let events = self.collect(3)?;
+        let how = if ucmm {
+            "opening a UCMM connection"
+        } else {
+            "allocating the explicit connection"
+        };
+        let mut reply = None;
+        for ev in events {
+            match ev {
+                ScannerEvent::Response { data, .. } => reply = Some(Ok(data)),
+                ScannerEvent::Error {
+                    service: svc,
+                    general,
+                    additional,
+                    ..
+                } => {
+                    let err = anyhow::anyhow!(
+                        "MAC ID {slave} answered {} with general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
+                        if svc == service {
+                            "the request".to_string()
+                        } else {
+                            format!("service 0x{svc:02X}")
+                        },
+                        general_status_text(general)
+                    );
+                    if reply.is_none() {
+                        reply = Some(Err(err));
+                    }
+                }
+                ScannerEvent::Timeout { service: svc, .. } if svc == service => {
+                    reply.get_or_insert_with(|| {
+                        Err(anyhow::anyhow!(
+                            "no answer from MAC ID {slave} within {} s (a device that refuses a Set may stay silent)",
+                            self.timeout
+                        ))
+                    });
+                }
+                ScannerEvent::Timeout { .. } => {
+                    reply.get_or_insert_with(|| {
+                        Err(anyhow::anyhow!(
+                            "no answer from MAC ID {slave} {how} within {} s",
+                            self.timeout
+                        ))
+                    });
+                }
+                _ => {}
+            }
+        }
+        reply.unwrap_or_else(|| Err(anyhow::anyhow!("no answer from MAC ID {slave} {how}")))
+    }
+}
+
+/// MAC IDs browsed at once: a bus port queues 32 frames (a CAN controller's transmit
+/// buffer is no deeper), and each batch's Allocate requests go out together.
+const BROWSE_BATCH: usize = 24;
+
+/// What browse learnt of one device.
+#[derive(Debug, Default)]
+struct Found {
+    /// Identity attributes 1–4, 6, 7 (None: not answered).
+    vendor: Option<u16>,
+    device_type: Option<u16>,
+    product_code: Option<u16>,
+    revision: Option<(u8, u8)>,
+    serial: Option<u32>,
+    name: Option<String>,
+    /// The Allocate was refused (the set belongs to another master).
+    refused: Option<(u8, u8)>,
+}
+
+fn u16_of(d: &[u8]) -> Option<u16> {
+    Some(u16::from_le_bytes(d.try_into().ok()?))
+}
+
+/// Browse reads the Identity attributes one by one with Get_Attribute_Single rather than
+/// Get_Attributes_All: the whole instance (36 bytes for the ADV200 card's 21-character
+/// name) exceeds a small device's explicit message limit (the card: 32 bytes, manual §3.2),
+/// which answers it with status 0x11.
+fn browse(s: &mut Session, from: u8, to: u8) -> Result<()> {
+    if from > to || to > 63 {
+        bail!("--from {from} --to {to}: MAC IDs are 0–63, from ≤ to");
+    }
+    let own = s.scanner_mac;
+    let macs: Vec<MacId> = (from..=to)
+        .filter_map(|m| MacId::new(m).ok())
+        .filter(|m| *m != own)
+        .collect();
+    let mut found: Vec<(MacId, Found)> = Vec::new();
+    for batch in macs.chunks(BROWSE_BATCH) {
+        for m in batch {
+            s.scanner.allocate(*m, choice::EXPLICIT)?;
+        }
+        let mut present = Vec::new();
+        for ev in s.collect(batch.len())? {
+            match ev {
+                ScannerEvent::Allocated { slave, .. } => present.push(slave),
+                ScannerEvent::Error {
+                    slave,
+                    general,
+                    additional,
+                    ..
+                } => found.push((
+                    slave,
+                    Found {
+                        refused: Some((general, additional)),
+                        ..Found::default()
+                    },
+                )),
+                _ => {}
+            }
+        }
+        const ATTRS: [u8; 6] = [1, 2, 3, 4, 6, 7];
+        for m in &present {
+            for a in ATTRS {
+                s.scanner.get_attribute_single(*m, 1, 1, a)?;
+            }
+            s.scanner.release(*m, choice::EXPLICIT)?;
+        }
+        let mut answers: Vec<(MacId, Vec<u8>)> = Vec::new();
+        let mut pending: std::collections::BTreeMap<MacId, usize> =
+            present.iter().map(|m| (*m, 0)).collect();
+        for ev in s.collect(present.len() * (ATTRS.len() + 1))? {
+            let slave = match &ev {
+                ScannerEvent::Response { slave, .. }
+                | ScannerEvent::Error { slave, .. }
+                | ScannerEvent::Timeout { slave, .. }
+                | ScannerEvent::NotConnected { slave, .. } => *slave,
+                _ => continue,
+            };
+            let Some(k) = pending.get_mut(&slave) else {
+                continue;
+            };
+            // Each queued operation reports once, in order: attributes, then the Release.
+            let attr = ATTRS.get(*k).copied();
+            *k += 1;
+            if let (Some(a), ScannerEvent::Response { data, .. }) = (attr, ev) {
+                answers.push((slave, [vec![a], data].concat()));
+            }
+        }
+        for m in present {
+            let mut f = Found::default();
+            for (_, d) in answers.iter().filter(|(x, _)| *x == m) {
+                let (a, v) = (d[0], &d[1..]);
+                match a {
+                    1 => f.vendor = u16_of(v),
+                    2 => f.device_type = u16_of(v),
+                    3 => f.product_code = u16_of(v),
+                    4 if v.len() == 2 => f.revision = Some((v[0], v[1])),
+                    6 => f.serial = v.try_into().ok().map(u32::from_le_bytes),
+                    7 if !v.is_empty() && usize::from(v[0]) == v.len() - 1 => {
+                        f.name = Some(String::from_utf8_lossy(&v[1..]).into_owned())
+                    }
+                    _ => {}
+                }
+            }
+            found.push((m, f));
+        }
+    }
+    found.sort_by_key(|(m, _)| *m);
+    println!(
+        "{:<4} {:<7} {:<12} {:<8} {:<9} {:<11} product name",
+        "MAC", "vendor", "device type", "product", "revision", "serial"
+    );
+    let q = || "?".to_string();
+    for (m, f) in &found {
+        if let Some((g, a)) = f.refused {
+            println!(
+                "{:<4} (present; refused the Allocate: general status 0x{g:02X} ({}), additional code 0x{a:02X})",
+                m.to_string(),
+                general_status_text(g)
+            );
+            continue;
+        }
+        println!(
+            "{:<4} {:<7} {:<12} {:<8} {:<9} {:<11} {}",
+            m.to_string(),
+            f.vendor.map_or_else(q, |v| v.to_string()),
+            f.device_type.map_or_else(q, |v| format!("0x{v:04X}")),
+            f.product_code.map_or_else(q, |v| v.to_string()),
+            f.revision.map_or_else(q, |(a, b)| format!("{a}.{b:03}")),
+            f.serial.map_or_else(q, |v| format!("0x{v:08X}")),
+            f.name.clone().unwrap_or_else(q)
+        );
+    }
+    println!("{} device(s) found", found.len());
+    Ok(())
+}
+
+fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16) -> Result<()> {
+    if period_ms == 0 {
+        bail!("--period-ms must be at least 1");
+    }
+    let sc = &mut s.scanner;
+    sc.allocate(slave, choice::EXPLICIT | choice::POLLED)?;
+    // Connection instance 2 is the polled I/O connection; attribute 7 its produced size.
+    sc.get_attribute_single(slave, 5, 2, 7)?;
+    sc.set_expected_packet_rate(slave, 2, period_ms)?;
+    let events = s.collect(3)?;
+    let mut input_size = None;
+    for ev in &events {
+        match ev {
+            ScannerEvent::Error {
+                service,
+                general,
+                additional,
+                ..
+            } => bail!(
+                "MAC ID {slave} refused service 0x{service:02X}: general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
+                general_status_text(*general)
+            ),
+            ScannerEvent::Timeout { service, .. } | ScannerEvent::NotConnected { service, .. } => {
+                bail!("no answer from MAC ID {slave} to service 0x{service:02X}")
+            }
+            ScannerEvent::Response {
+                service: 0x0E,
+                data,
+                ..
+            } if data.len() == 2 => {
+                input_size = Some(u16::from_le_bytes([data[0], data[1]]));
+            }
+            _ => {}
+        }
+    }
+    let input_size = input_size.context("the polled connection's produced size was not read")?;
+    println!(
+        "polled I/O allocated: {} bytes out, {input_size} bytes in, every {period_ms} ms",
+        output.len()
+    );
+    let now = s.link.now();
+    s.scanner.start_polling(
+        slave,
+        Duration::from_millis(u64::from(period_ms)),
+        output,
+        input_size,
+        now,
+    );
+    let mut seen = 0u32;
+    let limit = WallDuration::from_secs_f64(
+        f64::from(count) * f64::from(period_ms) / 1000.0 + s.timeout + 1.0,
+    );
+    let start = s.link.now();
+    let mut lines = Vec::new();
+    s.link.run(
+        &mut s.scanner,
+        |sc| {
+            while let Some(ev) = sc.poll_event() {
+                if let ScannerEvent::PollResponse { slave: m, data } = ev
+                    && m == slave
+                    && seen < count
+                {
+                    seen += 1;
+                    lines.push(data);
+                }
+            }
+            seen >= count
+        },
+        limit,
+    )?;
+    let elapsed = s.link.now() - start;
+    for (k, data) in lines.iter().enumerate() {
+        println!("input {}: {}", k + 1, hex(data));
+    }
+    s.scanner.stop_polling(slave);
+    s.scanner
+        .release(slave, choice::EXPLICIT | choice::POLLED)?;
+    s.collect(1)?;
+    if seen < count {
+        bail!(
+            "{seen} of {count} poll responses from MAC ID {slave} in {:.3} s",
+            elapsed.as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    let mut s = Session::open(args)?;
+    match &args.command {
+        Command::Browse { from, to } => browse(&mut s, *from, *to),
+        Command::Get {
+            slave,
+            class,
+            instance,
+            attribute,
+            ty,
+        } => {
+            let slave = mac(*slave, "MAC ID")?;
+            let data = s.request(
+                slave,
+                cantwin_devicenet::wire::service::GET_ATTRIBUTE_SINGLE,
+                *class,
+                *instance,
+                &[*attribute],
+            )?;
+            println!("{}", decode(&data, *ty));
+            Ok(())
+        }
+        Command::Set {
+            slave,
+            class,
+            instance,
+            attribute,
+            value,
+            ty,
+        } => {
+            let slave = mac(*slave, "MAC ID")?;
+            let mut data = vec![*attribute];
+            data.extend(encode(value, *ty)?);
+            s.request(
+                slave,
+                cantwin_devicenet::wire::service::SET_ATTRIBUTE_SINGLE,
+                *class,
+                *instance,
+                &data,
+            )?;
+            println!("ok");
+            Ok(())
+        }
+        Command::Poll {
+            slave,
+            out,
+            count,
+            period_ms,
+        } => {
+            let slave = mac(*slave, "MAC ID")?;
+            let output = parse_hex(out)?;
+            poll(&mut s, slave, &output, *count, *period_ms)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_encode_little_endian_and_decode_back() {
+        assert_eq!(encode("1000", ValueType::I16).unwrap(), [0xE8, 0x03]);
+        assert_eq!(
+            encode("-2", ValueType::I32).unwrap(),
+            [0xFE, 0xFF, 0xFF, 0xFF]
+        );
+        assert_eq!(encode("0x0C", ValueType::U8).unwrap(), [0x0C]);
+        assert_eq!(
+            encode("ab", ValueType::ShortString).unwrap(),
+            [2, b'a', b'b']
+        );
+        assert_eq!(encode("0A 0b", ValueType::Bytes).unwrap(), [0x0A, 0x0B]);
+        assert!(encode("256", ValueType::U8).is_err());
+        assert!(encode("0A0", ValueType::Bytes).is_err());
+        assert_eq!(decode(&[0xFE, 0xFF, 0xFF, 0xFF], ValueType::I32), "-2");
+        assert_eq!(decode(&[2, b'a', b'b'], ValueType::ShortString), "\"ab\"");
+        assert_eq!(decode(&[1], ValueType::U16), "01 (1 bytes, not a U16)");
+        assert_eq!(general_status_text(0x14), "attribute not supported");
+    }
+}
