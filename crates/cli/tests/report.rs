@@ -170,3 +170,46 @@ fn report_rejects_bad_options_and_missing_files() {
     assert!(ok, "{err}");
     assert!(out.contains("Examples:"), "{out}");
 }
+
+#[test]
+fn report_decodes_a_devicenet_channel_when_told() {
+    let dir = temp_dir("devicenet");
+    let log = dir.join("dn.log");
+    let scenario = format!(
+        "{}/../../scenarios/adv200-devicenet.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let (ok, _, err) = cantwin(&[
+        "sim",
+        &scenario,
+        "--duration",
+        "0.3",
+        "--candump",
+        log.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let page = dir.join("dn.html");
+    let (ok, _, err) = cantwin(&[
+        "report",
+        log.to_str().unwrap(),
+        "--protocol",
+        "can0=devicenet",
+        "--bit-rate",
+        "125k",
+        "-o",
+        page.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let html = std::fs::read_to_string(&page).unwrap();
+    let timeline = table(&html, "timeline");
+    // The drive's card checks its MAC ID (12) when it goes on line (DeviceNet duplicate
+    // MAC ID check, group 2 message 7).
+    assert!(
+        timeline
+            .iter()
+            .any(|r| r[2] == "devicenet"
+                && r[4].starts_with("G2 MAC 12 msg 7: duplicate MAC ID check")),
+        "{timeline:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
