@@ -30,7 +30,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
 use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
@@ -508,29 +508,29 @@ fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec
     Ok(result.unwrap_or(Err(GwError::Code(103))))
 }
 
-/// Drives the bus: runs jobs one at a time and keeps the master fed between them, until
-/// every client is gone.
+/// Drives the bus: runs jobs one at a time and keeps the master fed between them (so the
+/// link's receive queue stays short and a job waits at most 10 ms), until every client is
+/// gone.
 fn serve_bus(link: &mut Link, jobs: &Receiver<Job>) -> Result<()> {
     let mut master = Master::new();
     loop {
-        match jobs.recv_timeout(WallDuration::from_millis(20)) {
+        match jobs.try_recv() {
             Ok(job) => {
                 let r = execute(link, &mut master, &job)?;
                 // A client that left does not take an answer.
                 let _ = job.reply.send(r);
             }
-            Err(RecvTimeoutError::Timeout) => {
-                // Consume what the bus carried meanwhile so that the link's queue stays short.
+            Err(TryRecvError::Empty) => {
                 link.run(
                     &mut master,
                     |m| {
                         while m.poll_event().is_some() {}
                         false
                     },
-                    WallDuration::from_millis(5),
+                    WallDuration::from_millis(10),
                 )?;
             }
-            Err(RecvTimeoutError::Disconnected) => return Ok(()),
+            Err(TryRecvError::Disconnected) => return Ok(()),
         }
     }
 }
