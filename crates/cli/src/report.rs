@@ -95,7 +95,7 @@ pub fn run(args: &Args) -> Result<()> {
         "{}: {} records, {} SDO transfers, {} anomalies",
         out.display(),
         records,
-        report.sdo.len(),
+        report.sdo_total,
         report.anomalies.len()
     );
     Ok(())

@@ -145,7 +145,7 @@ pub fn render_html(report: &Report) -> String {
         utc(report.start_ns),
         dur as f64 / 1e9,
         report.channels.len(),
-        report.sdo.len(),
+        report.sdo_total,
         report.anomalies.len()
     );
 

@@ -321,6 +321,8 @@ pub struct Report {
     pub ids: Vec<IdStats>,
     /// SDO transfers in the order they ended.
     pub sdo: Vec<sdo::Transfer>,
+    /// SDO transfers seen; only the first [`Options::max_timeline`] are kept in `sdo`.
+    pub sdo_total: u64,
     /// The decoded timeline, in time order: the first [`Options::max_timeline`] rows in
     /// capture order.
     pub timeline: Vec<Row>,
@@ -364,6 +366,7 @@ pub struct Analysis<'o> {
     sdo: HashMap<(usize, u8), sdo::Tracker>,
     hb: BTreeMap<(String, u8), NodeHb>,
     transfers: Vec<sdo::Transfer>,
+    transfers_total: u64,
     rows: Vec<Row>,
     dropped: u64,
     anomalies: Vec<Anomaly>,
@@ -419,6 +422,7 @@ impl<'o> Analysis<'o> {
             sdo: HashMap::new(),
             hb: BTreeMap::new(),
             transfers: Vec::new(),
+            transfers_total: 0,
             rows: Vec::new(),
             dropped: 0,
             anomalies: Vec::new(),
@@ -607,7 +611,10 @@ impl<'o> Analysis<'o> {
                 Some(tr.node),
                 text,
             );
-            self.transfers.push(tr);
+            self.transfers_total += 1;
+            if self.transfers.len() < self.opts.max_timeline {
+                self.transfers.push(tr);
+            }
         }
     }
 
@@ -805,6 +812,7 @@ impl<'o> Analysis<'o> {
             channels,
             ids,
             sdo: self.transfers,
+            sdo_total: self.transfers_total,
             timeline: self.rows,
             timeline_dropped: dropped,
             anomalies: self.anomalies,

@@ -373,6 +373,21 @@ fn timeline_is_capped_with_a_note() {
     let report = analyse(&records, &opts);
     assert_eq!(report.timeline.len(), 4);
     assert_eq!(report.timeline_dropped, 6);
+    // SDO transfers are kept up to the same cap and counted beyond it.
+    let records: Vec<_> = (0..10)
+        .flat_map(|i| {
+            [
+                rec(2 * i, 0x605, &[0x40, 0x00, 0x10, 0, 0, 0, 0, 0]),
+                rec(
+                    2 * i + 1,
+                    0x585,
+                    &[0x43, 0x00, 0x10, 0, 0x91, 0x01, 0x0F, 0],
+                ),
+            ]
+        })
+        .collect();
+    let sdo = analyse(&records, &opts);
+    assert_eq!((sdo.sdo.len(), sdo.sdo_total), (4, 10));
     let html = render_html(&report);
     assert!(html.contains("The timeline shows the first 4 rows; 6 more were left out."));
 }
