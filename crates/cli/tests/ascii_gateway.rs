@@ -155,3 +155,44 @@ fn cia309_3_gateway_serves_tcp_clients() {
     let _ = sim.kill();
     let _ = sim.wait();
 }
+
+/// The gateway on an in-process scenario: the `eds` device of `scenarios/eds-device.toml`
+/// answers with its EDS's values.
+#[test]
+fn cia309_3_gateway_reads_the_eds_device_of_a_scenario() {
+    let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args([
+            "gateway",
+            "--ascii",
+            "--scenario",
+            &scenario_file("eds-device.toml"),
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        let mut stdin = gw.stdin.take().unwrap();
+        for q in [
+            "[1] 6 read 0x1008 0 vs",
+            "[2] 6 read 0x2000 0 u16",
+            "[3] 6 write 0x2000 0 u16 10001",
+            "[4] 6 read 0x1000 0 x32",
+            "[5] 6 read 0x6000 1 x8",
+        ] {
+            writeln!(stdin, "{q}").unwrap();
+        }
+    }
+    let out = gw.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        String::from_utf8(out.stdout).unwrap(),
+        "[1] \"cantwin example I/O module\"\n[2] 3000\n[3] ERROR: 0x06090031\n\
+         [4] 0x00030191\n[5] 0xA5\n"
+    );
+}
