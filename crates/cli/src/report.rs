@@ -24,6 +24,10 @@ pub struct Args {
     /// Name PDO values from a node's EDS or DCF: NODE=FILE (repeatable).
     #[arg(long = "eds", value_name = "NODE=FILE")]
     eds: Vec<String>,
+    /// Width of a bus load window in milliseconds (default: 100 ms, widened so that a long
+    /// capture has at most 2000 windows).
+    #[arg(long, value_name = "MS")]
+    window_ms: Option<u64>,
     /// Channel name of a pcap file's records (pcap has none).
     #[arg(long, value_name = "NAME", default_value = "can0")]
     pcap_channel: String,
@@ -42,6 +46,12 @@ fn options(args: &Args) -> Result<Options> {
                     spec.parse().with_context(|| format!("--bit-rate {spec}"))?;
             }
         }
+    }
+    if let Some(ms) = args.window_ms {
+        if ms == 0 {
+            bail!("--window-ms must be at least 1");
+        }
+        opts.window_ns = Some(ms.saturating_mul(1_000_000));
     }
     for spec in &args.protocol {
         let Some((ch, p)) = spec.split_once('=') else {

@@ -166,6 +166,9 @@ fn report_rejects_bad_options_and_missing_files() {
     let (ok, _, err) = cantwin(&["report", "missing.log", "--protocol", "can0=profibus"]);
     assert!(!ok);
     assert!(err.contains("unknown protocol"), "{err}");
+    let (ok, _, err) = cantwin(&["report", "missing.log", "--window-ms", "0"]);
+    assert!(!ok);
+    assert!(err.contains("--window-ms must be at least 1"), "{err}");
     let (ok, out, err) = cantwin(&["report", "--help"]);
     assert!(ok, "{err}");
     assert!(out.contains("Examples:"), "{out}");

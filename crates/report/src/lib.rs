@@ -888,3 +888,24 @@ fn id_raw(id: Id) -> u32 {
 fn id_key(id: Id) -> (bool, u32) {
     (matches!(id, Id::Extended(_)), id_raw(id))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_as_text_number_or_bytes() {
+        assert_eq!(value_text(b"Twin 1", 6), "\"Twin 1\"");
+        assert_eq!(
+            value_text(&[0x91, 0x01, 0x0F, 0x00], 4),
+            "0x000F0191 (983441)"
+        );
+        assert_eq!(value_text(&[7], 1), "0x07 (7)");
+        assert_eq!(value_text(&[], 0), "");
+        let data: Vec<u8> = (0..10).collect();
+        assert_eq!(
+            value_text(&data, 65_536),
+            "00 01 02 03 04 05 06 07 08 09 … (65536 bytes)"
+        );
+    }
+}
