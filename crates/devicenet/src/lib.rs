@@ -8,7 +8,8 @@
 //!   the [`Application`] hook for device classes and polled I/O data;
 //! * [`ucmm`]: group 3 explicit connections opened and closed by any client;
 //! * [`Slave`]: a UCMM-capable Predefined Master/Slave Connection Set server;
-//! * [`Scanner`]: the master: allocate, poll, explicit requests, browse.
+//! * [`Scanner`]: the master: allocate, poll, explicit requests, browse;
+//! * [`eds`]: ODVA Electronic Data Sheets written from a device's object model.
 //!
 //! Both [`Slave`] and [`Scanner`] implement [`cantwin_can::Node`]: frames in, frames out,
 //! time passed in by the caller.
@@ -85,6 +86,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod eds;
 pub mod fragment;
 pub mod link;
 pub mod objects;
