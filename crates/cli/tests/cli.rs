@@ -94,6 +94,8 @@ fn every_command_has_help_with_examples() {
         &["eds", "check", "--help"],
         &["eds", "dcf", "--help"],
         &["cal", "--help"],
+        &["report", "--help"],
+        &["gateway", "--help"],
         &["cal", "cmd", "--help"],
         &["cal", "param", "--help"],
         &["sdo", "read", "--help"],
