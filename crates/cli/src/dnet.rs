@@ -11,6 +11,9 @@ use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
 use cantwin_can::{Duration, Node, Outbox};
+use cantwin_devicenet::eds::{
+    CipType, DeviceEds, EdsDate, EdsParam, EdsTime, FileSection, descriptor,
+};
 use cantwin_devicenet::wire::{BodyFormat, choice};
 use cantwin_devicenet::{MacId, Scanner, ScannerConfig, ScannerEvent};
 
@@ -131,6 +134,20 @@ enum Command {
         /// Poll period in ms (also the expected packet rate set on the connection).
         #[arg(long, default_value_t = 100)]
         period_ms: u16,
+    },
+    /// Print the ODVA EDS of a scenario's DeviceNet device (the ADV200 card with PAR 4000 =
+    /// DeviceNet), generated from its object model: identity, polled I/O sizes, parameters.
+    #[command(
+        after_help = "Examples:\n  cantwin dnet eds --scenario scenarios/adv200-devicenet.toml --device drive\n  \
+                            cantwin dnet eds --scenario scenarios/adv200-devicenet.toml --device drive -o adv200-dn.eds"
+    )]
+    Eds {
+        /// The device's name in the scenario.
+        #[arg(long)]
+        device: String,
+        /// Write the EDS to this file instead of printing it.
+        #[arg(short, long, value_name = "FILE")]
+        output: Option<std::path::PathBuf>,
     },
 }
 
@@ -665,6 +682,18 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
 }
 
 pub fn run(args: &Args) -> Result<()> {
+    if let Command::Eds { device, output } = &args.command {
+        let text = eds_text(&args.target, device)?;
+        return match output {
+            Some(path) => {
+                std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+            }
+            None => {
+                print!("{text}");
+                Ok(())
+            }
+        };
+    }
     let mut s = Session::open(args)?;
     match &args.command {
         Command::Browse { from, to } => browse(&mut s, *from, *to),
@@ -717,7 +746,135 @@ pub fn run(args: &Args) -> Result<()> {
             let output = parse_hex(out)?;
             poll(&mut s, slave, &output, *count, *period_ms)
         }
+        Command::Eds { .. } => Ok(()),
     }
+}
+
+/// Days since 1970-01-01 to a (year, month, day) civil date (the proleptic Gregorian
+/// calendar's 400-year cycle of 146097 days).
+fn civil(days: i64) -> (i64, u8, u8) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = (doy - (153 * mp + 2) / 5 + 1) as u8;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u8;
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    (year, month, day)
+}
+
+/// The file's date: `SOURCE_DATE_EPOCH` when set (reproducible output), else now (UTC).
+fn file_date() -> (EdsDate, EdsTime) {
+    let secs = std::env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|v| v.trim().parse::<i64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| i64::try_from(d.as_secs()).unwrap_or(0))
+        });
+    let (year, month, day) = civil(secs.div_euclid(86_400));
+    let t = secs.rem_euclid(86_400);
+    (
+        EdsDate {
+            month,
+            day,
+            year: u16::try_from(year).unwrap_or(1970),
+        },
+        EdsTime {
+            hour: (t / 3600) as u8,
+            minute: (t / 60 % 60) as u8,
+            second: (t % 60) as u8,
+        },
+    )
+}
+
+/// Build the scenario, power it up, and describe the device's DeviceNet object model.
+fn eds_text(target: &Target, device: &str) -> Result<String> {
+    use cantwin_adv200::Adv200;
+    use cantwin_adv200::params::{ParamAccess, ParamType, catalog};
+    use cantwin_devicenet::Application;
+
+    let file = target
+        .scenario
+        .as_ref()
+        .context("say which scenario holds the device: --scenario FILE")?;
+    let scenario = cantwin_scenario::Scenario::load(file)?;
+    let mut built = scenario.build(
+        &cantwin_scenario::Registry::builtin(),
+        &cantwin_scenario::BuildEnv::default(),
+    )?;
+    let port = built
+        .device(device)
+        .with_context(|| format!("{} has no device {device:?}", file.display()))?
+        .port;
+    // Power-up happens at the first instant; the card reads PAR 4000 then.
+    built
+        .sim
+        .run_until(cantwin_can::Instant::from_nanos(1_000_000));
+    let drive = built.sim.node::<Adv200>(port).with_context(|| {
+        format!(
+            "{device:?} is not an ADV200 drive: only its DeviceNet personality has an EDS generator"
+        )
+    })?;
+    let slave = drive.devicenet().with_context(|| {
+        format!(
+            "{device:?} does not run the DeviceNet personality (PAR 4000 Fieldbus type = DeviceNet)"
+        )
+    })?;
+    let (input, output) = slave.app().poll_sizes();
+    let params = catalog()
+        .iter()
+        .map(|d| {
+            // The Parameter object answers every value as a DWORD (manual §3.4.1).
+            let ty = if d.ty.signed() {
+                CipType::Dint
+            } else {
+                CipType::Udint
+            };
+            let mut p = EdsParam::new(d.par, d.name.clone(), ty, 4);
+            p.units = d.unit.to_string();
+            p.min = Some(d.min);
+            p.max = Some(d.max);
+            p.default = Some(d.default);
+            if d.access == ParamAccess::Ro {
+                p.descriptor = descriptor::READ_ONLY | descriptor::MONITOR;
+            }
+            let mut help = Vec::new();
+            if let ParamType::Src { .. } = d.ty {
+                help.push("the number of the parameter feeding it (0 = Null)");
+            }
+            if d.after_reset {
+                help.push("takes effect at the next drive reset");
+            }
+            p.help = help.join("; ");
+            if let ParamType::Enum(values) = d.ty {
+                p.enums = values
+                    .iter()
+                    .map(|(v, n)| (i64::from(*v), (*n).to_string()))
+                    .collect();
+            }
+            p
+        })
+        .collect();
+    let (date, time) = file_date();
+    let eds = DeviceEds {
+        file: FileSection {
+            description: "ADV200 with the EXP-CAN/DN-ADV card, DeviceNet (generated from the twin's object model)".into(),
+            date,
+            time,
+            revision: (1, 0),
+        },
+        identity: slave.config().identity.clone(),
+        vendor_name: "Gefran".into(),
+        product_type_name: "AC Drive".into(),
+        catalog: Some("EXP-CAN/DN-ADV".into()),
+        polled: (input > 0 || output > 0).then_some((input, output)),
+        params,
+    };
+    Ok(cantwin_devicenet::eds::write(&eds))
 }
 
 #[cfg(test)]
@@ -743,5 +900,12 @@ mod tests {
         assert_eq!(decode(&[2, b'a', b'b'], ValueType::ShortString), "\"ab\"");
         assert_eq!(decode(&[1], ValueType::U16), "01 (1 bytes, not a U16)");
         assert_eq!(general_status_text(0x14), "attribute not supported");
+    }
+
+    #[test]
+    fn civil_dates_from_days_since_1970() {
+        assert_eq!(civil(0), (1970, 1, 1));
+        assert_eq!(civil(11_016), (2000, 2, 29));
+        assert_eq!(civil(20_415), (2025, 11, 23));
     }
 }

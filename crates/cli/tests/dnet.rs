@@ -176,3 +176,90 @@ fn dnet_rejects_a_bad_mac_and_bad_hex() {
     assert!(!ok);
     assert!(err.contains("not hex data"), "{err}");
 }
+
+/// Sections and `key = value;` entries of EDS text (`$` comments, entries over several
+/// lines).
+fn ini(
+    text: &str,
+) -> std::collections::BTreeMap<String, std::collections::BTreeMap<String, String>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut section = String::new();
+    let mut entry = String::new();
+    for raw in text.lines() {
+        let mut line = String::new();
+        let mut quote = false;
+        for c in raw.chars() {
+            if c == '"' {
+                quote = !quote;
+            }
+            if c == '$' && !quote {
+                break;
+            }
+            line.push(c);
+        }
+        let t = line.trim();
+        if entry.is_empty() && t.starts_with('[') && t.ends_with(']') {
+            section = t[1..t.len() - 1].to_string();
+            out.insert(section.clone(), std::collections::BTreeMap::new());
+            continue;
+        }
+        entry.push_str(t);
+        if t.ends_with(';') {
+            let (k, v) = entry.split_once('=').unwrap();
+            out.get_mut(&section).unwrap().insert(
+                k.trim().to_string(),
+                v.trim().trim_end_matches(';').to_string(),
+            );
+            entry.clear();
+        }
+    }
+    assert!(entry.is_empty(), "{entry}");
+    out
+}
+
+#[test]
+fn eds_of_the_adv200_devicenet_twin_parses_as_ini_with_its_identity_io_and_params() {
+    let (ok, out, err) = cantwin(&[
+        "dnet",
+        "eds",
+        "--scenario",
+        &scenario(),
+        "--device",
+        "drive",
+    ]);
+    assert!(ok, "{err}");
+    let eds = ini(&out);
+    assert_eq!(eds["Device"]["VendCode"], "0");
+    assert_eq!(eds["Device"]["ProdType"], "2");
+    assert_eq!(eds["Device"]["ProdCode"], "4");
+    assert_eq!(eds["Device"]["MajRev"], "1");
+    assert_eq!(eds["Device"]["ProdName"], "\"ADV200 EXP-CAN/DN-ADV\"");
+    assert_eq!(eds["Device Classification"]["Class1"], "DeviceNet");
+    // The worked example's PDC: 6 bytes to the master, 4 from it.
+    assert!(eds["IO_Info"]["Input1"].starts_with("6, 0, 0x0001"));
+    assert!(eds["IO_Info"]["Output1"].starts_with("4, 0, 0x0001"));
+    assert!(eds.contains_key("File") && eds.contains_key("ParamClass"));
+    // PAR 260 Motor speed: read-only monitor, a 16-bit instance in its path.
+    let p260: Vec<&str> = eds["Params"]["Param260"]
+        .split(',')
+        .map(str::trim)
+        .collect();
+    assert_eq!(
+        p260[1..6],
+        ["8", "\"20 0F 25 00 04 01 30 01\"", "0x0030", "0xC4", "4"]
+    );
+    assert_eq!(p260[6], "\"Motor speed\"");
+    // PAR 4000 Fieldbus type: an enumeration.
+    assert!(eds["Params"]["Enum4000"].contains("2, \"DeviceNet\""));
+    // A device without the DeviceNet personality is refused.
+    let (ok, _, err) = cantwin(&[
+        "dnet",
+        "eds",
+        "--scenario",
+        &scenario(),
+        "--device",
+        "master",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("not an ADV200"), "{err}");
+}
