@@ -109,6 +109,22 @@ fn parameter_object_instance_is_a_par_set_then_get_back_3_4_1() {
     assert_eq!(out.trim(), "1");
 }
 
+/// Manual §3.4.1: "nel caso di errore il drive non risponde" — a refused Set (above PAR
+/// 600's maximum) is not answered, and the value stays.
+#[test]
+fn refused_parameter_set_is_silent_and_reported_as_no_answer_3_4_1() {
+    let sim = sim();
+    let (ok, _, err) = dnet(
+        &sim,
+        &["set", "12", "0x0F", "600", "1", "0x2341", "--type", "u16"],
+    );
+    assert!(!ok);
+    assert!(err.contains("no answer from MAC ID 12 within 1 s"), "{err}");
+    let (ok, out, err) = dnet(&sim, &["get", "12", "0x0F", "600", "1", "--type", "i32"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "0");
+}
+
 #[test]
 fn error_response_is_printed_with_its_general_status_meaning() {
     let sim = sim();
