@@ -14,7 +14,7 @@ use cantwin_can::{Duration, Node, Outbox};
 use cantwin_devicenet::eds::{
     CipType, DeviceEds, EdsDate, EdsParam, EdsTime, FileSection, descriptor,
 };
-use cantwin_devicenet::wire::{BodyFormat, choice};
+use cantwin_devicenet::wire::{BodyFormat, choice, service};
 use cantwin_devicenet::{MacId, Scanner, ScannerConfig, ScannerEvent};
 
 use crate::connect::{Link, Target};
@@ -605,34 +605,59 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
     sc.set_expected_packet_rate(slave, 2, period_ms)?;
     let events = s.collect(3)?;
     let mut input_size = None;
+    let mut epr = None;
+    let mut failure = None;
     for ev in &events {
         match ev {
+            ScannerEvent::Allocated { .. } => {}
             ScannerEvent::Error {
                 service,
                 general,
                 additional,
                 ..
-            } => bail!(
-                "MAC ID {slave} refused service 0x{service:02X}: general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
-                general_status_text(*general)
-            ),
-            ScannerEvent::Timeout { service, .. } | ScannerEvent::NotConnected { service, .. } => {
-                bail!("no answer from MAC ID {slave} to service 0x{service:02X}")
+            } => {
+                failure.get_or_insert_with(|| {
+                    format!(
+                        "MAC ID {slave} refused service 0x{service:02X}: general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
+                        general_status_text(*general)
+                    )
+                });
             }
-            ScannerEvent::Response {
-                service: 0x0E,
-                data,
-                ..
-            } if data.len() == 2 => {
-                input_size = Some(u16::from_le_bytes([data[0], data[1]]));
+            ScannerEvent::Timeout { service, .. } | ScannerEvent::NotConnected { service, .. } => {
+                failure.get_or_insert_with(|| {
+                    format!("no answer from MAC ID {slave} to service 0x{service:02X}")
+                });
+            }
+            ScannerEvent::Response { service, data, .. } if data.len() == 2 => {
+                let v = u16::from_le_bytes([data[0], data[1]]);
+                match *service {
+                    service::GET_ATTRIBUTE_SINGLE => input_size = Some(v),
+                    // The Set reply carries the rate the device uses (rounded up to its
+                    // timer resolution).
+                    _ => epr = Some(v),
+                }
             }
             _ => {}
         }
     }
-    let input_size = input_size.context("the polled connection's produced size was not read")?;
+    let release = |s: &mut Session| -> Result<()> {
+        s.scanner
+            .release(slave, choice::EXPLICIT | choice::POLLED)?;
+        s.collect(1)?;
+        Ok(())
+    };
+    let (Some(input_size), None) = (input_size, &failure) else {
+        // Leave nothing allocated behind (an Allocate refused frees nothing: harmless).
+        release(s)?;
+        bail!(
+            "{}",
+            failure.unwrap_or_else(|| "the polled connection's produced size was not read".into())
+        );
+    };
     println!(
-        "polled I/O allocated: {} bytes out, {input_size} bytes in, every {period_ms} ms",
-        output.len()
+        "polled I/O allocated: {} bytes out, {input_size} bytes in, every {period_ms} ms (expected packet rate {} ms)",
+        output.len(),
+        epr.unwrap_or(period_ms)
     );
     let now = s.link.now();
     s.scanner.start_polling(
@@ -647,7 +672,6 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
         f64::from(count) * f64::from(period_ms) / 1000.0 + s.timeout + 1.0,
     );
     let start = s.link.now();
-    let mut lines = Vec::new();
     s.link.run(
         &mut s.scanner,
         |sc| {
@@ -657,7 +681,7 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
                     && seen < count
                 {
                     seen += 1;
-                    lines.push(data);
+                    println!("input {seen}: {}", hex(&data));
                 }
             }
             seen >= count
@@ -665,9 +689,6 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
         limit,
     )?;
     let elapsed = s.link.now() - start;
-    for (k, data) in lines.iter().enumerate() {
-        println!("input {}: {}", k + 1, hex(data));
-    }
     s.scanner.stop_polling(slave);
     s.scanner
         .release(slave, choice::EXPLICIT | choice::POLLED)?;
@@ -707,7 +728,7 @@ pub fn run(args: &Args) -> Result<()> {
             let slave = mac(*slave, "MAC ID")?;
             let data = s.request(
                 slave,
-                cantwin_devicenet::wire::service::GET_ATTRIBUTE_SINGLE,
+                service::GET_ATTRIBUTE_SINGLE,
                 *class,
                 *instance,
                 &[*attribute],
@@ -728,7 +749,7 @@ pub fn run(args: &Args) -> Result<()> {
             data.extend(encode(value, *ty)?);
             s.request(
                 slave,
-                cantwin_devicenet::wire::service::SET_ATTRIBUTE_SINGLE,
+                service::SET_ATTRIBUTE_SINGLE,
                 *class,
                 *instance,
                 &data,

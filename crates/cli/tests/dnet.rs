@@ -145,7 +145,7 @@ fn error_response_is_printed_with_its_general_status_meaning() {
 
 /// Manual §1.6 worked example over polled I/O (§3.5): 4 bytes out (control word 0x0003,
 /// Ramp ref 1 = 1000 rpm), 6 bytes in (status word, motor speed, analog input 2 at 2.5 V =
-/// 4096 counts).
+/// 4096 counts). The expected packet rate is rounded up to the card's 10 ms timer.
 #[test]
 fn poll_exchanges_the_worked_example_4_bytes_out_6_bytes_in() {
     let sim = sim();
@@ -159,12 +159,14 @@ fn poll_exchanges_the_worked_example_4_bytes_out_6_bytes_in() {
             "--count",
             "5",
             "--period-ms",
-            "20",
+            "25",
         ],
     );
     assert!(ok, "{err}");
     assert!(
-        out.contains("polled I/O allocated: 4 bytes out, 6 bytes in, every 20 ms"),
+        out.contains(
+            "polled I/O allocated: 4 bytes out, 6 bytes in, every 25 ms (expected packet rate 30 ms)"
+        ),
         "{out}"
     );
     let inputs: Vec<&str> = out
