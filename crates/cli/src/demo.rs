@@ -35,6 +35,8 @@ pub enum Part {
     Canopen,
     /// The ADV200 drive twin in the manual's worked example.
     Adv200,
+    /// The ADV200 on DeviceNet under cantwin's scanner.
+    Devicenet,
     /// The TM3 I/O coupler twin under cantwin's CANopen master.
     Tm3,
     /// The OPEN DRIVE twin under a CAL master.
@@ -47,6 +49,7 @@ pub fn run(args: &Args) -> Result<()> {
             Part::Physical,
             Part::Canopen,
             Part::Adv200,
+            Part::Devicenet,
             Part::Tm3,
             Part::Opendrive,
         ]
@@ -62,6 +65,7 @@ pub fn run(args: &Args) -> Result<()> {
             Part::Physical => physical(args)?,
             Part::Canopen => crate::demo_canopen::run()?,
             Part::Adv200 => crate::demo_adv200::run()?,
+            Part::Devicenet => crate::demo_devicenet::run()?,
             Part::Tm3 => crate::demo_tm3::run()?,
             Part::Opendrive => crate::demo_opendrive::run()?,
         }

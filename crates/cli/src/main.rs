@@ -11,6 +11,7 @@ mod connect;
 mod demo;
 mod demo_adv200;
 mod demo_canopen;
+mod demo_devicenet;
 mod demo_opendrive;
 mod demo_tm3;
 mod dnet;

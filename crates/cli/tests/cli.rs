@@ -54,6 +54,12 @@ fn demo_runs_without_arguments_and_tells_the_story() {
     assert!(out.contains("node 5 booted"), "{out}");
     // The ADV200 worked example ramps to 1500 rpm.
     assert!(out.contains("0x0003   1500 rpm"), "{out}");
+    // DeviceNet: the worked example's poll (4 bytes out, 6 in) runs the motor to 1500 rpm.
+    assert!(out.contains("465#0301DC05"), "{out}");
+    assert!(
+        out.contains("input 03 00 DC 05 00 10  speed  1500 rpm"),
+        "{out}"
+    );
     // CiA 401 I/O: outputs by RPDO, an input change by TPDO, a module pulled out.
     assert!(
         out.contains("module 2 outputs 0..3: [true, false, true, false]"),
