@@ -496,3 +496,48 @@ fn one_shot_poll() {
     );
     assert_eq!(s.app().consumed, vec![vec![9, 8, 7, 6]]);
 }
+
+#[test]
+fn browse_reports_a_device_whose_identity_exceeds_the_explicit_limit_and_releases_it() {
+    // A product name long enough that Get_Attributes_All of the Identity needs more than the
+    // 32 bytes the card's explicit messages carry: the slave answers general status 0x11, the
+    // scanner still reports the device (identity unknown) and releases its allocation.
+    let mut m = scanner();
+    let mut a = cantwin_devicenet::slave::Slave::new(
+        cantwin_devicenet::slave::SlaveConfig::new(
+            mac(12),
+            cantwin_can::BitRate::R500K,
+            cantwin_devicenet::Identity {
+                product_name: "ADV200 EXP-CAN/DN-ADV card".into(),
+                ..identity()
+            },
+        ),
+        Drive::new(2, 2),
+    )
+    .unwrap();
+    let mut w = Wire::new();
+    w.power_up(&mut [&mut m, &mut a]);
+    w.run_until(&mut [&mut m, &mut a], at(2 * SEC));
+    events(&mut m);
+    m.browse((10..=14).map(mac));
+    w.run_until(&mut [&mut m, &mut a], at(4 * SEC));
+    let ev = events(&mut m);
+    assert!(
+        ev.contains(&ScannerEvent::DeviceFound {
+            slave: mac(12),
+            identity: None
+        }),
+        "{ev:?}"
+    );
+    assert_eq!(
+        ev.last(),
+        Some(&ScannerEvent::BrowseDone {
+            found: vec![mac(12)]
+        })
+    );
+    assert_eq!(
+        a.devicenet_object().master,
+        None,
+        "the allocation was released"
+    );
+}

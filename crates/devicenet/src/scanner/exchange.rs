@@ -247,15 +247,22 @@ impl Scanner {
                 additional,
             } => {
                 if f.browse {
-                    if matches!(f.op, Op::Allocate(_)) {
-                        // Someone answered: a device is there, owned by another master.
-                        self.browse_found.push(slave);
-                        self.events.push_back(ScannerEvent::DeviceFound {
-                            slave,
-                            identity: None,
-                        });
+                    match f.op {
+                        Op::Allocate(_) => {
+                            // Someone answered: a device is there, owned by another master.
+                            self.browse_found.push(slave);
+                            self.events.push_back(ScannerEvent::DeviceFound {
+                                slave,
+                                identity: None,
+                            });
+                            self.drop_browse_ops(slave);
+                        }
+                        // The device is allocated but refused the Identity read (e.g. a
+                        // reply over its explicit size limit, status 0x11): its identity
+                        // stays unknown, and the queued Release still frees the connection.
+                        Op::Request { .. } => {}
+                        _ => self.browse_device_done(slave),
                     }
-                    self.drop_browse_ops(slave);
                     return;
                 }
                 self.events.push_back(ScannerEvent::Error {
@@ -321,11 +328,7 @@ impl Scanner {
         };
         if f.browse {
             if let Op::Release(_) = f.op {
-                let identity = p.browse_identity.take();
-                self.browse_found.push(slave);
-                self.events
-                    .push_back(ScannerEvent::DeviceFound { slave, identity });
-                self.browse_finished(slave);
+                self.browse_device_done(slave);
             }
             return;
         }
@@ -340,7 +343,13 @@ impl Scanner {
         p.tx = None;
         p.rx.reset();
         if f.browse {
-            self.drop_browse_ops(slave);
+            match f.op {
+                // Allocated, but no Identity answer: release all the same.
+                Op::Request { .. } => {}
+                // Allocated and read; the device is there even if the Release got lost.
+                Op::Release(_) => self.browse_device_done(slave),
+                _ => self.drop_browse_ops(slave),
+            }
         } else {
             self.events.push_back(ScannerEvent::Timeout {
                 slave,

@@ -434,6 +434,18 @@ impl Scanner {
         }
     }
 
+    /// Browse of `slave` ended after its allocation: report it with what was read.
+    fn browse_device_done(&mut self, slave: MacId) {
+        let identity = self
+            .peers
+            .get_mut(&slave)
+            .and_then(|p| p.browse_identity.take());
+        self.browse_found.push(slave);
+        self.events
+            .push_back(ScannerEvent::DeviceFound { slave, identity });
+        self.drop_browse_ops(slave);
+    }
+
     fn drop_browse_ops(&mut self, slave: MacId) {
         if let Some(p) = self.peers.get_mut(&slave) {
             p.queue.retain(|(_, b)| !b);
