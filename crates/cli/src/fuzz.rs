@@ -18,8 +18,8 @@ pub struct Args {
     /// Cases per target.
     #[arg(long, default_value_t = 1000)]
     cases: u64,
-    /// The campaign's seed.
-    #[arg(long, default_value_t = 0x00C0_FFEE)]
+    /// The campaign's seed (decimal or 0x-prefixed hexadecimal).
+    #[arg(long, default_value = "0xC0FFEE", value_parser = parse_seed)]
     seed: u64,
     /// The first case number (to replay a reported failure).
     #[arg(long, default_value_t = 0)]
@@ -29,6 +29,14 @@ pub struct Args {
     /// List the targets and exit.
     #[arg(long)]
     list: bool,
+}
+
+fn parse_seed(s: &str) -> Result<u64, String> {
+    match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u64::from_str_radix(hex, 16),
+        None => s.parse(),
+    }
+    .map_err(|e| format!("{s:?}: {e}"))
 }
 
 /// One fuzz target: a name, what it feeds, and the function that runs case `rng`.
@@ -533,6 +541,13 @@ mod tests {
             e.contains("no fuzz target \"nope\"") && e.contains("canopen-wire"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn seeds_are_decimal_or_hex_as_printed_in_replay_lines() {
+        assert_eq!(parse_seed("0xC0FFEE"), Ok(0xC0FFEE));
+        assert_eq!(parse_seed("12"), Ok(12));
+        assert!(parse_seed("0xZZ").is_err());
     }
 
     #[test]
