@@ -1180,3 +1180,111 @@ fn probe(
         Expect::Frame { .. } => (false, "not a probe".into()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+        [[device]]\nname = \"node5\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 5\nheartbeat_ms = 100\n";
+
+    fn error_of(script: &str) -> String {
+        match Scenario::parse(&format!("{HEAD}{script}"), "s.toml") {
+            Ok(_) => panic!("accepted: {script}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    fn report(script: &str) -> CheckReport {
+        let s = Scenario::parse(&format!("{HEAD}{script}"), "s.toml").unwrap();
+        check(&s, &Registry::builtin(), &BuildEnv::default()).unwrap()
+    }
+
+    #[test]
+    fn script_errors_name_file_line_and_key() {
+        let e = error_of("\n[[at]]\ntime_ms = 5\naction = \"explode\"\ndevice = \"node5\"\n");
+        assert!(
+            e.starts_with("s.toml:12: key `at[0].action`: unknown action \"explode\""),
+            "{e}"
+        );
+        let e = error_of("\n[[at]]\ntime_ms = 5\naction = \"power_off\"\ndevice = \"node9\"\n");
+        assert!(
+            e.contains("key `at[0].device`: no device named \"node9\""),
+            "{e}"
+        );
+        let e = error_of("\n[[expect]]\nwithin_ms = [5, 1]\nframe = \"705#00\"\n");
+        assert!(e.contains("s.toml:12: key `expect[0].within_ms`"), "{e}");
+        let e = error_of("\n[[expect]]\nwithin_ms = [0, 1]\nframe = \"7055#00\"\n");
+        assert!(
+            e.contains("key `expect[0].frame`: identifier \"7055\""),
+            "{e}"
+        );
+        let e = error_of("\n[[expect]]\nat_ms = 1\n");
+        assert!(
+            e.contains("exactly one of `frame`, `value`, `controller`"),
+            "{e}"
+        );
+        let e = error_of("\n[[at]]\ntime_ms = 5\naction = \"send\"\nframe = \"605#4008??\"\n");
+        assert!(
+            e.contains("no wildcards") || e.contains("bad data byte"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn frame_patterns_match_wildcards_and_tails() {
+        let p = parse_pattern("085#3081??*").unwrap();
+        assert!(p.matches(&Frame::std(0x085, &[0x30, 0x81, 0x11, 0, 0, 0, 0, 0]).unwrap()));
+        assert!(!p.matches(&Frame::std(0x085, &[0x30, 0x81]).unwrap()));
+        assert!(!p.matches(&Frame::std(0x086, &[0x30, 0x81, 0x11]).unwrap()));
+        let exact = parse_pattern("705#05").unwrap();
+        assert!(exact.matches(&Frame::std(0x705, &[5]).unwrap()));
+        assert!(!exact.matches(&Frame::std(0x705, &[5, 0]).unwrap()));
+        assert_eq!(
+            parse_pattern("12345678#R").unwrap().to_string(),
+            "12345678#R"
+        );
+        assert_eq!(p.to_string(), "085#3081??*");
+    }
+
+    #[test]
+    fn cia301_7_2_8_3_2_boot_up_then_heartbeat_pass_and_a_wrong_state_fails() {
+        let r = report(
+            "\n[[expect]]\nwithin_ms = [0, 1]\nframe = \"705#00\"\n\n\
+             [[expect]]\nwithin_ms = [99, 101]\nframe = \"705#05\"\n",
+        );
+        assert!(!r.passed());
+        assert!(r.outcomes[0].passed, "{r}");
+        assert_eq!(r.outcomes[0].detail, "1 seen, the first at 0.110 ms");
+        assert!(!r.outcomes[1].passed);
+        assert_eq!(r.first_failure().map(|o| o.line), Some(16));
+    }
+
+    #[test]
+    fn actions_apply_at_their_time_and_values_are_read_from_the_dictionary() {
+        // 0x1017 written to 50 ms at 10 ms: heartbeats at 60 ms and 110 ms, none at 100 ms.
+        let r = report(
+            "\n[[at]]\ntime_ms = 10\naction = \"send\"\nframe = \"605#2B17100032000000\"\n\n\
+             [[expect]]\nat_ms = 11\nvalue = { device = \"node5\", index = 0x1017, sub = 0, equals = 50 }\n\n\
+             [[expect]]\nwithin_ms = [59, 61]\nframe = \"705#7F\"\n\n\
+             [[expect]]\nwithin_ms = [99, 101]\nframe = \"705#*\"\nabsent = true\n\n\
+             [[at]]\ntime_ms = 200\naction = \"bus_off\"\ndevice = \"node5\"\n\n\
+             [[expect]]\nat_ms = 200\ncontroller = { device = \"node5\", state = \"bus-off\" }\n",
+        );
+        assert!(r.passed(), "{r}");
+        assert_eq!(r.actions, 2);
+        assert_eq!(r.outcomes.len(), 4);
+    }
+
+    #[test]
+    fn an_action_that_cannot_apply_is_a_failure() {
+        let r = report(
+            "\n[[at]]\ntime_ms = 1\naction = \"power_off\"\ndevice = \"node5\"\n\n\
+             [[at]]\ntime_ms = 2\naction = \"bus_off\"\ndevice = \"node5\"\n",
+        );
+        assert!(!r.passed());
+        assert_eq!(r.outcomes.len(), 1);
+        assert_eq!(r.outcomes[0].line, 17);
+        assert!(r.outcomes[0].detail.contains("powered off"), "{r}");
+    }
+}
