@@ -241,7 +241,7 @@ fn socketcand(rng: &mut SplitMix64) {
 }
 
 const SLCAN_SEEDS: &[&str] = &[
-    "t1238112233445566778",
+    "t12381122334455667788",
     "T1234567F2AABB",
     "r1230",
     "R123456780",
@@ -548,6 +548,47 @@ mod tests {
         assert_eq!(parse_seed("0xC0FFEE"), Ok(0xC0FFEE));
         assert_eq!(parse_seed("12"), Ok(12));
         assert!(parse_seed("0xZZ").is_err());
+    }
+
+    /// Mutations start from valid inputs, so the campaigns reach past the headers.
+    #[test]
+    fn every_seed_input_is_valid() {
+        let mut rng = SplitMix64::new(1);
+        let mut formats = std::collections::BTreeSet::new();
+        for _ in 0..64 {
+            let seed = capture_seed(&mut rng);
+            let reader = cantwin_capture::CaptureReader::new(Cursor::new(seed)).unwrap();
+            formats.insert(format!("{:?}", reader.format()));
+            let records: Vec<_> = reader.collect::<Result<_, _>>().unwrap();
+            assert!(records.len() <= 2);
+        }
+        assert_eq!(formats.len(), 3, "{formats:?}");
+        for eds in [EDS_DRIVE, EDS_IO, EDS_QUIRKS, EDS_ADV200] {
+            cantwin_eds::parse_bytes(eds.as_bytes()).unwrap();
+        }
+        for s in [
+            SCENARIO_CIA301,
+            SCENARIO_OPENDRIVE,
+            SCENARIO_ADV200_DNET,
+            SCENARIO_ADV200_DS402,
+            SCENARIO_TM3,
+        ] {
+            Scenario::parse(s, "seed.toml")
+                .unwrap()
+                .build(&Registry::builtin(), &BuildEnv::default())
+                .unwrap();
+        }
+        for c in SOCKETCAND_SEEDS {
+            let ok = cantwin_gateway::socketcand::wire::parse_command(c.as_bytes()).is_ok()
+                || cantwin_gateway::socketcand::wire::parse_server_message(c.as_bytes()).is_ok();
+            assert!(ok, "{c}");
+        }
+        for c in SLCAN_SEEDS {
+            assert!(
+                cantwin_gateway::slcan::wire::parse_command(c.as_bytes()).is_ok(),
+                "{c}"
+            );
+        }
     }
 
     #[test]
