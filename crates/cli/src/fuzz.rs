@@ -2,8 +2,10 @@
 //! machine that reads outside input. Each case is seeded from the campaign seed and the
 //! case number, so a failure replays with `--seed S --from N --cases 1`; the property
 //! checked is the project's rule that bad input gets the protocol's own answer or a clear
-//! error, never a panic (decoders) or a stuck simulation (twins).
+//! error, never a panic (decoders) or a stuck simulation (twins). Results go through
+//! `black_box` so an optimised build cannot skip a decoder whose result is unused.
 
+use std::hint::black_box;
 use std::io::Cursor;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Instant as WallInstant;
@@ -201,19 +203,19 @@ fn canopen_wire(rng: &mut SplitMix64) {
     use cantwin_canopen::sdo::wire::{BlockSegment, Request, Response};
     use cantwin_canopen::wire::{self, Emcy, ErrorControl, NmtCommand, Sync, Time};
     let f = frame(rng, &[]);
-    let _ = NmtCommand::decode(&f);
-    let _ = ErrorControl::decode(&f, below(rng, 128) as u8);
-    let _ = Sync::decode(&f);
-    let _ = Time::decode(&f);
-    let _ = Emcy::decode(&f);
+    let _ = black_box(NmtCommand::decode(&f));
+    let _ = black_box(ErrorControl::decode(&f, below(rng, 128) as u8));
+    let _ = black_box(Sync::decode(&f));
+    let _ = black_box(Time::decode(&f));
+    let _ = black_box(Emcy::decode(&f));
     let m = wire::decode(&f);
-    let _ = m.sdo_request();
-    let _ = m.sdo_response();
+    let _ = black_box(m.sdo_request());
+    let _ = black_box(m.sdo_response());
     let mut b = [0u8; 8];
     b.iter_mut().for_each(|x| *x = rng.next_u64() as u8);
-    let _ = Request::decode(&b);
-    let _ = Response::decode(&b);
-    let _ = BlockSegment::decode(&b);
+    let _ = black_box(Request::decode(&b));
+    let _ = black_box(Response::decode(&b));
+    let _ = black_box(BlockSegment::decode(&b));
 }
 
 const SOCKETCAND_SEEDS: &[&str] = &[
@@ -236,8 +238,8 @@ fn socketcand(rng: &mut SplitMix64) {
         let seed = SOCKETCAND_SEEDS[below(rng, SOCKETCAND_SEEDS.len() as u64) as usize];
         mutate(rng, seed)
     };
-    let _ = parse_command(&input);
-    let _ = parse_server_message(&input);
+    let _ = black_box(parse_command(&input));
+    let _ = black_box(parse_server_message(&input));
 }
 
 const SLCAN_SEEDS: &[&str] = &[
@@ -261,8 +263,8 @@ fn slcan(rng: &mut SplitMix64) {
         let seed = SLCAN_SEEDS[below(rng, SLCAN_SEEDS.len() as u64) as usize];
         mutate(rng, seed)
     };
-    let _ = parse_command(&input);
-    let _ = parse_frame(&input);
+    let _ = black_box(parse_command(&input));
+    let _ = black_box(parse_frame(&input));
 }
 
 /// A small valid capture of each format, written with the capture crate's writers.
@@ -332,7 +334,7 @@ fn capture(rng: &mut SplitMix64) {
 fn eds(rng: &mut SplitMix64) {
     let seed = [EDS_DRIVE, EDS_IO, EDS_QUIRKS, EDS_ADV200][below(rng, 4) as usize];
     let input = mutate(rng, seed);
-    let _ = cantwin_eds::parse_bytes(&input);
+    let _ = black_box(cantwin_eds::parse_bytes(&input));
 }
 
 fn scenario(rng: &mut SplitMix64) {
@@ -347,7 +349,7 @@ fn scenario(rng: &mut SplitMix64) {
         return;
     };
     if let Ok(s) = Scenario::parse(&text, "fuzz.toml") {
-        let _ = s.build(&Registry::builtin(), &BuildEnv::default());
+        let _ = black_box(s.build(&Registry::builtin(), &BuildEnv::default()));
     }
 }
 
