@@ -297,6 +297,8 @@ pub enum Expect {
         sub: u8,
         /// The little-endian bytes expected.
         equals: Vec<u8>,
+        /// Whether `equals` is only the first bytes (a hex string ending in `*`).
+        prefix: bool,
     },
     /// A device's controller is in a fault confinement state at an instant.
     Controller {
@@ -657,6 +659,7 @@ impl ScriptParser<'_> {
                 absent: e.absent.unwrap_or(false),
             }
         } else if let Some(v) = &e.value {
+            let mut prefix = false;
             let equals = match &v.equals {
                 toml::Value::Integer(n) => {
                     // Little-endian, as many bytes as the value needs (at least one); the
@@ -667,7 +670,13 @@ impl ScriptParser<'_> {
                     }
                     b
                 }
-                toml::Value::String(s) => match hex_bytes(s) {
+                toml::Value::String(s) => match hex_bytes(match s.strip_suffix('*') {
+                    Some(head) => {
+                        prefix = true;
+                        head
+                    }
+                    None => s,
+                }) {
                     Some(b) => b,
                     None => {
                         return Err(self.err(
@@ -691,6 +700,7 @@ impl ScriptParser<'_> {
                 index: v.index,
                 sub: v.sub,
                 equals,
+                prefix,
             }
         } else if let Some(c) = &e.controller {
             let state = match c.state.as_str() {
@@ -756,9 +766,11 @@ fn describe(what: &Expect) -> String {
             index,
             sub,
             equals,
+            prefix,
         } => format!(
-            "{device} {index:04X}sub{sub} = {} at {}",
+            "{device} {index:04X}sub{sub} = {}{} at {}",
             hex(equals),
+            if *prefix { "…" } else { "" },
             fmt_ms(*at)
         ),
         Expect::Controller { at, device, state } => {
@@ -1129,6 +1141,7 @@ fn probe(
             index,
             sub,
             equals,
+            prefix,
             ..
         } => {
             let Some(d) = built.device(device) else {
@@ -1152,8 +1165,18 @@ fn probe(
                         v.resize(n, 0);
                         v
                     };
-                    let ok = pad(&bytes) == pad(equals);
-                    (ok, format!("holds {}", hex(&bytes)))
+                    let ok = if *prefix {
+                        bytes.starts_with(equals)
+                    } else {
+                        pad(&bytes) == pad(equals)
+                    };
+                    // A DOMAIN can be megabytes: show its size and first bytes only.
+                    let shown = if bytes.len() > 32 {
+                        format!("{}… ({} bytes)", hex(&bytes[..32]), bytes.len())
+                    } else {
+                        hex(&bytes)
+                    };
+                    (ok, format!("holds {shown}"))
                 }
             }
         }

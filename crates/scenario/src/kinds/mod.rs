@@ -4,5 +4,6 @@ pub mod adv200;
 pub mod cia301;
 pub mod eds;
 pub mod generator;
+pub mod master;
 pub mod opendrive;
 pub mod tm3;
