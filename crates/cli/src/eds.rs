@@ -16,6 +16,22 @@ pub struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum Command {
+    /// Write the EDS of a CANopen twin of a scenario, generated from its object dictionary.
+    #[command(
+        after_help = "Examples:\n  cantwin eds export --scenario scenarios/cia301-device.toml --device node5 -o node5.eds\n  \
+                            cantwin eds export --scenario scenarios/tm3-island.toml --device island"
+    )]
+    Export {
+        /// The scenario.
+        #[arg(long)]
+        scenario: PathBuf,
+        /// The device's name in the scenario.
+        #[arg(long)]
+        device: String,
+        /// Write here instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Check an EDS or DCF: syntax (errors name line, section and key), mandatory objects,
     /// object lists, sub-object counts, types, limits, $NODEID values, and advice such as a
     /// life time factor (0x100D) below 2.
@@ -101,8 +117,84 @@ fn advice(eds: &Eds) -> Vec<String> {
     out
 }
 
+/// The object dictionary of a CANopen twin on `port`, whatever kind built it.
+fn twin_dictionary(
+    sim: &cantwin_bus::Simulation,
+    port: cantwin_bus::PortId,
+) -> Option<&ObjectDictionary> {
+    if let Some(n) = sim.node::<cantwin_scenario::kinds::cia301::Cia301Node>(port) {
+        return Some(n.device().od());
+    }
+    if let Some(d) = sim.node::<cantwin_canopen::device::Device>(port) {
+        return Some(d.od());
+    }
+    if let Some(c) = sim.node::<cantwin_tm3::Tm3Coupler>(port) {
+        return Some(c.device().od());
+    }
+    if let Some(a) = sim.node::<cantwin_adv200::Adv200>(port) {
+        return a.device().map(|d| d.od());
+    }
+    None
+}
+
+fn export(scenario: &Path, device: &str) -> Result<String> {
+    let sc = cantwin_scenario::Scenario::load(scenario)?;
+    let built = sc.build(&cantwin_scenario::Registry::builtin(), &Default::default())?;
+    let dev = built.device(device).with_context(|| {
+        let names: Vec<&str> = built.devices.iter().map(|d| d.name.as_str()).collect();
+        format!(
+            "{} has no device {device:?} (devices: {})",
+            scenario.display(),
+            names.join(", ")
+        )
+    })?;
+    let od = twin_dictionary(&built.sim, dev.port).with_context(|| {
+        format!(
+            "{device:?} ({}) is not a CANopen device, or its card is not in a CANopen personality",
+            dev.kind
+        )
+    })?;
+    let desc = od.description();
+    let count = |range: std::ops::RangeInclusive<u16>| {
+        desc.objects()
+            .filter(|o| range.contains(&o.index()))
+            .count() as u16
+    };
+    let text = |index, sub| match od.get(index, sub) {
+        Ok(cantwin_canopen::od::Value::VisibleString(s)) => Some(s),
+        _ => None,
+    };
+    let mut info = cantwin_eds::DeviceInfo {
+        vendor_name: Some("cantwin".into()),
+        product_name: text(0x1008, 0).or_else(|| Some(device.to_string())),
+        granularity: Some(8),
+        nr_of_rx_pdo: Some(count(0x1400..=0x15FF)),
+        nr_of_tx_pdo: Some(count(0x1800..=0x19FF)),
+        simple_boot_up_slave: Some(true),
+        simple_boot_up_master: Some(false),
+        group_messaging: Some(false),
+        lss_supported: Some(false),
+        dynamic_channels_supported: Some(0),
+        ..Default::default()
+    };
+    if let Some(bus) = built.sim.bus(dev.port.bus()) {
+        info.set_baud_rates(&[bus.bit_rate().bits_per_second() / 1000]);
+    }
+    let eds = cantwin_eds::from_od(
+        desc,
+        info,
+        cantwin_eds::FileInfo::new(format!("{device}.eds")),
+    );
+    Ok(cantwin_eds::write(&eds))
+}
+
 pub fn run(args: &Args) -> Result<()> {
     match &args.command {
+        Command::Export {
+            scenario,
+            device,
+            output,
+        } => emit(&export(scenario, device)?, output.as_deref()),
         Command::Check { file } => {
             let eds = load(file)?;
             let report = eds.check();
