@@ -43,17 +43,15 @@
 //! out 0, so a stored non-zero heartbeat time wins, and a restore of the defaults (0x1011)
 //! brings back `heartbeat_ms`.
 
-use std::sync::Arc;
-
 use cantwin_bus::{AnyNode, PortConfig};
-use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use cantwin_can::{ControllerEvent, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::ObjectAccess;
-use cantwin_canopen::device::{Device, DeviceConfig, Event};
+use cantwin_canopen::device::{Device, Event};
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
-use cantwin_canopen::storage::FileStorage;
 
+use super::common::{canopen_device, sdo_timeout};
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::model::BusSpec;
@@ -338,10 +336,7 @@ impl DeviceKind for Cia301 {
                 ));
             }
         }
-        let sdo_timeout_ms: u64 = s.get_or("sdo_timeout_ms", 1000)?;
-        if sdo_timeout_ms == 0 {
-            return Err(s.error("sdo_timeout_ms", "`sdo_timeout_ms` must be greater than 0"));
-        }
+        let sdo_timeout = sdo_timeout(s)?;
         let layout = Layout {
             options,
             domain_size,
@@ -356,22 +351,7 @@ impl DeviceKind for Cia301 {
                 format!("the device's dictionary is invalid: {e}"),
             )
         })?;
-        let config = DeviceConfig {
-            sdo_timeout: Duration::from_millis(sdo_timeout_ms),
-            ..DeviceConfig::new(node_id)
-        };
-        let mut device =
-            Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
-        if let Some(dir) = &env.state_dir {
-            let dir = dir.join(&s.device().name);
-            let storage = FileStorage::new(&dir).map_err(|e| {
-                s.error(
-                    "name",
-                    format!("cannot keep stored parameters in {}: {e}", dir.display()),
-                )
-            })?;
-            device.set_storage(Box::new(storage));
-        }
+        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
         let node = Cia301Node {
             device,
             heartbeat_ms,
@@ -393,6 +373,7 @@ impl DeviceKind for Cia301 {
 mod tests {
     use super::*;
     use crate::{Registry, Scenario};
+    use cantwin_can::Duration;
     use cantwin_canopen::nmt::State;
 
     fn scenario(extra: &str) -> String {

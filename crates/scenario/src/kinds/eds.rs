@@ -29,14 +29,12 @@
 //! With `--state-dir`, the device keeps what 0x1010 stores in `STATE_DIR/<device name>/`.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use cantwin_bus::{AnyNode, PortConfig};
-use cantwin_can::Duration;
-use cantwin_canopen::device::{Device, DeviceConfig};
-use cantwin_canopen::storage::FileStorage;
+use cantwin_canopen::device::Device;
 use cantwin_eds::{EdsValue, parse_bytes, to_od};
 
+use super::common::{canopen_device, sdo_timeout};
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::model::BusSpec;
@@ -136,10 +134,7 @@ impl DeviceKind for EdsKind {
             };
             hb.entry.default_value = Some(EdsValue::Integer(i128::from(ms)));
         }
-        let sdo_timeout_ms: u64 = s.get_or("sdo_timeout_ms", 1000)?;
-        if sdo_timeout_ms == 0 {
-            return Err(s.error("sdo_timeout_ms", "`sdo_timeout_ms` must be greater than 0"));
-        }
+        let sdo_timeout = sdo_timeout(s)?;
 
         let desc = to_od(&eds).map_err(|e| {
             s.error(
@@ -147,22 +142,7 @@ impl DeviceKind for EdsKind {
                 format!("{}: not a usable object dictionary: {e}", path.display()),
             )
         })?;
-        let config = DeviceConfig {
-            sdo_timeout: Duration::from_millis(sdo_timeout_ms),
-            ..DeviceConfig::new(node_id)
-        };
-        let mut device =
-            Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
-        if let Some(dir) = &env.state_dir {
-            let dir = dir.join(&s.device().name);
-            let storage = FileStorage::new(&dir).map_err(|e| {
-                s.error(
-                    "name",
-                    format!("cannot keep stored parameters in {}: {e}", dir.display()),
-                )
-            })?;
-            device.set_storage(Box::new(storage));
-        }
+        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
         let port = PortConfig {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()

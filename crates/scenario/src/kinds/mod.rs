@@ -2,6 +2,7 @@
 
 pub mod adv200;
 pub mod cia301;
+mod common;
 pub mod eds;
 pub mod generator;
 pub mod master;

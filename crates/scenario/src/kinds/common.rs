@@ -1,0 +1,51 @@
+//! Settings and device set-up shared by the CANopen kinds (`cia301`, `eds`), and test
+//! helpers shared by the kinds' unit tests.
+
+use std::sync::Arc;
+
+use cantwin_can::Duration;
+use cantwin_canopen::device::{Device, DeviceConfig};
+use cantwin_canopen::od::OdDescription;
+use cantwin_canopen::storage::FileStorage;
+
+use crate::build::BuildEnv;
+use crate::error::ScenarioError;
+use crate::registry::Settings;
+
+/// The `sdo_timeout_ms` key (default 1000 ms, never 0): how long the SDO server waits for
+/// the client before it aborts the transfer with 0x0504 0000 (SDO protocol timed out).
+pub(crate) fn sdo_timeout(s: &Settings<'_>) -> Result<Duration, ScenarioError> {
+    let ms: u64 = s.get_or("sdo_timeout_ms", 1000)?;
+    if ms == 0 {
+        return Err(s.error("sdo_timeout_ms", "`sdo_timeout_ms` must be greater than 0"));
+    }
+    Ok(Duration::from_millis(ms))
+}
+
+/// A CiA 301 device with node-ID `node_id` over `desc`, whose stored parameters (0x1010)
+/// live under the scenario's state directory, one folder per device name, when there is one.
+pub(crate) fn canopen_device(
+    s: &Settings<'_>,
+    env: &BuildEnv,
+    desc: OdDescription,
+    node_id: u8,
+    sdo_timeout: Duration,
+) -> Result<Device, ScenarioError> {
+    let config = DeviceConfig {
+        sdo_timeout,
+        ..DeviceConfig::new(node_id)
+    };
+    let mut device =
+        Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
+    if let Some(dir) = &env.state_dir {
+        let dir = dir.join(&s.device().name);
+        let storage = FileStorage::new(&dir).map_err(|e| {
+            s.error(
+                "name",
+                format!("cannot keep stored parameters in {}: {e}", dir.display()),
+            )
+        })?;
+        device.set_storage(Box::new(storage));
+    }
+    Ok(device)
+}
