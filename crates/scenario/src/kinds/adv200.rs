@@ -121,6 +121,7 @@ mod tests {
     use cantwin_bus::Recorder;
     use cantwin_can::{Frame, Instant};
 
+    use crate::kinds::common::testing::{recorded, shipped};
     use crate::{Registry, Scenario};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"adv200\"\nbus = \"can0\"\n";
@@ -136,15 +137,7 @@ mod tests {
 
     #[test]
     fn the_shipped_example_boots_as_node_12_and_runs_the_motor() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../scenarios/adv200-example.toml"
-        );
-        let text = std::fs::read_to_string(path).unwrap();
-        let scenario = Scenario::parse(&text, path).unwrap();
-        let mut built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let mut built = shipped("adv200-example.toml");
         let bus = built.bus("can0").unwrap();
         let drive = built.device("drive").unwrap().port;
         let master = built.device("master").unwrap().port;
@@ -166,15 +159,10 @@ mod tests {
         built.sim.run_until(Instant::from_nanos(1_300_000_000));
         let node = built.sim.node::<Adv200>(drive).unwrap();
         assert_eq!(node.param(par::MOTOR_SPEED), Ok(1000));
-        let frames: Vec<String> = built
-            .sim
-            .bus(bus)
-            .unwrap()
-            .tap::<Recorder>(tap)
-            .unwrap()
-            .frames()
-            .filter(|f| f.frame.id().as_raw() == 0x18C)
-            .map(|f| f.frame.to_string())
+        let frames: Vec<String> = recorded(&built, bus, tap)
+            .iter()
+            .filter(|f| f.id().as_raw() == 0x18C)
+            .map(ToString::to_string)
             .collect();
         // Analog input 2 at 2.5 V = 4096 counts; digital input 4 on (status bit 8).
         assert_eq!(frames.last().map(String::as_str), Some("18C#0301E8030010"));
@@ -182,15 +170,7 @@ mod tests {
 
     #[test]
     fn the_shipped_devicenet_scenario_checks_its_mac_id_at_power_up() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../scenarios/adv200-devicenet.toml"
-        );
-        let text = std::fs::read_to_string(path).unwrap();
-        let scenario = Scenario::parse(&text, path).unwrap();
-        let mut built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let mut built = shipped("adv200-devicenet.toml");
         let bus = built.bus("can0").unwrap();
         let drive = built.device("drive").unwrap().port;
         let tap = built.sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
@@ -198,14 +178,9 @@ mod tests {
         let node = built.sim.node::<Adv200>(drive).unwrap();
         assert_eq!(node.param(par::FIELDBUS_TYPE), Ok(2));
         assert!(node.devicenet().is_some());
-        let frames: Vec<String> = built
-            .sim
-            .bus(bus)
-            .unwrap()
-            .tap::<Recorder>(tap)
-            .unwrap()
-            .frames()
-            .map(|f| f.frame.to_string())
+        let frames: Vec<String> = recorded(&built, bus, tap)
+            .iter()
+            .map(ToString::to_string)
             .collect();
         // Two duplicate MAC ID check requests (group 2 message 7 of MAC 12 = 0x467), 1 s
         // apart, then the node is on-line and silent until a master allocates it.

@@ -49,3 +49,37 @@ pub(crate) fn canopen_device(
     }
     Ok(device)
 }
+
+/// Helpers for the kinds' unit tests.
+#[cfg(test)]
+pub(crate) mod testing {
+    use cantwin_bus::{BusId, Recorder, TapId};
+    use cantwin_can::Frame;
+
+    use crate::build::Built;
+    use crate::{Registry, Scenario};
+
+    /// The scenario file `name` shipped in the repository's `scenarios/` folder, built with
+    /// the built-in kinds and no state directory.
+    pub(crate) fn shipped(name: &str) -> Built {
+        let path = format!("{}/../../scenarios/{name}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).unwrap();
+        let scenario = Scenario::parse(&text, &path).unwrap();
+        scenario
+            .build(&Registry::builtin(), &Default::default())
+            .unwrap()
+    }
+
+    /// The frames the recorder `tap` on `bus` has seen, in bus order.
+    pub(crate) fn recorded(built: &Built, bus: BusId, tap: TapId) -> Vec<Frame> {
+        built
+            .sim
+            .bus(bus)
+            .unwrap()
+            .tap::<Recorder>(tap)
+            .unwrap()
+            .frames()
+            .map(|f| f.frame)
+            .collect()
+    }
+}

@@ -202,6 +202,7 @@ mod tests {
     use cantwin_can::{Frame, Instant};
     use cantwin_opendrive::OpenDrive;
 
+    use crate::kinds::common::testing::{recorded, shipped};
     use crate::{Registry, Scenario};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"opendrive\"\nbus = \"can0\"\n";
@@ -217,15 +218,7 @@ mod tests {
 
     #[test]
     fn the_shipped_scenario_answers_message_0_and_runs() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../scenarios/opendrive.toml"
-        );
-        let text = std::fs::read_to_string(path).unwrap();
-        let scenario = Scenario::parse(&text, path).unwrap();
-        let mut built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let mut built = shipped("opendrive.toml");
         let bus = built.bus("can0").unwrap();
         let drive = built.device("drive").unwrap().port;
         let listener = built.device("listener").unwrap().port;
@@ -233,14 +226,9 @@ mod tests {
         let start = Frame::std(440, &[0x00, 0xA8, 0x88, 0x13]).unwrap();
         built.sim.transmit(listener, start).unwrap();
         built.sim.run_until(Instant::from_nanos(4_000_000_000));
-        let frames: Vec<String> = built
-            .sim
-            .bus(bus)
-            .unwrap()
-            .tap::<Recorder>(tap)
-            .unwrap()
-            .frames()
-            .map(|f| f.frame.to_string())
+        let frames: Vec<String> = recorded(&built, bus, tap)
+            .iter()
+            .map(ToString::to_string)
             .collect();
         assert_eq!(frames, ["1B8#00A88813", "1B7#00A98813"]);
         let node = built.sim.node::<OpenDrive>(drive).unwrap();

@@ -113,21 +113,14 @@ impl DeviceKind for Tm3Kind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinds::common::testing::shipped;
     use crate::{Registry, Scenario};
     use cantwin_can::{Frame, Instant};
     use cantwin_canopen::nmt::State;
 
     #[test]
     fn the_shipped_island_boots_takes_its_inputs_and_sets_outputs() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../scenarios/tm3-island.toml"
-        );
-        let text = std::fs::read_to_string(path).unwrap();
-        let scenario = Scenario::parse(&text, path).unwrap();
-        let mut built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let mut built = shipped("tm3-island.toml");
         let port = built.device("island").unwrap().port;
         let listener = built.device("listener").unwrap().port;
         built.sim.run_until(Instant::from_nanos(1_000_000));
