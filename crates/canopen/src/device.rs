@@ -1070,12 +1070,7 @@ impl<H: OdHooks> Core<H> {
 
     /// 0x1010: "save" stores the selected groups.
     fn store(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
-        if v != storage::SAVE {
-            return Err(AbortCode::DATA_TRANSFER);
-        }
-        let Some(s) = &mut self.storage else {
-            return Err(AbortCode::HARDWARE_ERROR);
-        };
+        let s = signed_storage(&mut self.storage, v, storage::SAVE)?;
         for g in Group::for_sub(sub) {
             let blob = storage::encode(&self.od, *g);
             s.save(*g, &blob)
@@ -1086,17 +1081,29 @@ impl<H: OdHooks> Core<H> {
 
     /// 0x1011: "load" erases the selected groups; defaults apply after the next reset.
     fn restore(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
-        if v != storage::LOAD {
-            return Err(AbortCode::DATA_TRANSFER);
-        }
-        let Some(s) = &mut self.storage else {
-            return Err(AbortCode::HARDWARE_ERROR);
-        };
+        let s = signed_storage(&mut self.storage, v, storage::LOAD)?;
         for g in Group::for_sub(sub) {
             s.erase(*g)
                 .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
         }
         Ok(())
+    }
+}
+
+/// The storage behind a write of `v` to 0x1010 or 0x1011, which only the signature
+/// `signature` ("save" or "load") triggers: any other value is refused with 0x0800 0020, and
+/// a device without storage answers 0x0606 0000 (CiA 301 §7.5.2.10 and §7.5.2.11).
+fn signed_storage(
+    storage: &mut Option<Box<dyn Storage>>,
+    v: u32,
+    signature: u32,
+) -> Result<&mut dyn Storage, AbortCode> {
+    if v != signature {
+        return Err(AbortCode::DATA_TRANSFER);
+    }
+    match storage {
+        Some(s) => Ok(s.as_mut()),
+        None => Err(AbortCode::HARDWARE_ERROR),
     }
 }
 
