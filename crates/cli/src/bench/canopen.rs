@@ -306,7 +306,7 @@ pub fn find_fleet(
     let mut lowest_fail: Option<usize> = None;
     // A little below the linear estimate: more buses mean more cache misses.
     let mut n = ((single_rtf * threads as f64 * 0.9) as usize).max(1);
-    for _ in 0..8 {
+    for _ in 0..10 {
         let r = run_networks_threaded(n, threads, duration, filtering)?;
         progress(&r);
         trials.push(r);
@@ -319,21 +319,17 @@ pub fn find_fleet(
             lowest_fail = Some(n);
         }
         let low = best.map_or(0, |b| b.buses);
-        // Next guess: scale by the measured factor, kept between what passed and what failed.
-        let mut next = ((n as f64) * rtf * 0.98) as usize;
-        if let Some(f) = lowest_fail {
-            next = next.min(f - 1);
-        }
-        next = next.max(low + 1).max(1);
+        // The cost per network grows with their number (caches), so a linear rescale
+        // overshoots: rescale until both a passing and a failing count are known, then
+        // bisect between them.
+        let next = match lowest_fail {
+            Some(f) if low > 0 => low + (f - low) / 2,
+            Some(f) => (((n as f64) * rtf * 0.9) as usize).clamp(1, f.saturating_sub(1).max(1)),
+            None => (((n as f64) * rtf * 0.98) as usize).max(n + 1),
+        };
+        // Done: within 2 % (or 1) of a failing count, or nothing left to try.
         if let Some(f) = lowest_fail
-            && next >= f
-        {
-            break;
-        }
-        // Close enough: within 2 % of a failing count.
-        if let Some(f) = lowest_fail
-            && low > 0
-            && (f - low) * 50 <= f
+            && (next <= low || next >= f || (f - low) * 50 <= f || f - low <= 1)
         {
             break;
         }
