@@ -22,6 +22,7 @@
 
 use crate::CaptureWriter;
 use crate::error::{Error, Result};
+use crate::io_util::next_record;
 use crate::record::{ErrorFrame, Event, Record};
 use crate::socketcan::{EFF_FLAG, ERR_FLAG, ID_MASK, RTR_FLAG};
 use cantwin_can::{Frame, Id};
@@ -346,14 +347,7 @@ impl<R: BufRead> Iterator for CandumpReader<R> {
 
     /// Records until the end of the file or the first error (then nothing more).
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        let r = self.read_record().transpose();
-        if !matches!(r, Some(Ok(_))) {
-            self.done = true;
-        }
-        r
+        next_record(self, |r| &mut r.done, Self::read_record)
     }
 }
 

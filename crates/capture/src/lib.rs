@@ -56,6 +56,7 @@ pub use error::{Error, Format, Result};
 pub use record::{ErrorClassError, ErrorFrame, Event, Record, error_class};
 
 use candump::{CandumpReader, CandumpWriter};
+use io_util::next_record;
 use pcap::{PcapReader, PcapWriter};
 use pcapng::{PcapngReader, PcapngWriter};
 use std::fs::File;
@@ -204,14 +205,7 @@ impl<R: BufRead> Iterator for CaptureReader<R> {
 
     /// Records until the end of the file or the first error (then nothing more).
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        let r = self.read_record().transpose();
-        if !matches!(r, Some(Ok(_))) {
-            self.done = true;
-        }
-        r
+        next_record(self, |r| &mut r.done, Self::read_record)
     }
 }
 

@@ -13,7 +13,7 @@
 
 use crate::CaptureWriter;
 use crate::error::{Error, Format, Result};
-use crate::io_util::{Endian, read_body, read_up_to, skip};
+use crate::io_util::{Endian, next_record, read_body, read_up_to, skip};
 use crate::record::Record;
 use crate::socketcan::{self, CAN_MTU, Decoded, LINKTYPE_CAN_SOCKETCAN};
 use std::io::{Read, Write};
@@ -447,14 +447,7 @@ impl<R: Read> Iterator for PcapngReader<R> {
 
     /// Records until the end of the file or the first error (then nothing more).
     fn next(&mut self) -> Option<Self::Item> {
-        if self.done {
-            return None;
-        }
-        let r = self.read_record().transpose();
-        if !matches!(r, Some(Ok(_))) {
-            self.done = true;
-        }
-        r
+        next_record(self, |r| &mut r.done, Self::read_record)
     }
 }
 
