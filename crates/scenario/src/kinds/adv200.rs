@@ -121,18 +121,12 @@ mod tests {
     use cantwin_bus::Recorder;
     use cantwin_can::{Frame, Instant};
 
-    use crate::kinds::common::testing::{recorded, shipped};
-    use crate::{Registry, Scenario};
+    use crate::kinds::common::testing::{build_error, built, recorded, shipped};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"adv200\"\nbus = \"can0\"\n";
 
     fn error_of(extra: &str) -> String {
-        let text = DEVICE.to_string() + extra;
-        let scenario = Scenario::parse(&text, "t.toml").unwrap();
-        match scenario.build(&Registry::builtin(), &Default::default()) {
-            Ok(_) => panic!("built: {extra}"),
-            Err(e) => e.to_string(),
-        }
+        build_error(&(DEVICE.to_string() + extra))
     }
 
     #[test]
@@ -192,10 +186,7 @@ mod tests {
     fn params_by_number_and_name_reach_the_drive() {
         let text = DEVICE.to_string()
             + "params = { 4000 = \"DS402\", 4004 = \"500k\", 4006 = 7, 600 = -100 }\ndigital_inputs = [3]\nanalog_inputs = [1.0]\n";
-        let scenario = Scenario::parse(&text, "t.toml").unwrap();
-        let built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let built = built(&text);
         let port = built.device("drive").unwrap().port;
         let node = built.sim.node::<Adv200>(port).unwrap();
         assert_eq!(node.param(par::FIELDBUS_TYPE), Ok(3));

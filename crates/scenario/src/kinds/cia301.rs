@@ -372,7 +372,7 @@ impl DeviceKind for Cia301 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Registry, Scenario};
+    use crate::kinds::common::testing::{build_error, built};
     use cantwin_can::Duration;
     use cantwin_canopen::nmt::State;
 
@@ -385,13 +385,7 @@ mod tests {
     }
 
     fn error_of(extra: &str) -> String {
-        match Scenario::parse(&scenario(extra), "t.toml")
-            .unwrap()
-            .build(&Registry::builtin(), &BuildEnv::default())
-        {
-            Ok(_) => panic!("{extra:?} was accepted"),
-            Err(e) => e.to_string(),
-        }
+        build_error(&scenario(extra))
     }
 
     #[test]
@@ -421,10 +415,7 @@ mod tests {
     #[test]
     fn boot_up_then_heartbeat_every_heartbeat_ms() {
         let text = scenario("node_id = 5\nheartbeat_ms = 100\ndomain_size = 16");
-        let mut built = Scenario::parse(&text, "t.toml")
-            .unwrap()
-            .build(&Registry::builtin(), &BuildEnv::default())
-            .unwrap();
+        let mut built = built(&text);
         let bus = built.bus("can0").unwrap();
         built.sim.run_for(Duration::from_millis(350));
         let frames = built.sim.bus(bus).unwrap().stats().frames();
@@ -441,10 +432,7 @@ mod tests {
         let text = scenario(
             "node_id = 5\ndomain_size = 300\nvendor_id = 0x1234\nproduct_code = 7\ndevice_name = \"a rather long device name\"",
         );
-        let built = Scenario::parse(&text, "t.toml")
-            .unwrap()
-            .build(&Registry::builtin(), &BuildEnv::default())
-            .unwrap();
+        let built = built(&text);
         let port = built.device("dev").unwrap().port;
         let node = built.sim.node::<Cia301Node>(port).unwrap();
         let od = node.device().od();
@@ -476,10 +464,7 @@ mod tests {
 
     impl Rig {
         fn new(extra: &str) -> Rig {
-            let mut built = Scenario::parse(&scenario(extra), "t.toml")
-                .unwrap()
-                .build(&Registry::builtin(), &BuildEnv::default())
-                .unwrap();
+            let mut built = built(&scenario(extra));
             let bus = built.bus("can0").unwrap();
             let tap = built
                 .sim

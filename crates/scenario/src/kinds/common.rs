@@ -57,7 +57,29 @@ pub(crate) mod testing {
     use cantwin_can::Frame;
 
     use crate::build::Built;
+    use crate::error::ScenarioError;
     use crate::{Registry, Scenario};
+
+    /// The scenario `text` built with the built-in kinds and no state directory; the text
+    /// itself must parse.
+    pub(crate) fn try_build(text: &str) -> Result<Built, ScenarioError> {
+        Scenario::parse(text, "t.toml")
+            .unwrap()
+            .build(&Registry::builtin(), &Default::default())
+    }
+
+    /// The scenario `text`, built.
+    pub(crate) fn built(text: &str) -> Built {
+        try_build(text).unwrap()
+    }
+
+    /// Why the scenario `text` does not build.
+    pub(crate) fn build_error(text: &str) -> String {
+        match try_build(text) {
+            Ok(_) => panic!("built: {text}"),
+            Err(e) => e.to_string(),
+        }
+    }
 
     /// The scenario file `name` shipped in the repository's `scenarios/` folder, built with
     /// the built-in kinds and no state directory.

@@ -202,18 +202,13 @@ mod tests {
     use cantwin_can::{Frame, Instant};
     use cantwin_opendrive::OpenDrive;
 
-    use crate::kinds::common::testing::{recorded, shipped};
+    use crate::kinds::common::testing::{build_error, built, recorded, shipped, try_build};
     use crate::{Registry, Scenario};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"opendrive\"\nbus = \"can0\"\n";
 
     fn error_of(extra: &str, bit_rate: &str) -> String {
-        let text = DEVICE.replace("500k", bit_rate) + extra;
-        let scenario = Scenario::parse(&text, "t.toml").unwrap();
-        match scenario.build(&Registry::builtin(), &Default::default()) {
-            Ok(_) => panic!("built: {extra}"),
-            Err(e) => e.to_string(),
-        }
+        build_error(&(DEVICE.replace("500k", bit_rate) + extra))
     }
 
     #[test]
@@ -239,10 +234,7 @@ mod tests {
     fn settings_reach_the_drive() {
         let text = DEVICE.to_string()
             + "params = { P21 = 1.5, P180 = 256 }\ninputs = [4]\nreference_hz = 20.0\ndip_s1 = false\n";
-        let scenario = Scenario::parse(&text, "t.toml").unwrap();
-        let built = scenario
-            .build(&Registry::builtin(), &Default::default())
-            .unwrap();
+        let built = built(&text);
         let port = built.device("drive").unwrap().port;
         let node = built.sim.node::<OpenDrive>(port).unwrap();
         use cantwin_opendrive::params::{P21, P180};
@@ -304,11 +296,6 @@ mod tests {
         assert!(e.contains("unknown key `load_torque`"), "{e}");
         // C48 = 3 is 125 kbit/s.
         let text = DEVICE.replace("500k", "125k") + "params = { C48 = 3 }\n";
-        let scenario = Scenario::parse(&text, "t.toml").unwrap();
-        assert!(
-            scenario
-                .build(&Registry::builtin(), &Default::default())
-                .is_ok()
-        );
+        assert!(try_build(&text).is_ok());
     }
 }

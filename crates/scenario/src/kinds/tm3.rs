@@ -113,8 +113,7 @@ impl DeviceKind for Tm3Kind {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinds::common::testing::shipped;
-    use crate::{Registry, Scenario};
+    use crate::kinds::common::testing::{shipped, try_build};
     use cantwin_can::{Frame, Instant};
     use cantwin_canopen::nmt::State;
 
@@ -159,10 +158,7 @@ mod tests {
     }
 
     fn build(extra: &str) -> Result<crate::Built, ScenarioError> {
-        let text = DEVICE.to_string() + extra;
-        Scenario::parse(&text, "t.toml")
-            .unwrap()
-            .build(&Registry::builtin(), &Default::default())
+        try_build(&(DEVICE.to_string() + extra))
     }
 
     #[test]
