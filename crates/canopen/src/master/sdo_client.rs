@@ -868,6 +868,24 @@ mod tests {
         (SdoClient::for_node(5).unwrap(), Outbox::new())
     }
 
+    /// A client whose upload of 0x2003 sub 0 in `mode` started at `T0`, its request sent.
+    fn uploading(mode: Mode) -> (SdoClient, Outbox) {
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, mode, T0, &mut out).unwrap();
+        out.clear();
+        (c, out)
+    }
+
+    /// A client whose download of `data` to 0x2003 sub 0 in `mode` started at `T0`, its
+    /// request sent.
+    fn downloading(data: Vec<u8>, mode: Mode) -> (SdoClient, Outbox) {
+        let (mut c, mut out) = client();
+        c.start_download(0x2003, 0, data, mode, T0, &mut out)
+            .unwrap();
+        out.clear();
+        (c, out)
+    }
+
     fn resp(c: &mut SdoClient, b: [u8; 8], out: &mut Outbox) -> Vec<[u8; 8]> {
         assert!(c.on_frame(&Frame::std(0x585, &b).unwrap(), T0, out));
         out.drain()
@@ -894,10 +912,7 @@ mod tests {
 
     #[test]
     fn cia301_7_2_4_3_7_upload_segment_with_wrong_toggle_aborts_0x05030000() {
-        let (mut c, mut out) = client();
-        c.start_upload(0x2003, 0, Mode::Segmented, T0, &mut out)
-            .unwrap();
-        out.clear();
+        let (mut c, mut out) = uploading(Mode::Segmented);
         let r = resp(&mut c, [0x41, 0x03, 0x20, 0, 10, 0, 0, 0], &mut out);
         assert_eq!(r, [[0x60, 0, 0, 0, 0, 0, 0, 0]]);
         // Toggle 1 where 0 is expected.
@@ -931,10 +946,7 @@ mod tests {
 
     #[test]
     fn cia301_7_2_4_3_13_block_upload_sequence_number_above_block_size_aborts_0x05040003() {
-        let (mut c, mut out) = client();
-        c.start_upload(0x2003, 0, Mode::Block { blksize: 2 }, T0, &mut out)
-            .unwrap();
-        out.clear();
+        let (mut c, mut out) = uploading(Mode::Block { blksize: 2 });
         resp(&mut c, [0xC4, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
         let r = resp(&mut c, [0x03, 0, 0, 0, 0, 0, 0, 0], &mut out);
         assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x03, 0x00, 0x04, 0x05]]);
@@ -946,17 +958,7 @@ mod tests {
 
     #[test]
     fn cia301_7_2_4_3_10_block_download_ack_beyond_the_block_aborts_0x05040003() {
-        let (mut c, mut out) = client();
-        c.start_download(
-            0x2003,
-            0,
-            vec![0; 20],
-            Mode::Block { blksize: 127 },
-            T0,
-            &mut out,
-        )
-        .unwrap();
-        out.clear();
+        let (mut c, mut out) = downloading(vec![0; 20], Mode::Block { blksize: 127 });
         let r = resp(&mut c, [0xA4, 0x03, 0x20, 0, 2, 0, 0, 0], &mut out);
         assert_eq!(r.len(), 2, "a block of 2 segments");
         let r = resp(&mut c, [0xA2, 3, 2, 0, 0, 0, 0, 0], &mut out);
@@ -965,26 +967,14 @@ mod tests {
 
     #[test]
     fn cia301_7_2_4_3_9_block_download_with_server_block_size_0_aborts_0x05040002() {
-        let (mut c, mut out) = client();
-        c.start_download(
-            0x2003,
-            0,
-            vec![0; 20],
-            Mode::Block { blksize: 127 },
-            T0,
-            &mut out,
-        )
-        .unwrap();
-        out.clear();
+        let (mut c, mut out) = downloading(vec![0; 20], Mode::Block { blksize: 127 });
         let r = resp(&mut c, [0xA4, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
         assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x02, 0x00, 0x04, 0x05]]);
     }
 
     #[test]
     fn cia301_7_2_4_3_17_unexpected_response_aborts_0x05040001() {
-        let (mut c, mut out) = client();
-        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
-        out.clear();
+        let (mut c, mut out) = uploading(Mode::Auto);
         // A download response to an upload request.
         let r = resp(&mut c, [0x60, 0x03, 0x20, 0, 0, 0, 0, 0], &mut out);
         assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x01, 0x00, 0x04, 0x05]]);
@@ -993,9 +983,7 @@ mod tests {
 
     #[test]
     fn cia301_7_2_4_3_3_uploaded_length_differs_from_indicated_size() {
-        let (mut c, mut out) = client();
-        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
-        out.clear();
+        let (mut c, mut out) = uploading(Mode::Auto);
         resp(&mut c, [0x41, 0x03, 0x20, 0, 3, 0, 0, 0], &mut out);
         // The last segment brings 2 bytes instead of 3 (n = 5).
         let r = resp(&mut c, [0x0B, 1, 2, 0, 0, 0, 0, 0], &mut out);
