@@ -349,23 +349,7 @@ impl SdoClient {
         };
         self.begin(Mux::new(index, sub), data);
         match mode {
-            Mode::Expedited => {
-                let mut d = [0u8; 4];
-                d[..len].copy_from_slice(&self.data);
-                self.state = State::DlInitiate { expedited: true };
-                let init = Initiate::Expedited {
-                    data: d,
-                    len: u8::try_from(len).ok(),
-                };
-                self.send(
-                    Request::InitiateDownload {
-                        mux: self.mux,
-                        init,
-                    },
-                    now,
-                    out,
-                );
-            }
+            Mode::Expedited => self.initiate_expedited_download(now, out),
             Mode::Block { .. } => {
                 self.may_fall_back = self.config.fallback;
                 self.state = State::BlkDlInitiate;
@@ -528,21 +512,7 @@ impl SdoClient {
             self.may_fall_back = false;
             if self.state == State::BlkDlInitiate {
                 if (1..=4).contains(&self.data.len()) {
-                    let mut d = [0u8; 4];
-                    d[..self.data.len()].copy_from_slice(&self.data);
-                    self.state = State::DlInitiate { expedited: true };
-                    let init = Initiate::Expedited {
-                        data: d,
-                        len: u8::try_from(self.data.len()).ok(),
-                    };
-                    self.send(
-                        Request::InitiateDownload {
-                            mux: self.mux,
-                            init,
-                        },
-                        now,
-                        out,
-                    );
+                    self.initiate_expedited_download(now, out);
                 } else {
                     self.initiate_segmented_download(now, out);
                 }
@@ -563,6 +533,27 @@ impl SdoClient {
     fn initiate_upload(&mut self, now: Instant, out: &mut Outbox) {
         self.state = State::UpInitiate;
         self.send(Request::InitiateUpload { mux: self.mux }, now, out);
+    }
+
+    /// The whole of `data` in the initiate request; the callers have checked that it holds
+    /// 1 to 4 bytes.
+    fn initiate_expedited_download(&mut self, now: Instant, out: &mut Outbox) {
+        let len = self.data.len();
+        let mut d = [0u8; 4];
+        d[..len].copy_from_slice(&self.data);
+        self.state = State::DlInitiate { expedited: true };
+        let init = Initiate::Expedited {
+            data: d,
+            len: u8::try_from(len).ok(),
+        };
+        self.send(
+            Request::InitiateDownload {
+                mux: self.mux,
+                init,
+            },
+            now,
+            out,
+        );
     }
 
     fn initiate_segmented_download(&mut self, now: Instant, out: &mut Outbox) {
@@ -989,6 +980,25 @@ mod tests {
         let r = resp(&mut c, [0x0B, 1, 2, 0, 0, 0, 0, 0], &mut out);
         assert_eq!(r, [[0x80, 0x03, 0x20, 0, 0x10, 0x00, 0x07, 0x06]]);
         assert_eq!(events(&mut c), [aborted(AbortCode::TYPE_MISMATCH, false)]);
+    }
+
+    #[test]
+    fn cia301_7_2_4_3_9_refused_block_download_of_3_bytes_falls_back_to_expedited() {
+        let (mut c, mut out) = downloading(vec![1, 2, 3], Mode::Block { blksize: 127 });
+        // Abort 0x0504 0001 (command specifier not valid): the server knows no block
+        // transfer, so the 3 bytes go in one expedited initiate (n = 1, e = 1, s = 1).
+        let r = resp(
+            &mut c,
+            [0x80, 0x03, 0x20, 0, 0x01, 0x00, 0x04, 0x05],
+            &mut out,
+        );
+        assert_eq!(r, [[0x27, 0x03, 0x20, 0, 1, 2, 3, 0]]);
+        assert_eq!(
+            events(&mut c),
+            [SdoEvent::FellBack {
+                code: AbortCode::INVALID_COMMAND
+            }]
+        );
     }
 
     #[test]
