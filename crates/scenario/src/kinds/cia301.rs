@@ -51,7 +51,7 @@ use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
 
-use super::common::{canopen_device, sdo_timeout};
+use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::model::BusSpec;
@@ -289,12 +289,7 @@ impl DeviceKind for Cia301 {
         env: &BuildEnv,
     ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
         let node_id: u8 = s.require("node_id")?;
-        if !(1..=127).contains(&node_id) {
-            return Err(s.error(
-                "node_id",
-                format!("`node_id` is 1–127 (CiA 301 §7.3.2.1), not {node_id}"),
-            ));
-        }
+        check_node_id(s, node_id)?;
         let heartbeat_ms: u16 = s.get_or("heartbeat_ms", 0)?;
         let defaults = Cia301Options::default();
         let options = Cia301Options {

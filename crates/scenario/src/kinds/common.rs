@@ -12,6 +12,17 @@ use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::registry::Settings;
 
+/// Refuses a `node_id` outside 1–127, the CANopen node-ID range (CiA 301 §7.3.2.1).
+pub(crate) fn check_node_id(s: &Settings<'_>, node_id: u8) -> Result<(), ScenarioError> {
+    if !(1..=127).contains(&node_id) {
+        return Err(s.error(
+            "node_id",
+            format!("`node_id` is 1–127 (CiA 301 §7.3.2.1), not {node_id}"),
+        ));
+    }
+    Ok(())
+}
+
 /// The `sdo_timeout_ms` key (default 1000 ms, never 0): how long the SDO server waits for
 /// the client before it aborts the transfer with 0x0504 0000 (SDO protocol timed out).
 pub(crate) fn sdo_timeout(s: &Settings<'_>) -> Result<Duration, ScenarioError> {

@@ -34,7 +34,7 @@ use cantwin_bus::{AnyNode, PortConfig};
 use cantwin_canopen::device::Device;
 use cantwin_eds::{EdsValue, parse_bytes, to_od};
 
-use super::common::{canopen_device, sdo_timeout};
+use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::model::BusSpec;
@@ -105,12 +105,7 @@ impl DeviceKind for EdsKind {
                 ));
             }
         };
-        if !(1..=127).contains(&node_id) {
-            return Err(s.error(
-                "node_id",
-                format!("`node_id` is 1–127 (CiA 301 §7.3.2.1), not {node_id}"),
-            ));
-        }
+        check_node_id(s, node_id)?;
 
         // A DCF's ParameterValues are the values the device is configured with: they become
         // the power-on values, so that resets come back to them too.
