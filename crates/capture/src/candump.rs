@@ -20,9 +20,8 @@
 //! up to 9 fractional digits, blank lines, and `\r\n` line ends. CAN FD (`ID##...`) and CAN
 //! XL (`...#...#...`) lines are skipped and counted ([`CandumpReader::skipped`]).
 
-use crate::CaptureWriter;
 use crate::error::{Error, Result};
-use crate::io_util::next_record;
+use crate::io_util::{next_record, writer_plumbing};
 use crate::record::{ErrorFrame, Event, Record};
 use crate::socketcan::{EFF_FLAG, ERR_FLAG, ID_MASK, RTR_FLAG};
 use cantwin_can::{Frame, Id};
@@ -108,28 +107,9 @@ impl<W: Write> CandumpWriter<W> {
         self.out.write_all(line.as_bytes())?;
         Ok(())
     }
-
-    /// Flushes the underlying writer.
-    pub fn flush(&mut self) -> Result<()> {
-        self.out.flush()?;
-        Ok(())
-    }
-
-    /// The underlying writer.
-    pub fn into_inner(self) -> W {
-        self.out
-    }
 }
 
-impl<W: Write> CaptureWriter for CandumpWriter<W> {
-    fn write_record(&mut self, record: &Record) -> Result<()> {
-        CandumpWriter::write_record(self, record)
-    }
-
-    fn flush(&mut self) -> Result<()> {
-        CandumpWriter::flush(self)
-    }
-}
+writer_plumbing!(CandumpWriter);
 
 /// What one line holds.
 #[derive(Debug, Clone, PartialEq, Eq)]

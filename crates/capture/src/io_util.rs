@@ -23,6 +23,37 @@ pub(crate) fn next_record<S>(
     r
 }
 
+/// What every capture writer has besides its own `write_record`: `flush`, `into_inner` and
+/// the [`CaptureWriter`](crate::CaptureWriter) impl forwarding to the inherent methods. The
+/// writer keeps its output in a field `out`.
+macro_rules! writer_plumbing {
+    ($writer:ident) => {
+        impl<W: std::io::Write> $writer<W> {
+            /// Flushes the underlying writer.
+            pub fn flush(&mut self) -> $crate::error::Result<()> {
+                std::io::Write::flush(&mut self.out)?;
+                Ok(())
+            }
+
+            /// The underlying writer.
+            pub fn into_inner(self) -> W {
+                self.out
+            }
+        }
+
+        impl<W: std::io::Write> $crate::CaptureWriter for $writer<W> {
+            fn write_record(&mut self, record: &$crate::Record) -> $crate::error::Result<()> {
+                $writer::write_record(self, record)
+            }
+
+            fn flush(&mut self) -> $crate::error::Result<()> {
+                $writer::flush(self)
+            }
+        }
+    };
+}
+pub(crate) use writer_plumbing;
+
 /// Reads until `buf` is full or the input ends; returns how many bytes were read.
 pub(crate) fn read_up_to<R: Read + ?Sized>(r: &mut R, buf: &mut [u8]) -> io::Result<usize> {
     let mut n = 0;

@@ -13,9 +13,8 @@
 //! CAN FD and CAN XL packets, which [`cantwin_can::Frame`] cannot hold, are skipped and counted
 //! ([`PcapReader::skipped`]).
 
-use crate::CaptureWriter;
 use crate::error::{Error, Format, Result};
-use crate::io_util::{Endian, next_record, read_body, read_up_to};
+use crate::io_util::{Endian, next_record, read_body, read_up_to, writer_plumbing};
 use crate::record::Record;
 use crate::socketcan::{self, CAN_MTU, Decoded, LINKTYPE_CAN_SOCKETCAN};
 use std::io::{Read, Write};
@@ -132,28 +131,9 @@ impl<W: Write> PcapWriter<W> {
         }
         Ok(())
     }
-
-    /// Flushes the underlying writer.
-    pub fn flush(&mut self) -> Result<()> {
-        self.out.flush()?;
-        Ok(())
-    }
-
-    /// The underlying writer.
-    pub fn into_inner(self) -> W {
-        self.out
-    }
 }
 
-impl<W: Write> CaptureWriter for PcapWriter<W> {
-    fn write_record(&mut self, record: &Record) -> Result<()> {
-        PcapWriter::write_record(self, record)
-    }
-
-    fn flush(&mut self) -> Result<()> {
-        PcapWriter::flush(self)
-    }
-}
+writer_plumbing!(PcapWriter);
 
 /// Reads a pcap file of either byte order and either resolution.
 #[derive(Debug)]

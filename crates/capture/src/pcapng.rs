@@ -11,9 +11,8 @@
 //! `if_name` is named `if<N>` after its index in the section. An interface with another link
 //! type is an error ([`Error::LinkType`]). CAN FD / CAN XL packets are skipped and counted.
 
-use crate::CaptureWriter;
 use crate::error::{Error, Format, Result};
-use crate::io_util::{Endian, next_record, read_body, read_up_to, skip};
+use crate::io_util::{Endian, next_record, read_body, read_up_to, skip, writer_plumbing};
 use crate::record::Record;
 use crate::socketcan::{self, CAN_MTU, Decoded, LINKTYPE_CAN_SOCKETCAN};
 use std::io::{Read, Write};
@@ -122,28 +121,9 @@ impl<W: Write> PcapngWriter<W> {
         self.out.write_all(&b)?;
         Ok(())
     }
-
-    /// Flushes the underlying writer.
-    pub fn flush(&mut self) -> Result<()> {
-        self.out.flush()?;
-        Ok(())
-    }
-
-    /// The underlying writer.
-    pub fn into_inner(self) -> W {
-        self.out
-    }
 }
 
-impl<W: Write> CaptureWriter for PcapngWriter<W> {
-    fn write_record(&mut self, record: &Record) -> Result<()> {
-        PcapngWriter::write_record(self, record)
-    }
-
-    fn flush(&mut self) -> Result<()> {
-        PcapngWriter::flush(self)
-    }
-}
+writer_plumbing!(PcapngWriter);
 
 #[derive(Debug)]
 struct Interface {
