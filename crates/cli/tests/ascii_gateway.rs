@@ -3,27 +3,11 @@
 //! over TCP.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+use common::*;
+
 use std::io::{BufRead, BufReader, Write};
-use std::process::{Child, Command, Stdio};
-
-fn sim_with_socketcand(scenario: &str, seconds: &str) -> (Child, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(["sim", scenario, "--socketcand", "0", "--duration", seconds])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line.split_whitespace().nth(1).unwrap().to_string();
-    (child, addr)
-}
-
-fn scenario_file(name: &str) -> String {
-    format!("{}/../../scenarios/{name}", env!("CARGO_MANIFEST_DIR"))
-}
+use std::process::{Command, Stdio};
 
 const DEVICE_NAME: &str =
     "cantwin generic CiA 301 device with a 64 KiB DOMAIN at 0x2000, four RPDOs and four TPDOs";

@@ -1,19 +1,10 @@
 //! The real `cantwin` binary, run as a user would.
 #![allow(clippy::unwrap_used)]
 
-use std::process::Command;
+mod common;
+use common::*;
 
-fn cantwin(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use std::process::Command;
 
 #[test]
 fn demo_runs_without_arguments_and_tells_the_story() {
@@ -187,12 +178,6 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
         );
     }
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-fn temp_dir(tag: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("cantwin-cli-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 const GENERATORS: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\
@@ -423,27 +408,6 @@ fn eds_dcf_commissions_a_node_and_doc_renders_markdown() {
     let (ok, out, _) = cantwin(&["eds", "doc", &corpus("drive.eds")]);
     assert!(ok);
     assert!(out.starts_with("# Drive V1"), "{out}");
-}
-
-/// Start `cantwin sim SCENARIO --socketcand 0` and return the child and the address.
-fn sim_with_socketcand(scenario: &str, seconds: &str) -> (std::process::Child, String) {
-    use std::io::BufRead;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(["sim", scenario, "--socketcand", "0", "--duration", seconds])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    std::io::BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line.split_whitespace().nth(1).unwrap().to_string();
-    (child, addr)
-}
-
-fn scenario_file(name: &str) -> String {
-    format!("{}/../../scenarios/{name}", env!("CARGO_MANIFEST_DIR"))
 }
 
 #[test]

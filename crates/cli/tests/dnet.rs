@@ -2,19 +2,10 @@
 //! ID 12, 500 kbit/s) served by `cantwin sim --socketcand 0`, run as a user would.
 #![allow(clippy::unwrap_used)]
 
-use std::process::{Child, Command, Stdio};
+mod common;
+use common::*;
 
-fn cantwin(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use std::process::{Child, Command, Stdio};
 
 fn scenario() -> String {
     format!(

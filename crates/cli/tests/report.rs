@@ -2,27 +2,12 @@
 //! traffic from `cantwin sdo` through socketcand; the test reads the page's tables back.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+use common::*;
+
 use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-
-fn cantwin(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn temp_dir(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("cantwin-report-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// The cells of each row of the table with `id`, tags stripped and entities decoded.
 fn table(html: &str, id: &str) -> Vec<Vec<String>> {
