@@ -34,10 +34,6 @@ pub const VENDOR_ID: u32 = 0x0000_0000;
 /// 0x1018 sub 2: product code, the card type code of PAR 534 (4).
 pub const PRODUCT_CODE: u32 = 4;
 
-fn u32v(name: &str, access: Access, v: u32) -> SubObject {
-    SubObject::new(name, DataType::Unsigned32, access).default(Value::Unsigned32(v))
-}
-
 /// Converts `v` to a value of `ty` (wrapping to its width).
 pub fn value_of(ty: DataType, v: i64) -> Value {
     match ty {
@@ -151,7 +147,10 @@ fn mapping(b: OdBuilder, index: u16, name: String, map: &[u32]) -> OdBuilder {
     )];
     for k in 1..=4u8 {
         let v = map.get(usize::from(k) - 1).copied().unwrap_or(0);
-        subs.push((k, u32v(&format!("Mapping entry {k}"), Access::Rw, v)));
+        subs.push((
+            k,
+            SubObject::unsigned32(format!("Mapping entry {k}"), Access::Rw, v),
+        ));
     }
     b.record(index, name, subs)
 }
@@ -167,7 +166,10 @@ fn ds402_objects(b: OdBuilder) -> OdBuilder {
             index,
             name,
             [
-                (1, u32v("Delta speed", Access::Rw, 1000).mappable()),
+                (
+                    1,
+                    SubObject::unsigned32("Delta speed", Access::Rw, 1000).mappable(),
+                ),
                 (
                     2,
                     SubObject::new("Delta time", DataType::Unsigned16, Access::Rw)
@@ -203,10 +205,13 @@ fn ds402_objects(b: OdBuilder) -> OdBuilder {
             0x6046,
             "vl velocity min max amount",
             [
-                (1, u32v("vl velocity min amount", Access::Rw, 0).mappable()),
+                (
+                    1,
+                    SubObject::unsigned32("vl velocity min amount", Access::Rw, 0).mappable(),
+                ),
                 (
                     2,
-                    u32v("vl velocity max amount", Access::Rw, 8000).mappable(),
+                    SubObject::unsigned32("vl velocity max amount", Access::Rw, 8000).mappable(),
                 ),
             ],
         );
@@ -237,23 +242,39 @@ pub fn build(
         Personality::CanOpen => 0,
         Personality::Ds402 => 0x192,
     };
-    let string = |name: &str, v: &str| {
-        SubObject::new(name, DataType::VisibleString, Access::Const)
-            .default(Value::VisibleString(v.into()))
-            .max_len(v.len())
-    };
     let mut b = OdBuilder::new()
-        .var(0x1000, u32v("Device type", Access::Ro, device_type))
+        .var(
+            0x1000,
+            SubObject::unsigned32("Device type", Access::Ro, device_type),
+        )
         .var(
             0x1001,
             SubObject::new("Error register", DataType::Unsigned8, Access::Ro).mappable(),
         )
-        .var(0x1002, u32v("Manufacturer status register", Access::Ro, 0))
-        .var(0x1005, u32v("COB-ID SYNC", Access::Rw, 0x8000_0080))
-        .var(0x1006, u32v("Communication cycle period", Access::Rw, 0))
-        .var(0x1008, string("Manufacturer device name", "ADV200"))
-        .var(0x1009, string("Manufacturer hardware version", "1.0"))
-        .var(0x100A, string("Manufacturer software version", "1.0"))
+        .var(
+            0x1002,
+            SubObject::unsigned32("Manufacturer status register", Access::Ro, 0),
+        )
+        .var(
+            0x1005,
+            SubObject::unsigned32("COB-ID SYNC", Access::Rw, 0x8000_0080),
+        )
+        .var(
+            0x1006,
+            SubObject::unsigned32("Communication cycle period", Access::Rw, 0),
+        )
+        .var(
+            0x1008,
+            SubObject::const_string("Manufacturer device name", "ADV200"),
+        )
+        .var(
+            0x1009,
+            SubObject::const_string("Manufacturer hardware version", "1.0"),
+        )
+        .var(
+            0x100A,
+            SubObject::const_string("Manufacturer software version", "1.0"),
+        )
         .var(
             0x100C,
             SubObject::new("Guard time", DataType::Unsigned16, Access::Rw)
@@ -267,7 +288,10 @@ pub fn build(
         .record(
             0x1010,
             "Store parameters",
-            [(1, u32v("Save all parameters", Access::Rw, 1))],
+            [(
+                1,
+                SubObject::unsigned32("Save all parameters", Access::Rw, 1),
+            )],
         )
         .var(
             0x1014,
@@ -277,7 +301,10 @@ pub fn build(
         .array(
             0x1016,
             "Consumer heartbeat time",
-            [(1, u32v("Consumer heartbeat time", Access::Rw, 0))],
+            [(
+                1,
+                SubObject::unsigned32("Consumer heartbeat time", Access::Rw, 0),
+            )],
         )
         .var(
             0x1017,
@@ -288,10 +315,19 @@ pub fn build(
             0x1018,
             "Identity object",
             [
-                (1, u32v("Vendor-ID", Access::Ro, VENDOR_ID)),
-                (2, u32v("Product code", Access::Ro, PRODUCT_CODE)),
-                (3, u32v("Revision number", Access::Ro, 0x0001_0000)),
-                (4, u32v("Serial number", Access::Ro, serial)),
+                (1, SubObject::unsigned32("Vendor-ID", Access::Ro, VENDOR_ID)),
+                (
+                    2,
+                    SubObject::unsigned32("Product code", Access::Ro, PRODUCT_CODE),
+                ),
+                (
+                    3,
+                    SubObject::unsigned32("Revision number", Access::Ro, 0x0001_0000),
+                ),
+                (
+                    4,
+                    SubObject::unsigned32("Serial number", Access::Ro, serial),
+                ),
             ],
         );
     let (rx, tx): (Vec<Vec<u32>>, Vec<Vec<u32>>) = match personality {

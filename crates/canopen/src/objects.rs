@@ -83,17 +83,11 @@ impl Default for Cia301Options {
 }
 
 fn u32_rw(name: &str, v: u32) -> SubObject {
-    SubObject::new(name, DataType::Unsigned32, Access::Rw).default(Value::Unsigned32(v))
+    SubObject::unsigned32(name, Access::Rw, v)
 }
 
 fn u32_ro(name: &str, v: u32) -> SubObject {
-    SubObject::new(name, DataType::Unsigned32, Access::Ro).default(Value::Unsigned32(v))
-}
-
-fn string(name: &str, v: &str) -> SubObject {
-    SubObject::new(name, DataType::VisibleString, Access::Const)
-        .default(Value::VisibleString(v.into()))
-        .max_len(v.len())
+    SubObject::unsigned32(name, Access::Ro, v)
 }
 
 /// Adds the CiA 301 communication objects (see the [module documentation](self)) to
@@ -127,14 +121,17 @@ pub fn cia301_defaults(builder: OdBuilder, o: &Cia301Options) -> OdBuilder {
         .var(0x1005, u32_rw("COB-ID SYNC", 0x80))
         .var(0x1006, u32_rw("Communication cycle period", 0))
         .var(0x1007, u32_rw("Synchronous window length", 0))
-        .var(0x1008, string("Manufacturer device name", &o.device_name))
+        .var(
+            0x1008,
+            SubObject::const_string("Manufacturer device name", &o.device_name),
+        )
         .var(
             0x1009,
-            string("Manufacturer hardware version", &o.hardware_version),
+            SubObject::const_string("Manufacturer hardware version", &o.hardware_version),
         )
         .var(
             0x100A,
-            string("Manufacturer software version", &o.software_version),
+            SubObject::const_string("Manufacturer software version", &o.software_version),
         )
         .var(
             0x100C,

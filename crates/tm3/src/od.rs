@@ -40,10 +40,6 @@ pub const TPDOS: u16 = 56;
 /// Mapping entries per PDO (manual: range of sub-index 0 is 8).
 pub const MAP_ENTRIES: u8 = 8;
 
-fn u32_sub(name: &str, access: Access, v: u32) -> SubObject {
-    SubObject::new(name, DataType::Unsigned32, access).default(Value::Unsigned32(v))
-}
-
 /// The value of 0x1000 for `island`.
 pub fn device_type(island: &Island) -> u32 {
     DEVICE_TYPE_BASE | island.layout().device_type_io_bits()
@@ -99,7 +95,10 @@ fn mapping_object(b: OdBuilder, index: u16, name: String, mapping: &[u32]) -> Od
     ))
     .chain((1..=MAP_ENTRIES).map(|k| {
         let v = mapping.get(usize::from(k) - 1).copied().unwrap_or(0);
-        (k, u32_sub(&format!("Mapping entry {k}"), Access::Rw, v))
+        (
+            k,
+            SubObject::unsigned32(format!("Mapping entry {k}"), Access::Rw, v),
+        )
     }));
     b.record(index, name, subs)
 }
@@ -171,7 +170,7 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
     b = b
         .var(
             0x1000,
-            u32_sub("Device type", Access::Ro, device_type(island)),
+            SubObject::unsigned32("Device type", Access::Ro, device_type(island)),
         )
         .var(
             0x1001,
@@ -179,7 +178,7 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
         )
         .var(
             0x1002,
-            u32_sub("Manufacturer status register", Access::Ro, 0).mappable(),
+            SubObject::unsigned32("Manufacturer status register", Access::Ro, 0).mappable(),
         );
     let history = core::iter::once((
         0,
@@ -190,13 +189,19 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
     .chain((1..=ERROR_HISTORY).map(|k| {
         (
             k,
-            u32_sub(&format!("Standard error field {k}"), Access::Ro, 0),
+            SubObject::unsigned32(format!("Standard error field {k}"), Access::Ro, 0),
         )
     }));
     b = b
         .array(0x1003, "Pre-defined error field", history)
-        .var(0x1005, u32_sub("COB-ID SYNC", Access::Rw, 0x80))
-        .var(0x1006, u32_sub("Communication cycle period", Access::Rw, 0))
+        .var(
+            0x1005,
+            SubObject::unsigned32("COB-ID SYNC", Access::Rw, 0x80),
+        )
+        .var(
+            0x1006,
+            SubObject::unsigned32("Communication cycle period", Access::Rw, 0),
+        )
         .var(0x1008, string("Manufacturer device name", DEVICE_NAME))
         .var(
             0x100A,
@@ -220,7 +225,10 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
         .array(
             0x1016,
             "Consumer heartbeat time",
-            [(1, u32_sub("Consumer heartbeat time", Access::Rw, 0))],
+            [(
+                1,
+                SubObject::unsigned32("Consumer heartbeat time", Access::Rw, 0),
+            )],
         )
         .var(
             0x1017,
@@ -231,10 +239,16 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
             0x1018,
             "Identity object",
             [
-                (1, u32_sub("Vendor-ID", Access::Ro, VENDOR_ID)),
-                (2, u32_sub("Product code", Access::Ro, PRODUCT_CODE)),
-                (3, u32_sub("Revision number", Access::Ro, REVISION)),
-                (4, u32_sub("Serial number", Access::Ro, 0)),
+                (1, SubObject::unsigned32("Vendor-ID", Access::Ro, VENDOR_ID)),
+                (
+                    2,
+                    SubObject::unsigned32("Product code", Access::Ro, PRODUCT_CODE),
+                ),
+                (
+                    3,
+                    SubObject::unsigned32("Revision number", Access::Ro, REVISION),
+                ),
+                (4, SubObject::unsigned32("Serial number", Access::Ro, 0)),
             ],
         );
     let module = |k: u8, code: u16| {
@@ -291,8 +305,14 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
             0x1201,
             "2nd server SDO parameter",
             [
-                (1, u32_sub("COB-ID client to server", Access::Rw, 1 << 31)),
-                (2, u32_sub("COB-ID server to client", Access::Rw, 1 << 31)),
+                (
+                    1,
+                    SubObject::unsigned32("COB-ID client to server", Access::Rw, 1 << 31),
+                ),
+                (
+                    2,
+                    SubObject::unsigned32("COB-ID server to client", Access::Rw, 1 << 31),
+                ),
                 (
                     3,
                     SubObject::new("Node-ID of the SDO client", DataType::Unsigned8, Access::Rw)

@@ -156,6 +156,19 @@ impl SubObject {
         }
     }
 
+    /// An UNSIGNED32 sub-object with a default, the most common shape of the communication
+    /// objects (COB-IDs, identity, mapping entries).
+    pub fn unsigned32(name: impl Into<String>, access: Access, default: u32) -> Self {
+        SubObject::new(name, DataType::Unsigned32, access).default(Value::Unsigned32(default))
+    }
+
+    /// A constant VISIBLE_STRING (device name and versions, 0x1008–0x100A), sized to its text.
+    pub fn const_string(name: impl Into<String>, text: &str) -> Self {
+        SubObject::new(name, DataType::VisibleString, Access::Const)
+            .default(Value::VisibleString(text.into()))
+            .max_len(text.len())
+    }
+
     /// Sets the default value.
     pub fn default(mut self, value: Value) -> Self {
         self.default = Some(value);
