@@ -1022,7 +1022,10 @@ impl<H: OdHooks> Core<H> {
         if let Some(code) = refused {
             return Err(code);
         }
-        let hooked = !(0x1400..=0x1BFF).contains(&index) && self.od.description().is_hooked(index);
+        // The PDO parameters are hooked for the PDO engine, which checked them above; the
+        // device's hooks see them too, after it, so a device can narrow what CiA 301 allows
+        // (a manual's "not supported" values).
+        let hooked = self.od.description().is_hooked(index);
         if hooked {
             self.hooks.validate(&self.od, index, sub, data)?;
         }

@@ -39,7 +39,8 @@
 //!   10 000..=10 000 000 µs in 1 ms steps, 29-bit identifiers where "not supported" (0x1005,
 //!   0x1014, TPDOs), TPDO bit 30, RPDO transmission types 241–254, TPDO transmission types
 //!   241–254 (manual: transmission type tables), 0x1016 sub 1 with bits 24–31 set. Checked
-//!   on expedited downloads.
+//!   where the value is written ([`ManualLimits`], the device's object hooks), so expedited,
+//!   segmented and block downloads are refused alike.
 //! * **Error register.** Besides the CiA 301 bits, bit 7 (manufacturer-specific) is set
 //!   while a module error is active and bit 5 (device profile) while 0x0080 is.
 
@@ -50,7 +51,7 @@ use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
 use cantwin_canopen::nmt::State;
-use cantwin_canopen::od::{OdBuildError, OdDescription, Value};
+use cantwin_canopen::od::{ObjectDictionary, OdBuildError, OdDescription, OdHooks, Value};
 use cantwin_canopen::pdo::PdoEvent;
 use cantwin_cia401::inputs::{self, AnalogTriggers};
 use cantwin_cia401::{objects as cia401, outputs};
@@ -123,9 +124,58 @@ pub enum Fitted {
     Unresponsive,
 }
 
+/// The value restrictions of the manual's object tables, checked on every write of the
+/// object whatever the SDO transfer that carries it (the CiA 301 layer's own checks run
+/// first). Refusals are 0x06090030 "value range of parameter exceeded".
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ManualLimits;
+
+impl ManualLimits {
+    /// Whether the manual refuses `value` (little-endian, up to 4 bytes) for `index`/`sub`.
+    pub fn refuses(index: u16, sub: u8, value: u32) -> bool {
+        let ttype = value as u8;
+        match (index, sub) {
+            // Manual 1006H: at least 10 ms, in 1 ms steps, at most 10 000 ms; 0 = unused.
+            (0x1006, 0) => {
+                value != 0 && (!(10_000..=10_000_000).contains(&value) || value % 1000 != 0)
+            }
+            // Manual 1005H, 1014H: 29-bit identifiers are not supported.
+            (0x1005, 0) | (0x1014, 0) => value & (1 << 29) != 0,
+            // Manual 1016H: bits 31-24 are 0.
+            (0x1016, 1) => value >> 24 != 0,
+            // Manual 1400H-141CH: transmission types 0-240 and 255.
+            (0x1400..=0x141C, 2) => (241..=254).contains(&ttype),
+            // Manual 1800H-1837H: 29-bit identifiers and "no RTR" are not supported;
+            // transmission types 0-240 and 255.
+            (0x1800..=0x1837, 1) => value & (3 << 29) != 0,
+            (0x1800..=0x1837, 2) => (241..=254).contains(&ttype),
+            _ => false,
+        }
+    }
+}
+
+impl OdHooks for ManualLimits {
+    fn validate(
+        &mut self,
+        _od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), AbortCode> {
+        let mut b = [0u8; 4];
+        let n = data.len().min(4);
+        b[..n].copy_from_slice(&data[..n]);
+        if Self::refuses(index, sub, u32::from_le_bytes(b)) {
+            Err(AbortCode::INVALID_VALUE)
+        } else {
+            Ok(())
+        }
+    }
+}
+
 /// The TM3 CANopen bus coupler. See the [module documentation](self).
 pub struct Tm3Coupler {
-    device: Device,
+    device: Device<ManualLimits>,
     desc: Arc<OdDescription>,
     config: CouplerConfig,
     fitted: Vec<Fitted>,
@@ -184,7 +234,7 @@ impl Tm3Coupler {
     /// [`Node::on_power_up`].
     pub fn new(config: CouplerConfig) -> Result<Self, CouplerError> {
         let desc = Arc::new(od::description(&config.island)?);
-        let device = Device::new(desc.clone(), device_config(config.node_id))?;
+        let device = Device::with_hooks(desc.clone(), device_config(config.node_id), ManualLimits)?;
         let n = config.island.modules().len();
         let fitted = config
             .island
@@ -221,12 +271,12 @@ impl Tm3Coupler {
     }
 
     /// The CiA 301 device inside.
-    pub fn device(&self) -> &Device {
+    pub fn device(&self) -> &Device<ManualLimits> {
         &self.device
     }
 
     /// The CiA 301 device inside, mutably.
-    pub fn device_mut(&mut self) -> &mut Device {
+    pub fn device_mut(&mut self) -> &mut Device<ManualLimits> {
         &mut self.device
     }
 
@@ -757,77 +807,6 @@ impl Tm3Coupler {
         self.history_written = !self.history.is_empty();
     }
 
-    /// The SDO server receive identifiers.
-    fn sdo_rx(&self) -> [(Option<u32>, u32); 2] {
-        let od = self.device.od();
-        let get = |i, s| od.get_unsigned(i, s).map(|v| v as u32);
-        let pair = |i| {
-            let rx = get(i, 1).filter(|v| v & (1 << 31) == 0);
-            let tx = get(i, 2).unwrap_or(1 << 31);
-            (rx, tx)
-        };
-        [pair(0x1200), pair(0x1201)]
-    }
-
-    /// The abort for an expedited download the manual does not allow (see the [module
-    /// documentation](self)), if any.
-    fn refuse(index: u16, sub: u8, v: u32) -> bool {
-        let ttype = v as u8;
-        match (index, sub) {
-            (0x1006, 0) => v != 0 && (!(10_000..=10_000_000).contains(&v) || v % 1000 != 0),
-            (0x1005, 0) | (0x1014, 0) => v & (1 << 29) != 0,
-            // Manual 1016H: bits 31-24 are 0.
-            (0x1016, 1) => v >> 24 != 0,
-            (0x1400..=0x141C, 2) => (241..=254).contains(&ttype),
-            (0x1800..=0x1837, 1) => v & (3 << 29) != 0,
-            (0x1800..=0x1837, 2) => (241..=254).contains(&ttype),
-            _ => false,
-        }
-    }
-
-    /// Answers an expedited download the manual refuses; returns whether it did.
-    fn screen_sdo(&mut self, frame: &Frame, out: &mut Outbox) -> bool {
-        let Id::Standard(s) = frame.id() else {
-            return false;
-        };
-        let d = frame.data_bytes();
-        if frame.is_remote() || d.len() != 8 || d[0] & 0xE2 != 0x22 {
-            return false;
-        }
-        let Some(tx) = self
-            .sdo_rx()
-            .into_iter()
-            .find(|(rx, _)| *rx == Some(u32::from(s.as_raw())))
-            .map(|(_, tx)| tx)
-        else {
-            return false;
-        };
-        if self.state() == State::Stopped {
-            return false;
-        }
-        let index = u16::from_le_bytes([d[1], d[2]]);
-        let sub = d[3];
-        let n = if d[0] & 1 != 0 {
-            4 - usize::from(d[0] >> 2 & 3)
-        } else {
-            4
-        };
-        let mut b = [0u8; 4];
-        b[..n].copy_from_slice(&d[4..4 + n]);
-        if !Self::refuse(index, sub, u32::from_le_bytes(b)) {
-            return false;
-        }
-        let Ok(id) = Id::standard((tx & 0x7FF) as u16) else {
-            return false;
-        };
-        let code = AbortCode::INVALID_VALUE.to_u32().to_le_bytes();
-        out.push(Frame::data_array(
-            id,
-            [0x80, d[1], d[2], sub, code[0], code[1], code[2], code[3]],
-        ));
-        true
-    }
-
     /// The firmware's receive queue takes `frame`; false if it overflowed.
     fn rx_queue(&mut self, now: Instant) -> bool {
         let service = self.config.rx_service_time.as_nanos().max(1);
@@ -865,7 +844,8 @@ impl AllowsEmcy for State {
 impl Node for Tm3Coupler {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         if self.switch != self.device.node_id()
-            && let Ok(d) = Device::new(self.desc.clone(), device_config(self.switch))
+            && let Ok(d) =
+                Device::with_hooks(self.desc.clone(), device_config(self.switch), ManualLimits)
         {
             self.device = d;
         }
@@ -882,7 +862,7 @@ impl Node for Tm3Coupler {
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
         self.run(now, out, |c, o| {
-            if !c.rx_queue(now) || c.screen_sdo(frame, o) {
+            if !c.rx_queue(now) {
                 return;
             }
             c.device.on_frame(frame, now, o);

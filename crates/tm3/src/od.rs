@@ -325,6 +325,10 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
 
 /// The whole dictionary description of a coupler carrying `island`.
 pub fn description(island: &Island) -> Result<OdDescription, OdBuildError> {
-    let b = communication_objects(OdBuilder::new(), island);
+    // The communication objects whose values the manual restricts go through the
+    // coupler's `ManualLimits` hooks.
+    let b = communication_objects(OdBuilder::new(), island)
+        .hook(0x1005..=0x1016)
+        .hook(0x1400..=0x1BFF);
     cia401::add_objects(b, &island.layout()).build()
 }

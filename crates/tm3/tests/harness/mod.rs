@@ -144,3 +144,98 @@ pub fn write(c: &mut Tm3Coupler, t: Instant, index: u16, sub: u8, data: &[u8]) -
         Ok(())
     }
 }
+
+/// Feeds one SDO request at `t` and returns the server's answer (0x583).
+fn sdo(c: &mut Tm3Coupler, t: Instant, req: [u8; 8]) -> [u8; 8] {
+    let mut out = Outbox::new();
+    c.on_frame(&Frame::std(0x603, &req).unwrap(), t, &mut out);
+    let f = out
+        .frames()
+        .iter()
+        .find(|f| f.to_string().starts_with("583#"))
+        .cloned()
+        .unwrap();
+    f.data_bytes().try_into().unwrap()
+}
+
+fn abort_of(d: [u8; 8]) -> Option<u32> {
+    (d[0] == 0x80).then(|| u32::from_le_bytes([d[4], d[5], d[6], d[7]]))
+}
+
+/// Segmented download of `data` (size indicated, CiA 301 §7.2.4.3.4-7): Ok or the abort
+/// code.
+pub fn write_segmented(
+    c: &mut Tm3Coupler,
+    t: Instant,
+    index: u16,
+    sub: u8,
+    data: &[u8],
+) -> Result<(), u32> {
+    let [lo, hi] = index.to_le_bytes();
+    let [s0, s1, s2, s3] = (data.len() as u32).to_le_bytes();
+    let d = sdo(c, t, [0x21, lo, hi, sub, s0, s1, s2, s3]);
+    if let Some(code) = abort_of(d) {
+        return Err(code);
+    }
+    assert_eq!(d[0], 0x60);
+    let mut toggle = 0u8;
+    let chunks: Vec<&[u8]> = data.chunks(7).collect();
+    for (k, chunk) in chunks.iter().enumerate() {
+        let last = k + 1 == chunks.len();
+        let mut req = [0u8; 8];
+        req[0] = toggle | ((7 - chunk.len() as u8) << 1) | u8::from(last);
+        req[1..1 + chunk.len()].copy_from_slice(chunk);
+        let d = sdo(c, t, req);
+        if let Some(code) = abort_of(d) {
+            return Err(code);
+        }
+        assert_eq!(d[0], 0x20 | toggle);
+        toggle ^= 0x10;
+    }
+    Ok(())
+}
+
+/// Block download of `data` (size indicated, no CRC, one block, CiA 301 §7.2.4.3.9-11):
+/// Ok or the abort code.
+pub fn write_block(
+    c: &mut Tm3Coupler,
+    t: Instant,
+    index: u16,
+    sub: u8,
+    data: &[u8],
+) -> Result<(), u32> {
+    let [lo, hi] = index.to_le_bytes();
+    let [s0, s1, s2, s3] = (data.len() as u32).to_le_bytes();
+    let d = sdo(c, t, [0xC2, lo, hi, sub, s0, s1, s2, s3]);
+    if let Some(code) = abort_of(d) {
+        return Err(code);
+    }
+    assert_eq!(d[0] & 0xFB, 0xA0);
+    let chunks: Vec<&[u8]> = data.chunks(7).collect();
+    let mut out = Outbox::new();
+    for (k, chunk) in chunks.iter().enumerate() {
+        let last = k + 1 == chunks.len();
+        let mut req = [0u8; 8];
+        req[0] = (k as u8 + 1) | if last { 0x80 } else { 0 };
+        req[1..1 + chunk.len()].copy_from_slice(chunk);
+        c.on_frame(&Frame::std(0x603, &req).unwrap(), t, &mut out);
+    }
+    let ack = out
+        .frames()
+        .iter()
+        .find(|f| f.to_string().starts_with("583#"))
+        .cloned()
+        .unwrap();
+    let ack = ack.data_bytes();
+    if ack[0] == 0x80 {
+        return Err(u32::from_le_bytes([ack[4], ack[5], ack[6], ack[7]]));
+    }
+    assert_eq!((ack[0], usize::from(ack[1])), (0xA2, chunks.len()));
+    let unused = (7 * chunks.len() - data.len()) as u8;
+    let d = sdo(c, t, [0xC1 | (unused << 2), 0, 0, 0, 0, 0, 0, 0]);
+    if let Some(code) = abort_of(d) {
+        return Err(code);
+    }
+    assert_eq!(d[0], 0xA1);
+    Ok(())
+}
