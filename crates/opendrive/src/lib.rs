@@ -73,8 +73,14 @@
 //! * Alarms: A2 overcurrent (instantaneous trip above [`DriveData::overcurrent_trip_pct`],
 //!   or a start without flying restart while the motor still turns above 10 % of its rated
 //!   frequency), A3 motor I²t overload when C32 = 1 (a warning only with C32 = 0), A4
-//!   heatsink overtemperature, A11 DC bus overvoltage. A5 is reported in message 1 but not
-//!   raised by the model. An alarm blocks the drive; it restarts only after the start
+//!   heatsink overtemperature, A5 power module overtemperature, A11 DC bus overvoltage.
+//!   §3.2 names A4 and A5 together as the drive's ("convertitore") overtemperature and
+//!   says no more; motor heating is C32's I²t (A3), so both are temperatures of the drive.
+//!   The twin measures two of them: the heatsink (A4: slow, a minute, driven by the
+//!   ambient and the mean current) and the output stage's junctions (A5: seconds, above the
+//!   heatsink by the losses of the current), so A4 follows from a hot cabinet or poor
+//!   cooling and A5 from an overload held too long at the current limit. An alarm blocks
+//!   the drive; it restarts only after the start
 //!   command was removed and given again. Alarms are kept in flash; with C35 = 1 they clear
 //!   at mains return (the node's power-up).
 //! * Mains off/on is the node's power cycle on the bus (`Bus::set_powered`): the motor

@@ -63,6 +63,13 @@ pub struct DriveData {
     pub heatsink_time_constant_s: f64,
     /// Heatsink overtemperature trip (°C): alarm A4.
     pub heatsink_trip_c: f64,
+    /// Power module (IGBT junction) temperature rise above the heatsink at the drive's rated
+    /// current, steady state (K).
+    pub module_rise_k: f64,
+    /// Power module thermal time constant, junction to heatsink (s).
+    pub module_time_constant_s: f64,
+    /// Power module overtemperature trip (°C): alarm A5.
+    pub module_trip_c: f64,
     /// Firmware version as read through mux 0x34.
     pub software_version: u16,
 }
@@ -79,6 +86,9 @@ impl Default for DriveData {
             heatsink_rise_k: 40.0,
             heatsink_time_constant_s: 60.0,
             heatsink_trip_c: 90.0,
+            module_rise_k: 20.0,
+            module_time_constant_s: 3.0,
+            module_trip_c: 125.0,
             software_version: 0x0300,
         }
     }
@@ -94,8 +104,8 @@ pub const A2: u8 = 2;
 pub const A3: u8 = 3;
 /// Heatsink overtemperature.
 pub const A4: u8 = 4;
-/// Drive overtemperature (reported in message 1 bit 6; the twin has one heatsink and
-/// raises A4 only).
+/// Power module overtemperature: the estimated junction temperature of the output stage
+/// (the second of the drive's overtemperature alarms in message 1 bit 6, manual §3.2).
 pub const A5: u8 = 5;
 /// DC bus overvoltage.
 pub const A11: u8 = 11;
@@ -255,6 +265,7 @@ pub struct Drive {
     current_pct: f64,
     dc_bus_v: f64,
     heatsink_c: f64,
+    module_c: f64,
     motor_thermal: f64,
     time_in_limit_s: f64,
     in_limit: bool,
@@ -296,6 +307,7 @@ impl Drive {
             current_pct: 0.0,
             dc_bus_v: vdc,
             heatsink_c: 40.0,
+            module_c: 40.0,
             motor_thermal: 0.0,
             time_in_limit_s: 0.0,
             in_limit: false,
@@ -457,6 +469,11 @@ impl Drive {
         self.heatsink_c
     }
 
+    /// The power module's estimated junction temperature (°C).
+    pub fn module_c(&self) -> f64 {
+        self.module_c
+    }
+
     /// The motor's I²t thermal state: 1.0 is the trip level.
     pub fn motor_thermal(&self) -> f64 {
         self.motor_thermal
@@ -610,6 +627,8 @@ impl Drive {
         self.motor_thermal *= k;
         let k = (-secs / self.hw.heatsink_time_constant_s.max(1e-3)).exp();
         self.heatsink_c = self.ambient_c + (self.heatsink_c - self.ambient_c) * k;
+        let k = (-secs / self.hw.module_time_constant_s.max(1e-3)).exp();
+        self.module_c = self.heatsink_c + (self.module_c - self.heatsink_c) * k;
     }
 
     fn trip(&mut self, n: u8) {
@@ -792,6 +811,16 @@ impl Drive {
         self.heatsink_c += (target - self.heatsink_c) * (dt / tau).min(1.0);
         if self.heatsink_c >= self.hw.heatsink_trip_c && !self.alarms.contains(A4) {
             self.trip(A4);
+        }
+        // Power module: its junctions sit above the heatsink by the losses of the current
+        // they carry, with a time constant of seconds where the heatsink's is a minute. An
+        // overload the heatsink would carry for a minute (150 % at the current limit) heats
+        // the junctions to their limit first: A5, while the heatsink is still below A4's.
+        let target = self.heatsink_c + self.hw.module_rise_k * drive_pu * drive_pu;
+        let tau = self.hw.module_time_constant_s.max(1e-3);
+        self.module_c += (target - self.module_c) * (dt / tau).min(1.0);
+        if self.module_c >= self.hw.module_trip_c && !self.alarms.contains(A5) {
+            self.trip(A5);
         }
     }
 

@@ -3,7 +3,7 @@
 
 mod common;
 use cantwin_cal::{ClientEvent, Request};
-use cantwin_opendrive::model::{A2, A3, A4, A11};
+use cantwin_opendrive::model::{A2, A3, A4, A5, A11};
 use cantwin_opendrive::params::C47;
 use cantwin_opendrive::{MESSAGE_1, OpenDrive};
 use common::*;
@@ -165,4 +165,51 @@ fn heatsink_overtemperature_notifies_bit_6() {
     r.run_ms(1);
     let frames = r.frames();
     assert_eq!((frames[0].0.as_str(), frames[0].1), ("1AD#100040", trip));
+}
+
+#[test]
+fn power_module_overtemperature_a5_notifies_bit_6_before_the_heatsink_trips() {
+    let mut r = rig();
+    running(&mut r);
+    r.exchange(f(430, &[0x30]));
+    // Thermal current P70 = 200 % (mux 0x19 = 256), so the motor's I²t (A3) allows the
+    // overload for over a minute.
+    assert_eq!(
+        r.exchange(f(1100, &[0x19, 0x00, 0x01])),
+        ["44C#190001", "44B#190001"]
+    );
+    // 290 % of the motor's rated torque: about 294 % of its current, 147 % of the drive's
+    // (P61 = 50 %), just under the current limit. The junctions sit 20 K × 1.47² = 43 K above
+    // the heatsink, which climbs towards 40 + 40 × 1.47² = 127 °C with its minute-long time
+    // constant: 125 °C at the junctions is reached after about 38 s, with the heatsink near
+    // 82 °C, under A4's 90 °C.
+    r.drive_mut().set_load_torque_pct(290.0);
+    assert!(!r.drive().in_limit());
+    let start = r.now().as_nanos();
+    let trip = until_alarm(&mut r, A5, 60_000);
+    let secs = (trip - start) as f64 / 1e9;
+    assert!((33.0..43.0).contains(&secs), "tripped after {secs} s");
+    let hw = *r.drive().hardware();
+    assert!(r.drive().module_c() >= hw.module_trip_c);
+    assert!(r.drive().heatsink_c() < hw.heatsink_trip_c - 5.0);
+    assert!(!r.drive().alarms().contains(A4));
+    assert!(!r.drive().alarms().contains(A3));
+    assert!(!r.drive().is_running());
+    r.run_ms(1);
+    let frames = r.frames();
+    assert_eq!(frames.len(), 1);
+    assert_eq!((frames[0].0.as_str(), frames[0].1), ("1AD#100040", trip));
+}
+
+#[test]
+fn power_module_stays_cool_at_rated_current_in_a_hot_cabinet() {
+    let mut r = rig();
+    running(&mut r);
+    // The heatsink test's conditions: A4 trips, A5 does not (the junctions are only a few
+    // kelvin above the heatsink at the motor's rated current).
+    r.drive_mut().set_ambient_c(85.0);
+    r.drive_mut().set_load_torque_pct(100.0);
+    until_alarm(&mut r, A4, 600_000);
+    assert!(!r.drive().alarms().contains(A5));
+    assert!(r.drive().module_c() < r.drive().heatsink_c() + 10.0);
 }
