@@ -215,6 +215,90 @@ impl Alarm {
     }
 }
 
+/// The Opt Bus Fault sub-codes the card raises at run time (§1.5 and §3.7.1 fieldbus
+/// tables; the configuration codes are raised by [`crate::card`] and [`crate::pdc`]).
+pub mod opt_bus {
+    /// Bus Loss: no SYNC within the communication cycle period, enable while not Operational
+    /// (not in polled I/O for DeviceNet), or the DeviceNet connection timed out.
+    pub const BUS_LOSS: u16 = 0x0000;
+    /// Error initializing CAN interface (an internal card error).
+    pub const CAN_INIT: u16 = 0xFF04;
+    /// Internal database error on channel 1; channel n is `DATABASE + n − 1` (…0xFFC3).
+    pub const DATABASE: u16 = 0xFFB4;
+    /// CAN msg overflow: more frames than the card can take at its bit rate.
+    pub const OVERFLOW: u16 = 0x8110;
+    /// LifeGuard/HeartBeat error: the master's guarding or heartbeat stopped.
+    pub const GUARDING: u16 = 0x8130;
+    /// CANopen: wrong NMT message length. DeviceNet: wrong baud rate.
+    pub const FFC5: u16 = 0xFFC5;
+    /// CANopen: invalid NMT command. DeviceNet: wrong MAC ID.
+    pub const FFC6: u16 = 0xFFC6;
+    /// CAN bus off ("check line state for problems").
+    pub const BUS_OFF: u16 = 0xFFC7;
+    /// DeviceNet: system error on connection ("check master for proper connection").
+    pub const CONNECTION: u16 = 0xFFC8;
+    /// DeviceNet: duplicate MAC ID check failed.
+    pub const DUPLICATE_MAC: u16 = 0xFFC9;
+    /// CANopen: CAN bus off again soon after recovering ("check line state for hardware
+    /// problems"), see [`crate::card`].
+    pub const BUS_OFF_HARDWARE: u16 = 0x8100;
+}
+
+/// A fault inside the card that nothing on the bus or in the parameters causes: the
+/// table's "Internal error, contact manufacturer" rows (§1.5, §3.7.1). The twin lets a test
+/// or a scenario give the card one of these defects; like every code marked `Cfg` in the
+/// table, the card finds it when it configures itself at the next drive reset, and keeps
+/// finding it at every reset until the defect is gone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum CardFault {
+    /// FF04 Error initializing CAN interface: the card stays off the bus.
+    CanInit,
+    /// FFB4..FFC3 Internal database error on channel n (1..=16): the card runs, in Opt Bus
+    /// Fault.
+    Database(u8),
+}
+
+impl CardFault {
+    /// The Opt Bus Fault sub-code.
+    pub const fn code(self) -> u16 {
+        match self {
+            CardFault::CanInit => opt_bus::CAN_INIT,
+            CardFault::Database(n) => opt_bus::DATABASE + n as u16 - 1,
+        }
+    }
+
+    /// The fault whose sub-code is `code` (FF04 or FFB4..FFC3).
+    pub const fn from_code(code: u16) -> Option<CardFault> {
+        match code {
+            opt_bus::CAN_INIT => Some(CardFault::CanInit),
+            0xFFB4..=0xFFC3 => Some(CardFault::Database((code - opt_bus::DATABASE + 1) as u8)),
+            _ => None,
+        }
+    }
+}
+
+impl core::str::FromStr for CardFault {
+    type Err = String;
+
+    /// The sub-code as the manual prints it, hexadecimal with or without `0x`: `FF04`,
+    /// `FFB4` … `FFC3`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let t = s.trim();
+        let hex = t
+            .strip_prefix("0x")
+            .or_else(|| t.strip_prefix("0X"))
+            .unwrap_or(t);
+        u16::from_str_radix(hex, 16)
+            .ok()
+            .and_then(CardFault::from_code)
+            .ok_or_else(|| {
+                format!(
+                    "{s:?} is not an internal card fault (FF04 CAN interface, FFB4..FFC3 database of channel 1..16)"
+                )
+            })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -229,5 +313,25 @@ mod tests {
         let codes: std::collections::BTreeSet<u16> =
             Alarm::all().iter().map(|a| a.emcy_code()).collect();
         assert_eq!(codes.len(), Alarm::all().len(), "codes are distinct");
+    }
+
+    #[test]
+    fn manual_1_5_internal_card_errors_ff04_and_ffb4_to_ffc3() {
+        assert_eq!(CardFault::CanInit.code(), 0xFF04);
+        assert_eq!(CardFault::Database(1).code(), 0xFFB4);
+        assert_eq!(CardFault::Database(16).code(), 0xFFC3);
+        for code in [0xFF04, 0xFFB4, 0xFFBB, 0xFFC3] {
+            assert_eq!(CardFault::from_code(code).map(CardFault::code), Some(code));
+        }
+        assert_eq!(CardFault::from_code(0xFFC4), None);
+        assert_eq!(CardFault::from_code(0xFFB3), None);
+        assert_eq!("ffb5".parse(), Ok(CardFault::Database(2)));
+        assert_eq!("0xFF04".parse(), Ok(CardFault::CanInit));
+        assert!(
+            "FF01"
+                .parse::<CardFault>()
+                .unwrap_err()
+                .contains("FFB4..FFC3")
+        );
     }
 }

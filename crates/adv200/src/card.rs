@@ -19,7 +19,17 @@
 //!   while the drive's enable command is on, or always with `Fieldbus alarm mode` = 1: 0
 //!   bus loss (no SYNC within 1.5 × 0x1006, or enable while not Operational), 8130 guarding
 //!   or heartbeat loss, 8110 receive overrun, FFC5 NMT message of the wrong length, FFC6
-//!   invalid NMT command, FFC7 bus-off.
+//!   invalid NMT command, FFC7 bus-off, 8100 bus-off again within [`BUS_OFF_REPEAT`] of
+//!   recovering from the previous one. DeviceNet: FFC8 for a poll command whose length is not
+//!   the PDC's Master→Slave size.
+//! * **Two codes for one bus-off** (§1.5 lists FFC7 "CAN bus off — check line state for
+//!   problems" and 8100 "CAN bus off — check line state for hardware problems"; the DeviceNet
+//!   table of §3.7.1 only FFC7): a bus-off is FFC7; one that follows the recovery from the
+//!   previous within [`BUS_OFF_REPEAT`] means the line cannot carry frames at all (a short,
+//!   a missing terminator, a node at another bit rate) and raises 8100 as well.
+//! * **Internal card errors** (FF04, FFB4..FFC3, "contact manufacturer"): a defect given to
+//!   the card with [`Adv200::inject_card_fault`] is found at the next drive reset, like the
+//!   other `Cfg` codes ([`CardFault`]).
 //! * **LEDs** (§"Leds", §1.6.2.1): PWR and +5VC on while powered and the card active, OP on in
 //!   Operational, AL on in any other NMT state or with Opt Bus Fault active.
 
@@ -31,7 +41,7 @@ use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
 
 use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
 
-use crate::alarms::Alarm;
+use crate::alarms::{Alarm, CardFault, opt_bus};
 use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
 use crate::ds402::{Ds402, State as PowerState};
@@ -115,6 +125,10 @@ pub struct Adv200 {
     last_now: Instant,
     /// An input changed outside a call from the bus: evaluate at once.
     dirty: bool,
+    /// Defects of the card found at every drive reset.
+    card_faults: std::collections::BTreeSet<CardFault>,
+    /// When the controller last recovered from bus-off.
+    bus_off_recovered: Option<Instant>,
 }
 
 impl core::fmt::Debug for Adv200 {
@@ -125,6 +139,12 @@ impl core::fmt::Debug for Adv200 {
             .finish_non_exhaustive()
     }
 }
+
+/// A bus-off within this time of the recovery from the previous one raises 8100 (hardware
+/// problem) besides FFC7 (§1.5; see the [module documentation](self)). ISO 11898-1 recovery
+/// takes 128 × 11 bit times (2.8 ms at 500 kbit/s): a line that sends the card bus-off again
+/// within a second of recovering keeps failing.
+pub const BUS_OFF_REPEAT: Duration = Duration::from_secs(1);
 
 const BAUDS: [u32; 5] = [0, 125_000, 250_000, 500_000, 1_000_000];
 
@@ -164,6 +184,8 @@ impl Adv200 {
             sticky: None,
             last_now: Instant::ZERO,
             dirty: false,
+            card_faults: std::collections::BTreeSet::new(),
+            bus_off_recovered: None,
         }
     }
 
@@ -214,6 +236,32 @@ impl Adv200 {
     pub fn raise_alarm(&mut self, alarm: Alarm) {
         self.dirty = true;
         self.drive.raise(alarm);
+    }
+
+    /// Gives the card an internal defect (FF04, FFB4..FFC3, "Internal error, contact
+    /// manufacturer"). Like every `Cfg` code of the §1.5/§3.7.1 tables the card finds it
+    /// when it configures itself, at the next drive reset, and at every reset after until
+    /// [`Adv200::clear_card_faults`].
+    pub fn inject_card_fault(&mut self, fault: CardFault) {
+        self.card_faults.insert(fault);
+    }
+
+    /// Repairs the card (effective at the next drive reset).
+    pub fn clear_card_faults(&mut self) {
+        self.card_faults.clear();
+    }
+
+    /// The defects given to the card.
+    pub fn card_faults(&self) -> impl Iterator<Item = CardFault> + '_ {
+        self.card_faults.iter().copied()
+    }
+
+    /// The first internal database error of the card, if any (FFB4..FFC3).
+    fn database_fault(&self) -> Option<u16> {
+        self.card_faults
+            .iter()
+            .find(|f| matches!(f, CardFault::Database(_)))
+            .map(|f| f.code())
     }
 
     /// Digital output k (1..=4).
@@ -293,6 +341,7 @@ impl Adv200 {
         self.dnet = None;
         self.drive.restart();
         self.sticky = None;
+        self.bus_off_recovered = None;
         let p = &self.params;
         self.latched = Latched {
             ty: p.value(par::FIELDBUS_TYPE),
@@ -318,6 +367,9 @@ impl Adv200 {
         if !(1..=127).contains(&self.latched.address) {
             return self.config_fault(0xFF03, now);
         }
+        if self.card_faults.contains(&CardFault::CanInit) {
+            return self.config_fault(opt_bus::CAN_INIT, now);
+        }
         let bps = BAUDS.get(self.latched.baud as usize).copied().unwrap_or(0);
         if self.config.bus_bit_rate.is_some_and(|b| b != bps) {
             self.drive.advance(&mut self.params, now);
@@ -331,6 +383,7 @@ impl Adv200 {
         } else {
             (Pdc::default(), None)
         };
+        let fault = fault.or(self.database_fault());
         let node = self.latched.address as u8;
         let built = build(personality, &pdc, self.config.serial)
             .ok()
@@ -380,6 +433,9 @@ impl Adv200 {
         else {
             return self.config_fault(0xFFC6, now);
         };
+        if self.card_faults.contains(&CardFault::CanInit) {
+            return self.config_fault(opt_bus::CAN_INIT, now);
+        }
         if self
             .config
             .bus_bit_rate
@@ -392,6 +448,7 @@ impl Adv200 {
             Ok(p) => (p, None),
             Err(e) => (Pdc::default(), Some(e.code())),
         };
+        let fault = fault.or(self.database_fault());
         let app = DnApp {
             params: ParamDb::new(),
             pdc,
@@ -438,10 +495,11 @@ impl Adv200 {
                 SlaveEvent::IoEstablished => state = 2,
                 SlaveEvent::IoTimedOut => {
                     state = 1;
-                    self.bus_fault(0);
+                    self.bus_fault(opt_bus::BUS_LOSS);
                 }
-                SlaveEvent::DuplicateMac => self.bus_fault(0xFFC9),
-                SlaveEvent::BusOff => self.bus_fault(0xFFC7),
+                SlaveEvent::DuplicateMac => self.bus_fault(opt_bus::DUPLICATE_MAC),
+                SlaveEvent::BusOff => self.bus_fault(opt_bus::BUS_OFF),
+                SlaveEvent::IoLengthMismatch { .. } => self.bus_fault(opt_bus::CONNECTION),
                 _ => {}
             }
         }
@@ -451,7 +509,7 @@ impl Adv200 {
         let _ = self.params.force(par::FIELDBUS_STATE, state);
         self.drive.advance(&mut self.params, now);
         if state != 2 && self.drive_enable_cmd() {
-            self.bus_fault(0);
+            self.bus_fault(opt_bus::BUS_LOSS);
         }
         if let Some(sticky) = self.sticky
             && !self.drive.alarms().contains(&sticky)
@@ -528,7 +586,7 @@ impl Adv200 {
             not_operational = c.dev.state() != State::Operational;
         }
         if not_operational && self.drive_enable_cmd() {
-            self.bus_fault(0);
+            self.bus_fault(opt_bus::BUS_LOSS);
         }
         if let Some(sticky) = self.sticky
             && !self.drive.alarms().contains(&sticky)
@@ -549,7 +607,9 @@ impl Adv200 {
             let Some(c) = &mut self.card else { continue };
             match e {
                 AlarmEvent::Raised(a) => {
-                    c.dev.emcy().raise(a.emcy_code(), a.manufacturer_bytes());
+                    // Every Opt Bus Fault sub-code is its own occurrence of 0xFF11 (§1.5):
+                    // each one is sent, one alarm reset clears them all.
+                    c.dev.emcy().signal(a.emcy_code(), a.manufacturer_bytes());
                 }
                 AlarmEvent::Cleared(a) => {
                     let code = a.emcy_code();
@@ -801,7 +861,9 @@ impl Adv200 {
             while let Some(e) = c.dev.poll_event() {
                 match e {
                     Event::Sync { .. } => c.last_sync = Some(now),
-                    Event::LifeGuardingLost | Event::HeartbeatLost { .. } => faults.push(0x8130),
+                    Event::LifeGuardingLost | Event::HeartbeatLost { .. } => {
+                        faults.push(opt_bus::GUARDING)
+                    }
                     Event::StateChanged {
                         to: State::Operational,
                         ..
@@ -903,7 +965,7 @@ impl Node for Adv200 {
             if let Some(c) = &mut self.card {
                 c.last_sync = Some(now);
             }
-            self.bus_fault(0);
+            self.bus_fault(opt_bus::BUS_LOSS);
             again = true;
         }
         if let Some(c) = &mut self.card
@@ -951,10 +1013,23 @@ impl Node for Adv200 {
     }
 
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
-        match event {
-            ControllerEvent::BusOff => self.bus_fault(0xFFC7),
-            ControllerEvent::RxOverrun => self.bus_fault(0x8110),
-            _ => {}
+        if self.dnet.is_none() {
+            match event {
+                ControllerEvent::BusOff => {
+                    self.bus_fault(opt_bus::BUS_OFF);
+                    if self
+                        .bus_off_recovered
+                        .is_some_and(|t| now.saturating_duration_since(t) <= BUS_OFF_REPEAT)
+                    {
+                        self.bus_fault(opt_bus::BUS_OFF_HARDWARE);
+                    }
+                }
+                ControllerEvent::BusOffRecovered => self.bus_off_recovered = Some(now),
+                ControllerEvent::RxOverrun => self.bus_fault(opt_bus::OVERFLOW),
+                _ => {}
+            }
+        } else if event == ControllerEvent::RxOverrun {
+            self.bus_fault(opt_bus::OVERFLOW);
         }
         if let Some(c) = &mut self.card {
             c.dev.on_controller_event(event, now, out);

@@ -3,7 +3,7 @@
 
 mod common;
 
-use cantwin_adv200::alarms::Alarm;
+use cantwin_adv200::alarms::{Alarm, CardFault};
 use cantwin_adv200::params::par;
 use cantwin_adv200::{Adv200, Leds};
 use cantwin_can::{ControllerEvent, Instant, Node, Outbox};
@@ -209,4 +209,105 @@ fn manual_1_5_enable_outside_operational_is_bus_loss() {
     h.run_to(2 * MS);
     assert!(h.d.opt_bus_faults().is_empty());
     assert_eq!(h.d.param(par::ENABLE_STATE), Ok(1));
+}
+
+#[test]
+fn manual_1_5_ff04_error_initializing_can_interface_keeps_the_card_off_the_bus() {
+    // The defect is found when the card configures itself at a drive reset (`Cfg` column).
+    let mut h = H::canopen(|d| d.inject_card_fault(CardFault::CanInit));
+    assert_eq!(h.frames(), Vec::<String>::new(), "no boot-up, no EMCY");
+    assert_eq!(h.d.opt_bus_faults(), [0xFF04]);
+    assert_eq!(h.d.nmt_state(), None);
+    assert_eq!(h.d.param(par::ACTIVE_ALARM), Ok(0xFF11));
+    assert!(h.d.leds().al);
+    // Alarm reset does not repair the card.
+    h.d.set_param(par::ALARM_RESET, 1).unwrap();
+    h.run_to(MS);
+    assert_eq!(h.d.opt_bus_faults(), [0xFF04]);
+    // Repaired, the next drive reset brings it on the bus.
+    h.d.clear_card_faults();
+    let mut out = Outbox::new();
+    h.d.reset_drive(Instant::from_nanos(2 * MS), &mut out);
+    assert_eq!(out.frames()[0].to_string(), "70C#00");
+    assert!(h.d.opt_bus_faults().is_empty());
+}
+
+#[test]
+fn manual_1_5_ffb4_to_ffc3_internal_database_error_on_channel_n() {
+    for n in 1..=16u8 {
+        let code = 0xFFB4 + u16::from(n) - 1;
+        let mut h = H::canopen(|d| d.inject_card_fault(CardFault::Database(n)));
+        let c = code.to_le_bytes();
+        // The card boots and reports Opt Bus Fault with the channel's sub-code.
+        assert_eq!(
+            h.frames(),
+            [
+                "70C#00".to_string(),
+                emcy(0xFF11, 0x81, [c[0], c[1], 0, 0, 0])
+            ],
+            "channel {n}"
+        );
+        assert_eq!(h.d.opt_bus_faults(), [code]);
+        assert_eq!(
+            h.d.nmt_state(),
+            Some(cantwin_canopen::nmt::State::PreOperational)
+        );
+        // Alarm reset (PAR 1070 by SDO): the cause is still there, the alarm stays.
+        h.send("60C#2F2E240101000000");
+        h.run_to(MS);
+        assert_eq!(h.d.opt_bus_faults(), [code], "channel {n}");
+        assert_eq!(h.d.param(par::DRIVE_OK), Ok(0));
+    }
+    // Repaired: the next drive reset is clean.
+    let mut h = H::canopen(|d| d.inject_card_fault(CardFault::Database(3)));
+    h.d.clear_card_faults();
+    let mut out = Outbox::new();
+    h.d.reset_drive(Instant::from_nanos(MS), &mut out);
+    assert_eq!(out.frames().len(), 1, "boot-up only");
+    assert!(h.d.opt_bus_faults().is_empty());
+}
+
+/// A controller event at `ms`, after the card ran every deadline before it.
+fn controller(h: &mut H, event: ControllerEvent, ms: u64) {
+    h.run_to(ms * MS);
+    let mut out = Outbox::new();
+    h.d.on_controller_event(event, Instant::from_nanos(ms * MS), &mut out);
+    for f in out.drain() {
+        h.log.push((h.now, f.to_string()));
+    }
+    h.run_to(ms * MS);
+}
+
+#[test]
+fn manual_1_5_bus_off_is_ffc7_and_8100_when_it_repeats_after_recovery() {
+    let alarm_mode = |d: &mut Adv200| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap();
+    // A single bus-off: FFC7 only, even after a recovery long before.
+    let mut h = H::canopen(alarm_mode);
+    controller(&mut h, ControllerEvent::BusOff, 1);
+    controller(&mut h, ControllerEvent::BusOffRecovered, 4);
+    controller(&mut h, ControllerEvent::BusOff, 1100);
+    assert_eq!(h.d.opt_bus_faults(), [0xFFC7]);
+    // Bus-off again within a second of the recovery: the line has a hardware problem.
+    let mut h = H::canopen(alarm_mode);
+    controller(&mut h, ControllerEvent::BusOff, 1);
+    controller(&mut h, ControllerEvent::BusOffRecovered, 4);
+    controller(&mut h, ControllerEvent::BusOff, 500);
+    controller(&mut h, ControllerEvent::BusOffRecovered, 503);
+    assert_eq!(h.d.opt_bus_faults(), [0xFFC7, 0x8100]);
+    // Each sub-code travels in its own Opt Bus Fault EMCY.
+    h.run_to(600 * MS);
+    let sent: Vec<String> = h
+        .frames()
+        .into_iter()
+        .filter(|f| f.starts_with("08C#11FF"))
+        .collect();
+    assert_eq!(sent.len(), 2, "{sent:?}");
+    assert!(sent[0].ends_with("C7FF000000"), "{sent:?}");
+    assert!(sent[1].ends_with("0081000000"), "{sent:?}");
+    // Disabled with alarm mode 0: neither (§1.5: only while enabled).
+    let mut h = H::canopen(|_| {});
+    controller(&mut h, ControllerEvent::BusOff, 1);
+    controller(&mut h, ControllerEvent::BusOffRecovered, 4);
+    controller(&mut h, ControllerEvent::BusOff, 5);
+    assert!(h.d.opt_bus_faults().is_empty());
 }

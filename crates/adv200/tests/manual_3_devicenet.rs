@@ -3,6 +3,7 @@
 
 mod common;
 
+use cantwin_adv200::alarms::CardFault;
 use cantwin_adv200::params::par;
 use cantwin_adv200::{Adv200, Adv200Config, example};
 use cantwin_bus::{BusConfig, PortConfig, Recorder, Simulation};
@@ -216,4 +217,117 @@ fn manual_3_3_2_identity_reset_restarts_the_link_and_keeps_the_parameters() {
     assert!(dup[2] > at(2100));
     let node = sim.node::<Adv200>(pd).unwrap();
     assert_eq!(node.param(par::FIELDBUS_ADDRESS), Ok(12), "parameters kept");
+}
+
+/// A scanner (MAC 0) and the §3.9 drive (MAC 12, alarm mode 1 so that the faults show
+/// while the drive is disabled), both on-line at 2.1 s.
+fn online() -> (
+    Simulation,
+    cantwin_bus::BusId,
+    cantwin_bus::PortId,
+    cantwin_bus::PortId,
+) {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    let mut d = drive();
+    d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap();
+    let pd = sim.attach(bus, d, PortConfig::default()).unwrap();
+    sim.run_until(at(2100));
+    (sim, bus, pm, pd)
+}
+
+#[test]
+fn manual_3_7_1_ffc8_system_error_on_connection_when_the_master_polls_the_wrong_size() {
+    let (mut sim, bus, pm, pd) = online();
+    let mac = MacId::new(12).unwrap();
+    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+    {
+        let m = sim.node_mut::<Scanner>(pm).unwrap();
+        m.allocate(mac, choice::EXPLICIT | choice::POLLED).unwrap();
+        m.set_expected_packet_rate(mac, 2, 100).unwrap();
+        // The PDC's Master→Slave area is 4 bytes (§3.9); this master's scan list says 2.
+        m.start_polling(mac, Duration::from_millis(10), &[0x03, 0x00], 6, at(2110));
+    }
+    sim.run_until(at(2200));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.opt_bus_faults(), [0xFFC8]);
+    assert_eq!(node.param(par::ACTIVE_ALARM), Ok(0xFF11));
+    assert_eq!(node.param(par::m2s_mon(1)), Ok(0), "nothing consumed");
+    let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+    assert!(
+        rec.frames().all(|r| r.frame.id().as_raw() != 0x3CC),
+        "no poll response to a command of the wrong size"
+    );
+    // The right size is consumed and answered; the alarm stays until it is reset.
+    sim.node_mut::<Scanner>(pm).unwrap().stop_polling(mac);
+    sim.node_mut::<Scanner>(pm).unwrap().start_polling(
+        mac,
+        Duration::from_millis(10),
+        &[0x00, 0x00, 0xDC, 0x05],
+        6,
+        at(2210),
+    );
+    sim.run_until(at(2300));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.param(par::m2s_mon(2)), Ok(1500));
+    assert_eq!(node.opt_bus_faults(), [0xFFC8]);
+    let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+    assert!(rec.frames().any(|r| r.frame.id().as_raw() == 0x3CC));
+}
+
+#[test]
+fn manual_3_7_1_ffc7_bus_off_and_no_8100_in_devicenet() {
+    let (mut sim, bus, _pm, pd) = online();
+    // Bus-off twice within a second: DeviceNet's table has FFC7 only.
+    sim.bus_mut(bus).unwrap().force_bus_off(pd).unwrap();
+    sim.run_until(at(2200));
+    sim.bus_mut(bus).unwrap().force_bus_off(pd).unwrap();
+    sim.run_until(at(2300));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.opt_bus_faults(), [0xFFC7]);
+    assert_eq!(node.param(par::ACTIVE_ALARM), Ok(0xFF11));
+}
+
+#[test]
+fn manual_3_7_1_ffc9_duplicate_mac_id_check_failed() {
+    let (mut sim, bus, _pm, pd) = online();
+    // A second drive configured with the same MAC ID 12 is powered later: the first, on-line,
+    // answers its duplicate MAC ID check request.
+    let mut second = drive();
+    second.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap();
+    let p2 = sim.attach(bus, second, PortConfig::default()).unwrap();
+    sim.run_until(at(3500));
+    let late = sim.node::<Adv200>(p2).unwrap();
+    assert_eq!(late.opt_bus_faults(), [0xFFC9]);
+    // LED table: OP off, AL blinking, "Fault recuperabile (DUP MAC-ID fail, …)".
+    assert_eq!(late.devicenet_leds(), Some((Led::Off, Led::Blink)));
+    assert!(sim.node::<Adv200>(pd).unwrap().opt_bus_faults().is_empty());
+}
+
+#[test]
+fn manual_3_7_1_internal_errors_ff04_and_ffb4_in_devicenet() {
+    let cfg = |fault: CardFault| {
+        let h = common::H::new(Adv200Config::default(), |d| {
+            d.set_param_str(par::FIELDBUS_TYPE, "DeviceNet").unwrap();
+            d.set_param_str(par::FIELDBUS_BAUDRATE, "500k").unwrap();
+            d.set_param(par::FIELDBUS_ADDRESS, 12).unwrap();
+            d.inject_card_fault(fault);
+        });
+        (
+            h.d.opt_bus_faults(),
+            h.frames().len(),
+            h.d.devicenet().is_some(),
+        )
+    };
+    // FF04: the CAN interface does not start, nothing on the bus.
+    assert_eq!(cfg(CardFault::CanInit), (vec![0xFF04], 0, false));
+    // FFB4+n−1: the card runs (its duplicate MAC ID check goes out) in Opt Bus Fault.
+    assert_eq!(cfg(CardFault::Database(2)), (vec![0xFFB5], 1, true));
 }

@@ -486,6 +486,15 @@ impl<H> Emcy<'_, H> {
         r
     }
 
+    /// Signals another occurrence of error `code` with other manufacturer-specific bytes
+    /// (one active entry, one EMCY per occurrence); raises it if it is not active.
+    pub fn signal(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
+        let send = self.core.state.allows(Service::Emcy);
+        let r = self.core.emcy.signal(code, manufacturer, send);
+        self.core.mirror_errors();
+        r
+    }
+
     /// Clears error `code` (sends EMCY 0x0000 with the new error register).
     pub fn clear(&mut self, code: u16) -> bool {
         let send = self.core.state.allows(Service::Emcy);

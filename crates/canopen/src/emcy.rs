@@ -141,6 +141,28 @@ impl Producer {
         true
     }
 
+    /// Signals another occurrence of `code` with other manufacturer-specific bytes (the
+    /// same error code, a different cause in the device's own detail): queues a new EMCY if
+    /// `send`, as CiA 301 §7.2.7.1 sends one per error occurrence, without adding a second
+    /// active entry (one reset clears it). Raises it if it is not active. Returns whether an
+    /// EMCY was queued or the code newly raised.
+    pub fn signal(&mut self, code: u16, manufacturer: [u8; 5], send: bool) -> bool {
+        if code == 0 {
+            return false;
+        }
+        if !self.is_active(code) {
+            return self.raise(code, manufacturer, send);
+        }
+        if send {
+            self.enqueue(Emcy {
+                code,
+                register: self.register(),
+                manufacturer,
+            });
+        }
+        send
+    }
+
     /// Clears `code`: queues the error reset EMCY (0x0000) if `send`. Returns whether it
     /// was active.
     pub fn clear(&mut self, code: u16, send: bool) -> bool {
@@ -271,5 +293,28 @@ mod tests {
         );
         assert_eq!(p.history(), [0x3000, 0x2000]);
         assert!(!p.raise(0x3000, [0; 5], true));
+    }
+
+    #[test]
+    fn cia301_7_2_7_1_another_occurrence_with_other_details_is_sent_again() {
+        let mut p = Producer::new(0);
+        p.set_cob_id(CobId(0x85));
+        let t = Instant::from_nanos(1_000);
+        assert!(p.signal(0xFF11, [0xC7, 0xFF, 0, 0, 0], true));
+        assert!(p.signal(0xFF11, [0x00, 0x81, 0, 0, 0], true));
+        let sent: Vec<_> = std::iter::from_fn(|| p.poll(t))
+            .map(|e| (e.code, e.manufacturer))
+            .collect();
+        assert_eq!(
+            sent,
+            [
+                (0xFF11, [0xC7, 0xFF, 0, 0, 0]),
+                (0xFF11, [0x00, 0x81, 0, 0, 0])
+            ]
+        );
+        // One active entry: one reset clears it.
+        assert!(p.clear(0xFF11, true));
+        assert!(!p.is_active(0xFF11));
+        assert!(!p.signal(0x0000, [0; 5], true));
     }
 }

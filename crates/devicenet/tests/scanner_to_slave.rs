@@ -497,6 +497,38 @@ fn one_shot_poll() {
     assert_eq!(s.app().consumed, vec![vec![9, 8, 7, 6]]);
 }
 
+/// A poll command longer or shorter than the consumed connection size is not consumed, not
+/// answered, and reported to the device (the master's I/O sizes do not match the slave's).
+#[test]
+fn a_poll_command_of_the_wrong_length_is_reported_and_not_consumed() {
+    let (mut m, mut s, mut w) = setup(2);
+    m.allocate(mac(9), choice::EXPLICIT | choice::POLLED)
+        .unwrap();
+    m.set_expected_packet_rate(mac(9), 2, 1000).unwrap();
+    w.run_until(&mut [&mut m, &mut s], at(2 * SEC));
+    events(&mut m);
+    for data in [&[9u8, 8][..], &[9, 8, 7, 6, 5]] {
+        let mut out = cantwin_can::Outbox::new();
+        m.poll(mac(9), data, 4, &mut out);
+        let frames: Vec<Frame> = out.drain().collect();
+        w.inject(&mut [&mut m, &mut s], 0, frames[0]);
+    }
+    assert_eq!(events(&mut m), []);
+    assert!(s.app().consumed.is_empty());
+    let mismatches: Vec<_> = s
+        .app()
+        .events
+        .iter()
+        .filter_map(|(_, e)| match e {
+            cantwin_devicenet::SlaveEvent::IoLengthMismatch { received, expected } => {
+                Some((*received, *expected))
+            }
+            _ => None,
+        })
+        .collect();
+    assert_eq!(mismatches, [(2, 4), (5, 4)]);
+}
+
 #[test]
 fn browse_reports_a_device_whose_identity_exceeds_the_explicit_limit_and_releases_it() {
     // A product name long enough that Get_Attributes_All of the Identity needs more than the

@@ -32,6 +32,23 @@ pub trait DeviceKind: Send + Sync {
         let _ = (sim, port, index, sub);
         None
     }
+
+    /// Give the node this kind built on `port` an internal defect named `fault` in the
+    /// kind's words (a fault with no cause on the bus, such as a card's internal error), or
+    /// repair it with `None`, for `action = "inject"` / `"repair"` in scenario scripts. The
+    /// default refuses: the kind has no internal faults.
+    fn inject(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        fault: Option<&str>,
+    ) -> Result<(), String> {
+        let _ = (sim, port, fault);
+        Err(format!(
+            "a {} device has no internal faults to inject",
+            self.name()
+        ))
+    }
 }
 
 /// The device kinds a scenario may use.

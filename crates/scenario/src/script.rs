@@ -10,7 +10,8 @@
 //! [[at]]
 //! time_ms = 500
 //! action = "power_off"     # power_on, disconnect, connect, bus_off, babble, babble_stop,
-//! device = "node5"         # bit_rate_mismatch, bit_rate_fix, send, drop, corrupt, clear_faults
+//! device = "node5"         # bit_rate_mismatch, bit_rate_fix, send, drop, corrupt, clear_faults,
+//!                          # inject (with `fault`), repair
 //!
 //! [[expect]]
 //! within_ms = [1000, 1100]
@@ -55,6 +56,7 @@ pub(crate) struct RawAt {
     fraction: Option<f64>,
     count: Option<u64>,
     bit_rate: Option<String>,
+    fault: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -192,6 +194,14 @@ pub enum ActionKind {
     ClearFaults {
         /// The bus.
         bus: String,
+    },
+    /// Give a device an internal defect its kind names (`Some`), or repair it (`None`); see
+    /// [`crate::registry::DeviceKind::inject`].
+    Inject {
+        /// The device.
+        device: String,
+        /// The defect, in the kind's words.
+        fault: Option<String>,
     },
 }
 
@@ -588,12 +598,26 @@ impl ScriptParser<'_> {
             "clear_faults" => ActionKind::ClearFaults {
                 bus: self.bus(a.bus.as_deref(), None, line, &key("bus"))?,
             },
+            "inject" => ActionKind::Inject {
+                device: dev()?,
+                fault: Some(a.fault.clone().ok_or_else(|| {
+                    self.err(
+                        line,
+                        key("fault"),
+                        "needs `fault`, the defect in the device kind's words",
+                    )
+                })?),
+            },
+            "repair" => ActionKind::Inject {
+                device: dev()?,
+                fault: None,
+            },
             other => {
                 return Err(self.err(
                     line,
                     key("action"),
                     format!(
-                        "unknown action {other:?} (actions: send, power_off, power_on, disconnect, connect, bus_off, babble, babble_stop, bit_rate_mismatch, bit_rate_fix, drop, corrupt, clear_faults)"
+                        "unknown action {other:?} (actions: send, power_off, power_on, disconnect, connect, bus_off, babble, babble_stop, bit_rate_mismatch, bit_rate_fix, drop, corrupt, clear_faults, inject, repair)"
                     ),
                 ));
             }
@@ -936,7 +960,7 @@ pub fn check(
         built.sim.run_until(t);
         match step {
             Step::Act(a) => {
-                if let Err(e) = apply(&mut built, &script_ports, a) {
+                if let Err(e) = apply(&mut built, registry, &script_ports, a) {
                     outcomes.push(Outcome {
                         line: a.line,
                         label: format!("action at {}", fmt_ms(a.at)),
@@ -1049,6 +1073,7 @@ pub fn check(
 
 fn apply(
     built: &mut Built,
+    registry: &Registry,
     script_ports: &BTreeMap<String, PortId>,
     a: &Action,
 ) -> Result<(), String> {
@@ -1124,6 +1149,16 @@ fn apply(
                 .ok_or_else(|| format!("no bus {bus:?}"))?
                 .clear_faults();
             Ok(())
+        }
+        ActionKind::Inject { device, fault } => {
+            let d = built
+                .device(device)
+                .ok_or_else(|| format!("no device {device:?}"))?;
+            let (port, kind) = (d.port, d.kind.clone());
+            let k = registry
+                .get(&kind)
+                .ok_or_else(|| format!("no kind {kind:?}"))?;
+            return k.inject(&mut built.sim, port, fault.as_deref());
         }
     };
     r.map_err(|e| e.to_string())
@@ -1309,5 +1344,45 @@ mod tests {
         assert_eq!(r.outcomes.len(), 1);
         assert_eq!(r.outcomes[0].line, 17);
         assert!(r.outcomes[0].detail.contains("powered off"), "{r}");
+    }
+
+    #[test]
+    fn inject_needs_a_fault_and_a_kind_without_internal_faults_refuses_it() {
+        let e = error_of("\n[[at]]\ntime_ms = 1\naction = \"inject\"\ndevice = \"node5\"\n");
+        assert!(
+            e.contains("at[0].fault") && e.contains("needs `fault`"),
+            "{e}"
+        );
+        let r = report(
+            "\n[[at]]\ntime_ms = 1\naction = \"inject\"\ndevice = \"node5\"\nfault = \"FF04\"\n",
+        );
+        assert!(!r.passed());
+        assert!(
+            r.outcomes[0]
+                .detail
+                .contains("a cia301 device has no internal faults to inject"),
+            "{r}"
+        );
+    }
+
+    #[test]
+    fn inject_gives_an_adv200_card_its_internal_error_at_the_next_reset() {
+        let text = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+            [[device]]\nname = \"drive\"\nkind = \"adv200\"\nbus = \"can0\"\n\
+            params = { 4000 = \"CANopen\", 4004 = \"500k\", 4006 = 12 }\n\n\
+            [[at]]\ntime_ms = 10\naction = \"inject\"\ndevice = \"drive\"\nfault = \"FFB6\"\n\n\
+            [[at]]\ntime_ms = 20\naction = \"power_off\"\ndevice = \"drive\"\n\n\
+            [[at]]\ntime_ms = 30\naction = \"power_on\"\ndevice = \"drive\"\n\n\
+            [[at]]\ntime_ms = 40\naction = \"inject\"\ndevice = \"drive\"\nfault = \"FF01\"\n\n\
+            [[expect]]\nwithin_ms = [0, 19]\nframe = \"08C#*\"\nabsent = true\n\n\
+            [[expect]]\nwithin_ms = [30, 31]\nframe = \"08C#11FF81B6FF000000\"\n\n\
+            [[expect]]\nat_ms = 35\nvalue = { device = \"drive\", index = 0x2430, sub = 1, equals = 0xFF11 }\n";
+        let s = Scenario::parse(text, "s.toml").unwrap();
+        let r = check(&s, &Registry::builtin(), &BuildEnv::default()).unwrap();
+        // Three expectations pass; the FF01 injection is refused with the list of faults.
+        let failed: Vec<_> = r.outcomes.iter().filter(|o| !o.passed).collect();
+        assert_eq!(failed.len(), 1, "{r}");
+        assert!(failed[0].detail.contains("FFB4..FFC3"), "{r}");
+        assert_eq!(r.outcomes.iter().filter(|o| o.passed).count(), 3, "{r}");
     }
 }

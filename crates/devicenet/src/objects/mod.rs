@@ -85,6 +85,16 @@ pub enum SlaveEvent {
     IoEstablished,
     /// The polled I/O connection's inactivity watchdog expired.
     IoTimedOut,
+    /// A poll command carried data of another length than the connection's consumed size
+    /// (the master's scan list does not match the device's I/O). The data is not consumed:
+    /// longer is discarded by the connection (CIP Vol. 1 Connection object,
+    /// consumed_connection_size), shorter would leave items without values.
+    IoLengthMismatch {
+        /// Bytes received (after reassembly of a fragmented command).
+        received: u16,
+        /// The consumed connection size.
+        expected: u16,
+    },
     /// An explicit connection's inactivity watchdog expired and it was deleted.
     ExplicitTimedOut {
         /// Its Connection instance.

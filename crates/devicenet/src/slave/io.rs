@@ -27,7 +27,11 @@ impl<A: Application> Slave<A> {
         } else {
             data.to_vec()
         };
-        if command.len() > usize::from(c.consumed_size) {
+        if !command.is_empty() && command.len() != usize::from(c.consumed_size) {
+            let expected = c.consumed_size;
+            let received = u16::try_from(command.len()).unwrap_or(u16::MAX);
+            self.app
+                .event(SlaveEvent::IoLengthMismatch { received, expected }, now);
             return;
         }
         c.idle = command.is_empty();

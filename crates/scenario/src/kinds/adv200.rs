@@ -13,15 +13,23 @@
 //! | `expedited_only` | true | the card's SDO server refuses segmented and block transfers (§1.1 item 11); `false` lifts the limit |
 //! | `serial` | 1 | 0x1018 sub 4 |
 //!
+//! Scripts read drive parameters with `[[expect]] value = { device, index = 0x2000 + PAR,
+//! sub = 1, … }` in every personality (the §1.4 SDO mapping; the bytes are the parameter's
+//! size), and the card's other CANopen objects while it runs CANopen or DS402.
+//! `action = "inject"` with `fault = "FF04"` or `"FFB4"` … `"FFC3"` gives the card one of
+//! the internal errors of the §1.5/§3.7.1 tables (found at the next drive reset: a
+//! `power_off`/`power_on`); `action = "repair"` removes them.
+//!
 //! With the factory parameters (`Fieldbus baudrate` None, `Fieldbus address` 0) the card
 //! stays off the bus in Opt Bus Fault FF02, as the real one does until it is configured. A card
 //! whose baud rate differs from the bus's stays silent.
 
 use std::collections::BTreeMap;
 
+use cantwin_adv200::alarms::CardFault;
 use cantwin_adv200::params::def;
 use cantwin_adv200::{Adv200, Adv200Config, example};
-use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
 use serde::Deserialize;
 
 use crate::build::BuildEnv;
@@ -46,6 +54,35 @@ impl DeviceKind for Adv200Kind {
 
     fn summary(&self) -> &'static str {
         "Gefran ADV200 drive with the EXP-CAN card: params by number, example, digital_inputs, analog_inputs, expedited_only"
+    }
+
+    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
+        let node = sim.node::<Adv200>(port)?;
+        if (0x2000..=0x5FFF).contains(&index) && sub == 1 {
+            let (bytes, len) = node.params().encode(index - 0x2000).ok()?;
+            return Some(bytes[..len].to_vec());
+        }
+        node.device()?
+            .od()
+            .get(index, sub)
+            .ok()
+            .map(|v| v.to_le_bytes())
+    }
+
+    fn inject(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        fault: Option<&str>,
+    ) -> Result<(), String> {
+        let node = sim
+            .node_mut::<Adv200>(port)
+            .ok_or("the device is not an ADV200")?;
+        match fault {
+            Some(f) => node.inject_card_fault(f.parse::<CardFault>()?),
+            None => node.clear_card_faults(),
+        }
+        Ok(())
     }
 
     fn build(
