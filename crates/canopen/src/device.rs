@@ -26,6 +26,15 @@
 //! * **Stopped**: only NMT, node guarding and heartbeat; EMCYs queued at the transition are
 //!   dropped (errors are still recorded in 0x1001/0x1003), SDO transfers end silently. The
 //!   EMCY of an error whose 0x1029 reaction stops the device is sent before it stops.
+//! * **Acceptance filter**: [`Node::accepts`] passes only the identifiers a frame can
+//!   change the device on (NMT, SYNC, consumed TIME, its own node guarding requests, the
+//!   heartbeats 0x1016 monitors, the EMCYs 0x1028 consumes, its SDO servers' requests, its
+//!   runnable RPDOs, and its TPDOs for remote requests), rebuilt whenever one of those
+//!   COB-IDs changes; [`Node::on_frame`] skips any other frame at once (a driver that does
+//!   not filter only runs the timers already due). While a receive overrun waits for the
+//!   next frame to clear 0x8110 every identifier passes. [`DeviceConfig::acceptance_filter`]
+//!   turns the filter off. The next deadline is kept from the end of each call and computed
+//!   afresh only after a change through a `&mut` accessor.
 //!
 //! ```
 //! use std::sync::Arc;
@@ -110,16 +119,23 @@ pub struct DeviceConfig {
     pub sync_producer: bool,
     /// Whether the device can produce TIME (0x1012 bit 30 may be set).
     pub time_producer: bool,
+    /// Whether the device filters received frames by its own COB-IDs, as firmware programs
+    /// a controller's acceptance filter: [`Node::accepts`] then passes only the identifiers
+    /// the device reacts to, and [`Node::on_frame`] skips any other frame at once. Without
+    /// it every frame goes through the whole stack (same behaviour, more work).
+    pub acceptance_filter: bool,
 }
 
 impl DeviceConfig {
-    /// A device with node-ID `node_id`, a 1 s SDO timeout, able to produce SYNC and TIME.
+    /// A device with node-ID `node_id`, a 1 s SDO timeout, able to produce SYNC and TIME,
+    /// filtering received frames by its COB-IDs.
     pub const fn new(node_id: u8) -> Self {
         DeviceConfig {
             node_id,
             sdo_timeout: crate::sdo::server::DEFAULT_TIMEOUT,
             sync_producer: true,
             time_producer: true,
+            acceptance_filter: true,
         }
     }
 }
@@ -208,12 +224,21 @@ struct Core<H> {
     sdo_changed: bool,
     /// SDO transfers must end silently (stopped, reset).
     sdo_reset: bool,
+    /// The identifiers the device reacts to, as [`frame_key`]s, sorted: its acceptance
+    /// filter.
+    accept: Vec<u32>,
+    /// A COB-ID may have changed since `accept` was built: accept everything until it is
+    /// built again.
+    accept_stale: bool,
 }
 
 /// A CiA 301 device. See the [module documentation](self).
 pub struct Device<H = NoHooks> {
     core: Core<H>,
     sdo: Vec<SdoServer>,
+    /// [`Node::next_deadline`] as of the end of the last call; `None` when something
+    /// changed since through a `&mut` accessor, so it must be computed afresh.
+    deadline: Option<Option<Instant>>,
 }
 
 impl<H> core::fmt::Debug for Device<H> {
@@ -285,18 +310,23 @@ impl<H: OdHooks> Device<H> {
             bus_off_recovered: false,
             sdo_changed: true,
             sdo_reset: false,
+            accept: Vec::new(),
+            accept_stale: true,
         };
         core.configure();
         let mut device = Device {
             core,
             sdo: Vec::new(),
+            deadline: None,
         };
         device.apply_sdo_config();
+        device.refresh();
         Ok(device)
     }
 
     /// Uses `storage` for 0x1010/0x1011 and for the power-on values of every reset.
     pub fn set_storage(&mut self, storage: Box<dyn Storage>) {
+        self.deadline = None;
         self.core.storage = Some(storage);
     }
 
@@ -319,12 +349,14 @@ impl<H: OdHooks> Device<H> {
     /// effect at the next reset communication; use [`ObjectAccess::write`] for immediate
     /// effect.
     pub fn od_mut(&mut self) -> &mut ObjectDictionary {
+        self.deadline = None;
         &mut self.core.od
     }
 
     /// Sets an application value as the device itself would (no access check) and tells
     /// the PDO engine it changed (event-driven TPDOs mapping it are sent).
     pub fn set_value(&mut self, index: u16, sub: u8, value: &Value) -> Result<(), AbortCode> {
+        self.deadline = None;
         self.core.od.set(index, sub, value)?;
         if let Some(p) = &mut self.core.pdo {
             p.mark_changed(index, sub);
@@ -339,6 +371,7 @@ impl<H: OdHooks> Device<H> {
 
     /// The device hooks, mutably.
     pub fn hooks_mut(&mut self) -> &mut H {
+        self.deadline = None;
         &mut self.core.hooks
     }
 
@@ -349,6 +382,8 @@ impl<H: OdHooks> Device<H> {
 
     /// The PDO engine, mutably (to trigger event-driven TPDOs).
     pub fn pdo_mut(&mut self) -> Option<&mut PdoEngine> {
+        self.deadline = None;
+        self.core.accept_stale = true;
         self.core.pdo.as_mut()
     }
 
@@ -376,6 +411,7 @@ impl<H: OdHooks> Device<H> {
 
     /// Raising and clearing the device's own errors.
     pub fn emcy(&mut self) -> Emcy<'_, H> {
+        self.deadline = None;
         Emcy {
             core: &mut self.core,
         }
@@ -433,6 +469,9 @@ impl<H: OdHooks> Device<H> {
             let tx = od.get_unsigned(index, 2).unwrap_or(0x8000_0000) as u32;
             wanted.push((rx, tx));
         }
+        if self.sdo.len() != wanted.len() {
+            self.core.accept_stale = true;
+        }
         self.sdo
             .resize_with(wanted.len(), || SdoServer::for_node(0));
         for (server, (rx, tx)) in self.sdo.iter_mut().zip(wanted) {
@@ -447,6 +486,7 @@ impl<H: OdHooks> Device<H> {
             );
             if now != new {
                 server.set_cob_ids(rx, tx);
+                self.core.accept_stale = true;
             }
             server.set_timeout(self.core.config.sdo_timeout);
         }
@@ -467,7 +507,76 @@ impl<H: OdHooks> Device<H> {
             }
         }
         self.core.mirror_errors();
+        self.refresh();
     }
+
+    /// Brings the caches up to date after a change: the acceptance filter, if a COB-ID may
+    /// have changed, and the next deadline.
+    fn refresh(&mut self) {
+        if self.core.accept_stale {
+            self.rebuild_acceptance();
+        }
+        self.deadline = Some(self.compute_deadline());
+    }
+
+    /// Collects every identifier a received frame can change the device on (see
+    /// `Core::on_frame`, the SDO servers and [`PdoEngine::on_frame`]): NMT (CiA 301
+    /// §7.2.8.3.1), SYNC (0x1005), TIME when consumed (0x1012 bit 31), node guarding
+    /// requests for this node and the heartbeats of the producers 0x1016 monitors
+    /// (§7.2.8.3.2), the EMCYs 0x1028 consumes, the requests of every valid SDO server
+    /// channel (0x1200..0x127F sub 1), and every runnable RPDO and TPDO (data and remote
+    /// requests, 0x1400..0x15FF and 0x1800..0x19FF sub 1).
+    fn rebuild_acceptance(&mut self) {
+        let core = &mut self.core;
+        let mut keys = core::mem::take(&mut core.accept);
+        keys.clear();
+        let guard = |node: u8| u32::from(wire::ERROR_CONTROL_BASE) + u32::from(node);
+        keys.push(u32::from(wire::NMT_COB_ID));
+        keys.push(frame_key(core.sync.id()));
+        if core.time.consumer() {
+            keys.push(frame_key(core.time.id()));
+        }
+        keys.push(guard(core.config.node_id));
+        keys.extend(core.consumer.nodes().map(guard));
+        keys.extend(core.emcy_rx.iter().copied().map(frame_key));
+        keys.extend(self.sdo.iter().filter_map(SdoServer::rx_id).map(frame_key));
+        if let Some(p) = &core.pdo {
+            keys.extend(p.cob_ids().map(frame_key));
+        }
+        keys.sort_unstable();
+        keys.dedup();
+        keys.shrink_to_fit();
+        core.accept = keys;
+        core.accept_stale = false;
+    }
+
+    fn compute_deadline(&self) -> Option<Instant> {
+        let sdo = if self.core.state.allows(Service::Sdo) {
+            self.sdo.iter().filter_map(SdoServer::next_deadline).min()
+        } else {
+            None
+        };
+        match (self.core.next_deadline(), sdo) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Whether a frame on `id` can change the device: always while the filter is off or
+    /// out of date, and while a receive overrun waits for the next frame to clear it.
+    fn filter_passes(&self, id: Id) -> bool {
+        !self.core.config.acceptance_filter
+            || self.core.accept_stale
+            || self.core.overrun
+            || self.core.accept.binary_search(&frame_key(id)).is_ok()
+    }
+}
+
+/// An identifier as one sortable number: the raw identifier, bit 31 set for the extended
+/// format (as a CiA 301 COB-ID keeps the format in bit 29, a 29-bit identifier needs room
+/// above its own bits).
+fn frame_key(id: Id) -> u32 {
+    id.as_raw() | if id.is_extended() { 1 << 31 } else { 0 }
 }
 
 /// Raises and clears the device's errors; see [`Device::emcy`].
@@ -575,9 +684,11 @@ impl<H> Core<H> {
             .unwrap_or(Reaction::PreOperational);
         self.configure_emcy_consumers();
         self.sdo_changed = true;
+        self.accept_stale = true;
     }
 
     fn configure_emcy_consumers(&mut self) {
+        self.accept_stale = true;
         self.emcy_rx.clear();
         let n = self
             .od
@@ -1051,7 +1162,10 @@ impl<H: OdHooks> Core<H> {
         let now = self.now;
         let running = self.running();
         match index {
-            0x1005 => self.sync.set_cob_id(CobId(v), now, running),
+            0x1005 => {
+                self.sync.set_cob_id(CobId(v), now, running);
+                self.accept_stale = true;
+            }
             0x1006 => self.sync.set_period(v, now, running),
             0x1007 => self.sync.set_window(v),
             0x1019 => self.sync.set_overflow(v as u8),
@@ -1059,10 +1173,16 @@ impl<H: OdHooks> Core<H> {
                 self.u32(0x100C, 0).unwrap_or(0) as u16,
                 self.u32(0x100D, 0).unwrap_or(0) as u8,
             ),
-            0x1012 => self.time = TimeService::new(CobId(v)),
+            0x1012 => {
+                self.time = TimeService::new(CobId(v));
+                self.accept_stale = true;
+            }
             0x1014 => self.emcy.set_cob_id(CobId(v)),
             0x1015 => self.emcy.set_inhibit(v as u16),
-            0x1016 => self.consumer.set(sub, v),
+            0x1016 => {
+                self.consumer.set(sub, v);
+                self.accept_stale = true;
+            }
             0x1017 => self
                 .heartbeat
                 .set_time(v as u16, now, self.state != State::Initialising),
@@ -1075,6 +1195,7 @@ impl<H: OdHooks> Core<H> {
                 if let Some(p) = &mut self.pdo {
                     p.after_write(&self.od, index, sub, now);
                 }
+                self.accept_stale = true;
             }
             _ => {}
         }
@@ -1198,6 +1319,7 @@ impl<H: OdHooks> ObjectAccess for Device<H> {
     fn write(&mut self, index: u16, sub: u8, data: &[u8]) -> Result<(), AbortCode> {
         let r = self.core.write(index, sub, data);
         self.apply_sdo_config();
+        self.refresh();
         r
     }
 
@@ -1212,6 +1334,7 @@ impl<H: OdHooks> ObjectAccess for Device<H> {
     fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
         let r = self.core.write_end(index, sub);
         self.apply_sdo_config();
+        self.refresh();
         r
     }
 
@@ -1234,6 +1357,16 @@ impl<H: OdHooks> Node for Device<H> {
     }
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        if !self.filter_passes(frame.id()) {
+            // A frame none of the services reacts to: all the full path would do is run
+            // the timers due by now, and a driver that keeps to the contract has already
+            // ticked those.
+            self.core.now = now;
+            if self.next_deadline().is_some_and(|d| d <= now) {
+                self.after(now, out);
+            }
+            return;
+        }
         if !self.core.on_frame(frame, now, out) && self.core.state.allows(Service::Sdo) {
             let mut handled = false;
             for s in &mut self.sdo {
@@ -1258,14 +1391,9 @@ impl<H: OdHooks> Node for Device<H> {
     }
 
     fn next_deadline(&self) -> Option<Instant> {
-        let sdo = if self.core.state.allows(Service::Sdo) {
-            self.sdo.iter().filter_map(SdoServer::next_deadline).min()
-        } else {
-            None
-        };
-        match (self.core.next_deadline(), sdo) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
+        match self.deadline {
+            Some(cached) => cached,
+            None => self.compute_deadline(),
         }
     }
 
@@ -1285,5 +1413,9 @@ impl<H: OdHooks> Node for Device<H> {
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
         self.core.on_controller_event(event, now, out);
         self.after(now, out);
+    }
+
+    fn accepts(&self, id: Id) -> bool {
+        self.filter_passes(id)
     }
 }

@@ -181,6 +181,12 @@ impl Consumer {
         node != 0 && self.entries.iter().any(|e| e.node == node)
     }
 
+    /// The node-IDs monitored by some entry: the only producers whose heartbeats change
+    /// the consumer.
+    pub fn nodes(&self) -> impl Iterator<Item = u8> + '_ {
+        self.entries.iter().map(|e| e.node).filter(|&n| n != 0)
+    }
+
     /// A heartbeat or boot-up from `node` with state code `state` at `now`.
     pub fn on_heartbeat(&mut self, node: u8, state: u8, now: Instant) -> Heard {
         let Some(e) = self

@@ -605,6 +605,15 @@ impl PdoEngine {
         self.tpdos.get(n).is_some_and(|t| t.id.is_some())
     }
 
+    /// The identifiers [`PdoEngine::on_frame`] reacts to: every runnable RPDO's (its data)
+    /// and every runnable TPDO's (a remote request for it, §7.2.2.3). A frame on any other
+    /// identifier leaves the engine as it was, so a device may filter the others out.
+    pub fn cob_ids(&self) -> impl Iterator<Item = Id> + '_ {
+        let rx = self.rpdos.iter().filter_map(|r| r.id);
+        let tx = self.tpdos.iter().filter_map(|t| t.id);
+        rx.chain(tx)
+    }
+
     /// The next event the device should report, oldest first.
     pub fn poll_event(&mut self) -> Option<PdoEvent> {
         self.events.pop_front()

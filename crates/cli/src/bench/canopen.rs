@@ -66,13 +66,21 @@ pub fn pdo_4_4_description() -> Result<OdDescription> {
 /// Which frames reach a network device's `on_frame`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Filtering {
-    /// Every frame on the bus, as with a controller whose acceptance filter is open.
-    Open,
-    /// Only the identifiers this device consumes, as firmware would program the controller's
-    /// acceptance filter: NMT (0x000), SYNC (0x080), TIME (0x100), its SDO request
-    /// (0x600 + node) and node guarding remote request (0x700 + node). The network devices
-    /// have no RPDO, no heartbeat consumer and no EMCY consumer, so nothing else is for them.
+    /// Only the identifiers this device consumes, listed by hand as firmware would program
+    /// the controller's acceptance filter: NMT (0x000), SYNC (0x080), TIME (0x100), its SDO
+    /// request (0x600 + node) and node guarding remote request (0x700 + node). The network
+    /// devices have no RPDO, no heartbeat consumer and no EMCY consumer, so nothing else is
+    /// for them.
     Firmware,
+    /// The bus asks the `Device` itself ([`Node::accepts`]), which derives its filter from
+    /// its COB-IDs.
+    Device,
+    /// Every frame is handed to every device (a driver that never asks `accepts`); the
+    /// device skips the frames its filter does not pass.
+    Everything,
+    /// Every frame is handed to every device, whose own filter is off: each frame goes
+    /// through the whole stack (the behaviour before devices filtered).
+    Unfiltered,
 }
 
 /// A network device: a CiA 301 [`Device`] whose 0x1017 is set to [`HEARTBEAT_MS`] at
@@ -108,7 +116,8 @@ impl Node for NetDevice {
     }
     fn accepts(&self, id: Id) -> bool {
         match self.filtering {
-            Filtering::Open => self.device.accepts(id),
+            Filtering::Device => self.device.accepts(id),
+            Filtering::Everything | Filtering::Unfiltered => true,
             Filtering::Firmware => {
                 let Id::Standard(id) = id else {
                     return false;
@@ -172,7 +181,11 @@ fn add_networks(
             PortConfig::default(),
         )?;
         for node in 1..=NETWORK_DEVICES {
-            let device = Device::new(Arc::clone(desc), DeviceConfig::new(node))?;
+            let config = DeviceConfig {
+                acceptance_filter: filtering != Filtering::Unfiltered,
+                ..DeviceConfig::new(node)
+            };
+            let device = Device::new(Arc::clone(desc), config)?;
             sim.attach(bus, NetDevice { device, filtering }, PortConfig::default())?;
         }
         ids.push(bus);
@@ -596,7 +609,7 @@ fn sdo_bus<C: Node + Send + 'static>(
         bus,
         NetDevice {
             device,
-            filtering: Filtering::Open,
+            filtering: Filtering::Device,
         },
         port,
     )?;
@@ -808,7 +821,12 @@ mod tests {
 
     #[test]
     fn network_devices_send_a_tpdo_per_sync_and_heartbeats() {
-        for filtering in [Filtering::Open, Filtering::Firmware] {
+        for filtering in [
+            Filtering::Firmware,
+            Filtering::Device,
+            Filtering::Everything,
+            Filtering::Unfiltered,
+        ] {
             let r = run_networks(1, Duration::from_millis(1000), filtering).unwrap();
             // One NMT, 64 boot-ups, then SYNCs at 10..990 ms with 64 TPDOs each and heartbeats
             // at 100..900 ms: what falls due at 1000 ms is not on the bus yet when the run ends.
