@@ -453,7 +453,7 @@ pub struct TraceArgs {
 pub use cantwin_report::canopen::{describe, emcy_meaning};
 
 /// The PDOs an EDS declares for `node`, with their default COB-IDs and mappings.
-fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
+pub(crate) fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
     let mut decoder = PdoDecoder::new();
     for spec in specs {
         let (node, file) = spec

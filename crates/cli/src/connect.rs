@@ -166,6 +166,15 @@ impl Link {
         Ok(())
     }
 
+    /// The next frame on the bus, waiting up to `wait` for it.
+    pub fn recv(&mut self, wait: WallDuration) -> Result<Option<Frame>> {
+        Ok(self
+            .port
+            .recv_timeout(wait)
+            .context("receiving from the bus")?
+            .map(|rx| rx.frame))
+    }
+
     /// Receive frames for up to `limit` (or until Ctrl-C ends the process), handing each with
     /// its wall-clock time to `f` until it returns false.
     pub fn watch(

@@ -18,6 +18,8 @@ mod dnet;
 mod dump;
 mod eds;
 mod fuzz;
+mod monitor;
+mod monitor_ui;
 mod report;
 mod sim;
 
@@ -98,6 +100,16 @@ enum Command {
                             cantwin trace --socketcand 127.0.0.1:29536 --eds 5=device.eds --seconds 10"
     )]
     Trace(canopen::TraceArgs),
+    /// A live view of a CANopen bus in the terminal: nodes with NMT state, heartbeat, LEDs and
+    /// EMCY, decoded frames with filters, bus load, and the selected device's PDO values.
+    #[command(
+        after_help = "Examples:\n  cantwin monitor --scenario scenarios/monitor-network.toml\n  \
+                            cantwin monitor --socketcand 127.0.0.1:29536 --names scenarios/monitor-network.toml\n  \
+                            cantwin monitor --socketcand 127.0.0.1:29536 --bit-rate 250k --eds 5=device.eds\n\n\
+                            Keys: q quit, up/down select a node, space pause, PgUp/PgDn scroll,\n\
+                            Home/End oldest/live, / filter (node=5 svc=emcy,hb id=0x180-0x1FF), c clear filter"
+    )]
+    Monitor(monitor::Args),
     /// A CiA 309-3 ASCII gateway (CANopenNode/cocomm syntax) on stdin/stdout or TCP.
     #[command(
         after_help = "Examples:\n  echo '[1] 5 read 0x1008 0 vs' | cantwin gateway --ascii --socketcand 127.0.0.1:29536\n  \
@@ -136,6 +148,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Nmt(args) => canopen::run_nmt(&args),
         Command::Scan(args) => canopen::run_scan(&args),
         Command::Trace(args) => canopen::run_trace(&args),
+        Command::Monitor(args) => monitor::run(&args),
         Command::Gateway(args) => ascii_gateway::run(&args),
         Command::Report(args) => report::run(&args),
     }

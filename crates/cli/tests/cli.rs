@@ -100,10 +100,29 @@ fn every_command_has_help_with_examples() {
         &["nmt", "--help"],
         &["scan", "--help"],
         &["trace", "--help"],
+        &["monitor", "--help"],
     ] {
         let (ok, out, _) = cantwin(cmd);
         assert!(ok);
         assert!(out.contains("Examples:"), "{cmd:?}: {out}");
+    }
+}
+
+#[test]
+fn monitor_refuses_a_pipe_and_names_the_keys_in_its_help() {
+    // Standard output is a pipe here: the monitor says so instead of drawing into it.
+    let (ok, _, err) = cantwin(&[
+        "monitor",
+        "--scenario",
+        &scenario_file("monitor-network.toml"),
+    ]);
+    assert!(!ok);
+    assert!(err.contains("draws on a terminal"), "{err}");
+    assert!(err.contains("cantwin trace"), "{err}");
+    let (ok, out, _) = cantwin(&["monitor", "--help"]);
+    assert!(ok);
+    for key in ["q quit", "space pause", "PgUp/PgDn scroll", "/ filter"] {
+        assert!(out.contains(key), "{key}: {out}");
     }
 }
 

@@ -133,6 +133,19 @@ impl Field {
     }
 }
 
+/// The ADV200's alarms by EMCY code (EXP-CAN manual, alarm table): the first alarm of a
+/// shared code names it.
+fn adv200_alarms() -> Vec<(u16, String)> {
+    let mut out: Vec<(u16, String)> = Vec::new();
+    for alarm in cantwin_adv200::alarms::Alarm::all() {
+        let code = alarm.emcy_code();
+        if !out.iter().any(|(c, _)| *c == code) {
+            out.push((code, format!("ADV200 alarm {}", alarm.name())));
+        }
+    }
+    out
+}
+
 /// The power drive state a CiA 402 statusword encodes (CiA 402-2 statusword bits 0–3, 5
 /// and 6; IEC 61800-7-201 table of state coding).
 pub fn cia402_state(sw: u16) -> &'static str {
@@ -186,6 +199,9 @@ pub struct DeviceKind {
     pub name: String,
     /// The PDOs it knows.
     pub pdos: Vec<PdoLayout>,
+    /// The meanings its manual gives to EMCY codes, before the generic ones of CiA 301
+    /// table 21 (which say little about manufacturer-specific codes).
+    pub emcy: Vec<(u16, String)>,
 }
 
 /// `TPDO1`, `RPDO2`: the usual name of a PDO.
@@ -209,6 +225,14 @@ fn flags(names: &[(u8, &str)]) -> Format {
 }
 
 impl DeviceKind {
+    /// The device-specific meaning of an EMCY code, if the kind has one.
+    pub fn emcy_meaning(&self, code: u16) -> Option<&str> {
+        self.emcy
+            .iter()
+            .find(|(c, _)| *c == code)
+            .map(|(_, m)| m.as_str())
+    }
+
     /// The values `frame` carries if it is one of this kind's PDOs for node `node`; `None`
     /// for other frames.
     pub fn decode(&self, frame: &Frame, node: u8) -> Option<Vec<LiveValue>> {
@@ -278,6 +302,7 @@ impl DeviceKind {
                     ],
                 },
             ],
+            emcy: adv200_alarms(),
         }
     }
 
@@ -303,6 +328,7 @@ impl DeviceKind {
                     ],
                 },
             ],
+            emcy: adv200_alarms(),
         }
     }
 
@@ -311,16 +337,43 @@ impl DeviceKind {
     /// TPDO2–4 = analog inputs 0x6401 sub 1–12, RPDO2–4 = analog outputs 0x6411 sub 1–12
     /// (INTEGER16, four per PDO).
     pub fn cia401() -> DeviceKind {
-        DeviceKind::cia401_named("CiA 401 I/O")
+        DeviceKind::cia401_named("CiA 401 I/O", Vec::new())
     }
 
     /// The Schneider TM3 CANopen bus coupler (TM3BCCO): a CiA 401 device whose default PDOs
     /// are the profile's (manual, objects 1600H/1A00H).
     pub fn tm3() -> DeviceKind {
-        DeviceKind::cia401_named("TM3")
+        use cantwin_tm3::diag;
+        // The coupler's own codes (manual, object 1003H table); the CiA 301 ones it also
+        // raises read as table 21 says.
+        let emcy = [
+            (diag::ANALOG_DISABLE, "analog input interrupts disabled"),
+            (diag::GENERIC_ERROR, "internal communication error"),
+            (diag::RX_QUEUE_OVERRUN, "software receive queue overrun"),
+            (diag::TX_QUEUE_OVERRUN, "software transmit queue overrun"),
+            (diag::CONFIGURATION_TIMEOUT, "module configuration timeout"),
+            (
+                diag::CONFIGURATION_ERROR,
+                "modules do not match the configuration",
+            ),
+            (diag::RUNTIME_ERROR, "module failed or removed at runtime"),
+            (diag::SYNC_TIMEOUT, "SYNC timeout"),
+            (
+                diag::ROTARY_SWITCH_CHANGED,
+                "node-ID switches changed after power-up",
+            ),
+            (
+                diag::NOT_CONFIGURED_IN_OP,
+                "operational although not configured",
+            ),
+        ];
+        DeviceKind::cia401_named(
+            "TM3",
+            emcy.iter().map(|(c, m)| (*c, m.to_string())).collect(),
+        )
     }
 
-    fn cia401_named(name: &str) -> DeviceKind {
+    fn cia401_named(name: &str, emcy: Vec<(u16, String)>) -> DeviceKind {
         let bytes = |what: &str, pdo| PdoLayout {
             pdo,
             fields: (0..8u16)
@@ -345,6 +398,7 @@ impl DeviceKind {
         DeviceKind {
             name: name.into(),
             pdos,
+            emcy,
         }
     }
 
@@ -487,5 +541,19 @@ mod tests {
             Some("TM3".into())
         );
         assert_eq!(DeviceKind::builtin("generator"), None);
+    }
+
+    #[test]
+    fn kinds_name_their_manufacturer_emcy_codes() {
+        let tm3 = DeviceKind::tm3();
+        assert_eq!(
+            tm3.emcy_meaning(0x0080),
+            Some("analog input interrupts disabled")
+        );
+        assert_eq!(tm3.emcy_meaning(0x8130), None);
+        let adv = DeviceKind::adv200_example();
+        let overvoltage = adv.emcy_meaning(0x3210).unwrap();
+        assert!(overvoltage.starts_with("ADV200 alarm "), "{overvoltage}");
+        assert_eq!(DeviceKind::cia401().emcy_meaning(0x0080), None);
     }
 }

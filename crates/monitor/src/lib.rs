@@ -291,11 +291,22 @@ impl NetworkView {
             }
             _ => {}
         }
-        let text = match text {
+        let mut text = match text {
             // An EDS mapping the front end gave wins over the kind's defaults.
             Some(t) if describe_pdo(frame, &self.config.pdos).is_none() => t,
             _ => describe(frame, &self.config.pdos),
         };
+        if let Message::Emcy { node, emcy } = msg
+            && let Some(own) = self
+                .nodes
+                .get(&node)
+                .and_then(|n| n.kind.as_ref())
+                .and_then(|k| k.emcy_meaning(emcy.code))
+        {
+            // The device's manual says more than CiA 301 table 21.
+            let generic = format!("({})", cantwin_report::canopen::emcy_meaning(emcy.code));
+            text = text.replacen(&generic, &format!("({own})"), 1);
+        }
         self.ring.push_back(FrameEntry {
             seq: self.seq,
             at,

@@ -23,7 +23,8 @@ pub struct EmcyEvent {
 }
 
 impl EmcyEvent {
-    /// The meaning of the code (shared with `cantwin trace` and the capture report).
+    /// The generic meaning of the code, CiA 301 table 21 (shared with `cantwin trace` and
+    /// the capture report); see [`NodeInfo::emcy_meaning`] for the device's own.
     pub fn meaning(&self) -> &'static str {
         emcy_meaning(self.code)
     }
@@ -239,6 +240,17 @@ impl NodeInfo {
             _ => Led::Off,
         };
         Leds { run, err }
+    }
+
+    /// The meaning of the last EMCY: the kind's own for its code, else CiA 301 table 21's.
+    pub fn emcy_meaning(&self) -> Option<&str> {
+        let e = self.last_emcy.as_ref()?;
+        Some(
+            self.kind
+                .as_ref()
+                .and_then(|k| k.emcy_meaning(e.code))
+                .unwrap_or_else(|| e.meaning()),
+        )
     }
 
     /// The value named `name`, if a PDO carried it.

@@ -306,3 +306,29 @@ fn short_sdo_frames_and_malformed_frames_do_not_disturb_the_model() {
     assert_eq!(n.last_emcy, None);
     assert_eq!(n.state, None);
 }
+
+#[test]
+fn a_kind_names_its_own_emcy_codes_in_the_table_and_the_stream() {
+    let mut v = view();
+    v.declare(3, None, Some(DeviceKind::tm3()));
+    v.push(ms(0), &f(0x083, &[0x80, 0x00, 0x21, 0, 0, 0, 0, 0]));
+    v.push(ms(1), &f(0x084, &[0x80, 0x00, 0x21, 0, 0, 0, 0, 0]));
+    let n3 = v.node(3).unwrap();
+    assert_eq!(n3.emcy_meaning(), Some("analog input interrupts disabled"));
+    assert_eq!(
+        n3.last_emcy.as_ref().unwrap().meaning(),
+        "unknown error code"
+    );
+    let texts: Vec<&str> = v.frames().map(|e| e.text.as_str()).collect();
+    assert!(
+        texts[0].contains("code 0x0080 (analog input interrupts disabled) register 0x21"),
+        "{}",
+        texts[0]
+    );
+    // A node of no known kind keeps the generic meaning.
+    assert!(texts[1].contains("(unknown error code)"), "{}", texts[1]);
+    assert_eq!(
+        v.node(4).unwrap().emcy_meaning(),
+        Some("unknown error code")
+    );
+}

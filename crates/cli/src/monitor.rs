@@ -1,0 +1,218 @@
+//! `cantwin monitor`: a live view of a CANopen bus in the terminal. The model is
+//! `cantwin_monitor::NetworkView`; this module reads the bus and the keyboard and draws
+//! [`crate::monitor_ui`] on the terminal.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::time::{Duration as WallDuration, Instant as WallInstant};
+
+use anyhow::{Context, Result, bail};
+use cantwin_adv200::Adv200;
+use cantwin_can::{BitRate, Duration};
+use cantwin_canopen::device::Device;
+use cantwin_canopen::od::{ObjectDictionary, Value};
+use cantwin_monitor::{Config, DeviceKind, NetworkView};
+use cantwin_scenario::kinds::cia301::Cia301Node;
+use cantwin_scenario::{BuildEnv, Built, Registry, Scenario};
+use cantwin_tm3::Tm3Coupler;
+use ratatui::crossterm::event::{self, Event, KeyEventKind};
+
+use crate::connect::{Link, Target};
+use crate::monitor_ui::{Flow, Ui, draw};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    #[command(flatten)]
+    target: Target,
+    /// Name the nodes after the devices of this scenario file (when attached with
+    /// --socketcand to `cantwin sim FILE`); --scenario does it by itself.
+    #[arg(long, value_name = "FILE", conflicts_with = "scenario")]
+    names: Option<PathBuf>,
+    /// The bus bit rate for the load: default the scenario bus's, else 500k.
+    #[arg(long, value_name = "RATE")]
+    bit_rate: Option<BitRate>,
+    /// Width of a bus load window, in milliseconds.
+    #[arg(long, default_value_t = 100, value_name = "MS")]
+    window_ms: u64,
+    /// Decoded frames kept for scrolling.
+    #[arg(long, default_value_t = 10_000, value_name = "FRAMES")]
+    keep: usize,
+    /// Name PDO values from a node's EDS or DCF in the frame stream: NODE=FILE (repeatable).
+    #[arg(long = "eds", value_name = "NODE=FILE")]
+    eds: Vec<String>,
+}
+
+/// A node a scenario places on the bus: its node-ID, device name and kind.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Declared {
+    /// The node-ID.
+    pub node: u8,
+    /// The scenario's device name.
+    pub name: String,
+    /// Its kind, if the monitor knows how its PDOs read.
+    pub kind: Option<DeviceKind>,
+}
+
+fn od_identity(od: &ObjectDictionary) -> Option<DeviceKind> {
+    let device_type = match od.get(0x1000, 0) {
+        Ok(Value::Unsigned32(v)) => Some(v),
+        _ => None,
+    };
+    let name = match od.get(0x1008, 0) {
+        Ok(Value::VisibleString(s)) => Some(s),
+        _ => None,
+    };
+    DeviceKind::identify(device_type, name.as_deref())
+}
+
+/// The CANopen nodes of a built scenario, in file order: the twins' node-IDs and kinds as
+/// they are at power-up (DeviceNet and CAL devices, generators and masters have none).
+pub fn declared_nodes(built: &Built) -> Vec<Declared> {
+    let mut nodes = Vec::new();
+    for d in &built.devices {
+        let sim = &built.sim;
+        let found = if let Some(n) = sim.node::<Cia301Node>(d.port) {
+            Some((n.device().node_id(), od_identity(n.device().od())))
+        } else if let Some(n) = sim.node::<Device>(d.port) {
+            Some((n.node_id(), od_identity(n.od())))
+        } else if let Some(n) = sim.node::<Tm3Coupler>(d.port) {
+            Some((n.device().node_id(), Some(DeviceKind::tm3())))
+        } else if let Some(n) = sim.node::<Adv200>(d.port) {
+            // The CiA 402 personality has a power drive state; the CANopen one the PDC
+            // words of the worked example.
+            n.device().map(|dev| {
+                let kind = if n.power_state().is_some() {
+                    DeviceKind::adv200_ds402()
+                } else {
+                    DeviceKind::adv200_example()
+                };
+                (dev.node_id(), Some(kind))
+            })
+        } else {
+            None
+        };
+        if let Some((node, kind)) = found {
+            nodes.push(Declared {
+                node,
+                name: d.name.clone(),
+                kind,
+            });
+        }
+    }
+    nodes
+}
+
+/// The bus a scenario file's command means: `--bus`, else its only bus.
+fn scenario_bus<'a>(
+    scenario: &'a Scenario,
+    bus: Option<&str>,
+) -> Result<&'a cantwin_scenario::BusSpec> {
+    match bus {
+        Some(name) => scenario
+            .bus(name)
+            .with_context(|| format!("{} has no bus {name:?}", scenario.file.display())),
+        None if scenario.buses.len() == 1 => Ok(&scenario.buses[0]),
+        None => bail!(
+            "{} has several buses: choose one with --bus NAME",
+            scenario.file.display()
+        ),
+    }
+}
+
+/// A view configured for `scenario`'s bus `bus`, with its CANopen nodes declared.
+pub fn view_for_scenario(
+    scenario: &Scenario,
+    bus: Option<&str>,
+    mut config: Config,
+    bit_rate: Option<BitRate>,
+) -> Result<(NetworkView, Built)> {
+    let spec = scenario_bus(scenario, bus)?;
+    config.bit_rate = bit_rate.unwrap_or(spec.bit_rate);
+    let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+    let bus_id = built.bus(&spec.name);
+    let mut view = NetworkView::new(config);
+    for d in declared_nodes(&built) {
+        let on_bus = built
+            .device(&d.name)
+            .is_some_and(|b| Some(b.port.bus()) == bus_id);
+        if on_bus {
+            view.declare(d.node, Some(d.name), d.kind);
+        }
+    }
+    Ok((view, built))
+}
+
+/// Restores the terminal however the monitor ends: return, error or panic (ratatui's
+/// `init` installs the panic hook, this guard covers the rest).
+struct TerminalGuard;
+
+impl Drop for TerminalGuard {
+    fn drop(&mut self) {
+        ratatui::restore();
+    }
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    if !std::io::stdout().is_terminal() {
+        bail!(
+            "cantwin monitor draws on a terminal: run it with standard output on one (use `cantwin trace` for a pipe)"
+        );
+    }
+    let config = Config {
+        bit_rate: args.bit_rate.unwrap_or(BitRate::R500K),
+        window: Duration::from_millis(args.window_ms.max(1)),
+        ring: args.keep.max(1),
+        pdos: crate::canopen::pdo_decoder(&args.eds)?,
+        ..Config::default()
+    };
+    let bus = args.target.bus.as_deref();
+    let names = args.target.scenario.as_ref().or(args.names.as_ref());
+    let mut view = match names {
+        Some(file) => {
+            let scenario = Scenario::load(file)?;
+            view_for_scenario(&scenario, bus, config, args.bit_rate)?.0
+        }
+        None => NetworkView::new(config),
+    };
+    let source = match (&args.target.socketcand, &args.target.scenario) {
+        (Some(addr), _) => format!("socketcand {addr} {}", bus.unwrap_or("can0")),
+        (None, Some(file)) => format!("scenario {}", file.display()),
+        (None, None) => String::new(),
+    };
+    // Connect before taking over the terminal, so that errors print as usual.
+    let mut link = Link::open(&args.target)?;
+    let mut ui = Ui::new(source);
+    let mut terminal = ratatui::init();
+    let _guard = TerminalGuard;
+    let mut last_draw: Option<WallInstant> = None;
+    loop {
+        // Frames for up to 20 ms, then the keyboard, then (at most 10 times a second) the
+        // screen: a busy bus must not starve the keys or the other way round.
+        let until = WallInstant::now() + WallDuration::from_millis(20);
+        loop {
+            let left = until.saturating_duration_since(WallInstant::now());
+            match link.recv(left)? {
+                Some(frame) => view.push(link.now(), &frame),
+                None => break,
+            }
+            if left.is_zero() {
+                break;
+            }
+        }
+        view.advance(link.now());
+        while event::poll(WallDuration::ZERO).context("reading the keyboard")? {
+            if let Event::Key(key) = event::read().context("reading the keyboard")?
+                && key.kind == KeyEventKind::Press
+                && ui.on_key(key, &view) == Flow::Quit
+            {
+                return Ok(());
+            }
+        }
+        if last_draw.is_none_or(|t| t.elapsed() >= WallDuration::from_millis(100)) {
+            terminal
+                .draw(|f| draw(f, &view, &ui))
+                .context("drawing on the terminal")?;
+            last_draw = Some(WallInstant::now());
+        }
+    }
+}
