@@ -48,6 +48,11 @@ cargo clippy --workspace --all-targets --all-features -- -D warnings
 step "cargo test"
 cargo test --workspace
 
+# The Python package's crate links against Python and is not a workspace member: its own
+# formatting and lint checks (its tests are Python, run by the interop suite).
+step "python package: cargo fmt --check and clippy"
+(cd python && cargo fmt -- --check && cargo clippy --all-targets --all-features -- -D warnings)
+
 if [ -x tests/interop/run.sh ]; then
     step "interop suite (python-can, python-canopen, tshark)"
     tests/interop/run.sh

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# Interop suite: python-can, python-canopen and tshark against `cantwin sim`.
+# Interop suite: python-can, python-canopen and tshark against `cantwin sim`, and the
+# `cantwin` Python package (python/) with its in-process python-can interface.
 #
 # Creates (or reuses) a virtualenv inside the cargo target directory, installs the pinned
-# clients, builds the `cantwin` binary and runs pytest on this folder. Exits non-zero when
-# any test fails or when no test ran at all.
+# clients, builds the `cantwin` binary, builds the Python package into the virtualenv
+# (maturin, release, the shared target directory) and runs pytest on this folder, then on
+# the package's tests and examples. Exits non-zero when any test fails or when no test ran.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -27,13 +29,26 @@ if ! cmp -s "$here/requirements.txt" "$stamp" 2>/dev/null; then
 fi
 
 (cd "$root" && cargo build --quiet --bin cantwin)
+# The Python package: an editable install whose native module is built in release mode.
+(cd "$root/python" && VIRTUAL_ENV="$venv" CARGO_TARGET_DIR="$target" \
+  "$venv/bin/maturin" develop --release --quiet)
 export CANTWIN_BIN="$target/debug/cantwin"
 export CANTWIN_SCENARIOS="$root/scenarios"
 
+run_pytest() {
+  local dir="$1"
+  shift
+  local status=0
+  (cd "$dir" && "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@") || status=$?
+  if [ "$status" -eq 5 ]; then
+    echo "interop: pytest collected no tests in $dir" >&2
+    return 1
+  fi
+  return "$status"
+}
+
+# Two runs: each folder imports helpers from its own conftest module.
 status=0
-(cd "$here" && "$venv/bin/python" -m pytest -q -p no:cacheprovider "$@" "$here") || status=$?
-if [ "$status" -eq 5 ]; then
-  echo "interop: pytest collected no tests" >&2
-  exit 1
-fi
+run_pytest "$here" "$@" "$here" || status=$?
+run_pytest "$root/python" "$@" tests examples || status=$?
 exit "$status"

@@ -1,0 +1,129 @@
+"""The ``cantwin`` interface of python-can: a node on a bus of a :class:`cantwin.Simulation`
+in the same process, no sockets involved.
+
+::
+
+    bus = can.Bus(interface="cantwin", channel="can0", sim=sim)
+
+``sim`` is a :class:`cantwin.Simulation` or the name it was shared under with
+:func:`cantwin.share` (default ``"default"``). Frames sent here arbitrate and take bus time
+like any node's; the node acknowledges frames and receives every frame on the bus but its
+own. Message timestamps are bus time in seconds since the simulation started (the end of
+the frame).
+
+In virtual time, :meth:`recv` runs the simulation instead of sleeping: by up to `timeout`
+of bus time, stopping as soon as a frame for this node arrives. After a frame reached Python
+the simulation waits up to the simulation's ``reaction_time`` (wall clock) for another
+thread to answer before it runs on, so python-canopen's Notifier thread and the thread
+that answers (an SDO client, say) behave as on a fast host.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional, Union
+
+import can
+
+from ._native import CantwinError, Simulation
+
+__all__ = ["CantwinBus"]
+
+
+def _resolve(sim: Union[Simulation, str, None]) -> Simulation:
+    from . import shared
+
+    if sim is None:
+        return shared("default")
+    if isinstance(sim, str):
+        return shared(sim)
+    if isinstance(sim, Simulation):
+        return sim
+    raise TypeError(f"sim must be a cantwin.Simulation or a shared name, not {type(sim).__name__}")
+
+
+class CantwinBus(can.BusABC):
+    """A python-can bus attached to a bus of a :class:`cantwin.Simulation`.
+
+    :param channel: the scenario's bus name (``"can0"``).
+    :param sim: the simulation, or the name it was shared under (default ``"default"``).
+    :param rx_capacity: frames buffered for :meth:`recv`; further ones are lost (counted in
+        :attr:`overruns`).
+    """
+
+    def __init__(
+        self,
+        channel: Any = "can0",
+        can_filters: Optional[can.typechecking.CanFilters] = None,
+        sim: Union[Simulation, str, None] = None,
+        rx_capacity: int = 4096,
+        **kwargs: object,
+    ) -> None:
+        self._sim = _resolve(sim)
+        try:
+            self._port = self._sim.attach(str(channel), rx_capacity=rx_capacity)
+        except (KeyError, CantwinError) as e:
+            raise can.CanInitializationError(str(e)) from e
+        self.channel = str(channel)
+        self.channel_info = f"cantwin {self.channel}"
+        super().__init__(channel=channel, can_filters=can_filters, **kwargs)
+
+    @property
+    def sim(self) -> Simulation:
+        """The simulation this bus is attached to."""
+        return self._sim
+
+    @property
+    def overruns(self) -> int:
+        """Frames lost because the receive buffer was full."""
+        return self._port.overruns
+
+    def send(self, msg: can.Message, timeout: Optional[float] = None) -> None:
+        """Queue `msg` for transmission at the current bus time. With the transmit queue full
+        it waits for room, at most `timeout` seconds (default 1 s; bus time in virtual time)."""
+        if msg.is_fd:
+            raise can.CanOperationError("the simulated buses are classic CAN: no CAN FD frames")
+        if msg.is_error_frame:
+            raise can.CanOperationError("error frames cannot be sent")
+        try:
+            self._port.send(
+                msg.arbitration_id,
+                bytes(msg.data) if not msg.is_remote_frame else b"",
+                extended=msg.is_extended_id,
+                remote=msg.is_remote_frame,
+                dlc=msg.dlc,
+                timeout=timeout,
+            )
+        except (ValueError, CantwinError) as e:
+            raise can.CanOperationError(str(e)) from e
+
+    def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
+        try:
+            got = self._port.recv(timeout)
+        except CantwinError as e:
+            raise can.CanOperationError(str(e)) from e
+        if got is None:
+            return None, False
+        arbitration_id, extended, remote, dlc, data, at = got
+        msg = can.Message(
+            timestamp=at,
+            arbitration_id=arbitration_id,
+            is_extended_id=extended,
+            is_remote_frame=remote,
+            dlc=dlc,
+            data=None if remote else data,
+            channel=self.channel,
+            is_rx=True,
+        )
+        return msg, False
+
+    def shutdown(self) -> None:
+        """Detach the node from the bus."""
+        if self._is_shutdown:
+            return
+        super().shutdown()
+        self._port.close()
+
+    @staticmethod
+    def _detect_available_configs() -> list[dict[str, Any]]:
+        # The buses exist only inside a Simulation object: nothing to detect.
+        return []

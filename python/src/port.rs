@@ -1,0 +1,433 @@
+//! `cantwin.Port`: a node on a simulated bus driven from Python.
+//!
+//! # Time while receiving
+//!
+//! Paced, a receiver waits on the wall clock like any socket. In virtual time nothing moves
+//! the clock but Python, so [`Port::recv`] runs the simulation itself: event by event, up to
+//! the timeout in bus time, stopping as soon as a frame for this port arrives.
+//!
+//! A protocol stack in Python (python-canopen) receives on one thread (python-can's
+//! Notifier) and answers on another. Without care the receiving thread would run the
+//! simulation on (through the device's SDO timeout, say) before the answering thread got to
+//! send its answer. So after a frame reached Python, the simulation does not run more than
+//! [`REACTION_GAP`] past it until Python sent something or the simulation's reaction time
+//! (wall clock) passed: the answer goes out at the bus time a fast host would have sent it.
+
+use std::collections::VecDeque;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+
+use cantwin_bus::{PortConfig, PortId, TxOrder};
+use cantwin_can::{Duration, ExtendedId, Frame, Id, Instant, Node, Outbox, StandardId};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use crate::sim::{Delivery, Mode, Shared, err, secs};
+
+/// How far past the last frame handed to Python the simulation runs freely: frames that
+/// follow within this much bus time (the segments of an SDO block, a PDO burst) come as
+/// they come; beyond it, Python gets its reaction time first. Far below any protocol
+/// timeout (CiA 301 SDO timeouts are tens of milliseconds and more).
+const REACTION_GAP: Duration = Duration::from_millis(1);
+
+/// The transmit queue of a Python port: a socket's FIFO (SocketCAN's default `txqueuelen`
+/// is 10 frames; a sender finding it full waits, as a blocking socket write does).
+const QUEUE_DEPTH: usize = 32;
+
+/// How long `send` waits for room in the queue when python-can gives no timeout.
+const SEND_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// A received frame.
+#[derive(Clone, Copy)]
+struct Rx {
+    frame: Frame,
+    at: Instant,
+}
+
+struct RxState {
+    frames: VecDeque<Rx>,
+    capacity: usize,
+    overruns: u64,
+    closed: bool,
+}
+
+struct RxShared {
+    state: Mutex<RxState>,
+    ready: Condvar,
+}
+
+impl RxShared {
+    fn lock(&self) -> MutexGuard<'_, RxState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+/// The node on the bus: it buffers every frame for Python and notes the delivery.
+struct PyNode {
+    rx: Arc<RxShared>,
+    delivery: Arc<Delivery>,
+}
+
+impl Node for PyNode {
+    fn on_frame(&mut self, frame: &Frame, now: Instant, _out: &mut Outbox) {
+        let mut s = self.rx.lock();
+        if s.closed {
+            return;
+        }
+        if s.frames.len() >= s.capacity {
+            s.overruns += 1;
+            return;
+        }
+        s.frames.push_back(Rx {
+            frame: *frame,
+            at: now,
+        });
+        drop(s);
+        self.delivery.at.store(now.as_nanos(), Ordering::Relaxed);
+        self.delivery.pending.store(true, Ordering::Release);
+        self.rx.ready.notify_all();
+    }
+
+    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// A node on a simulated bus for Python (from :py:meth:`Simulation.attach`).
+///
+/// Its frames arbitrate and take bus time like any node's; it acknowledges frames and
+/// receives every frame on the bus but its own.
+#[pyclass(module = "cantwin._native", frozen)]
+pub struct Port {
+    shared: Arc<Shared>,
+    rx: Arc<RxShared>,
+    port: PortId,
+    bus: String,
+}
+
+pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyResult<Port> {
+    if rx_capacity == 0 {
+        return Err(PyValueError::new_err("rx_capacity must be at least 1"));
+    }
+    let rx = Arc::new(RxShared {
+        state: Mutex::new(RxState {
+            frames: VecDeque::new(),
+            capacity: rx_capacity,
+            overruns: 0,
+            closed: false,
+        }),
+        ready: Condvar::new(),
+    });
+    let node = PyNode {
+        rx: Arc::clone(&rx),
+        delivery: Arc::clone(&shared.delivery),
+    };
+    let mut core = shared.lock();
+    let id = core.bus_id(bus)?;
+    let port = core
+        .with_sim(|sim| {
+            sim.attach(
+                id,
+                node,
+                PortConfig::DEFAULT
+                    .with_queue_depth(QUEUE_DEPTH)
+                    .with_order(TxOrder::Fifo),
+            )
+        })?
+        .map_err(|e| err(e.to_string()))?;
+    Ok(Port {
+        shared: Arc::clone(shared),
+        rx,
+        port,
+        bus: bus.to_string(),
+    })
+}
+
+/// What `recv` hands to Python: identifier, extended, remote, DLC, data, bus time (s).
+type Received = (u32, bool, bool, u8, Vec<u8>, f64);
+
+fn to_py(r: Rx) -> Received {
+    let (raw, extended) = match r.frame.id() {
+        Id::Standard(s) => (u32::from(s.as_raw()), false),
+        Id::Extended(e) => (e.as_raw(), true),
+    };
+    (
+        raw,
+        extended,
+        r.frame.is_remote(),
+        r.frame.dlc(),
+        r.frame.data_bytes().to_vec(),
+        r.at.since_start().as_secs_f64(),
+    )
+}
+
+enum Next {
+    Got(Rx),
+    Closed,
+    Empty,
+}
+
+impl Port {
+    /// Queue `frame`, waiting up to `timeout` for room in the queue.
+    fn transmit(&self, frame: Frame, timeout: Duration) -> PyResult<()> {
+        let port = self.port;
+        let wall_deadline = std::time::Instant::now() + std::time::Duration::from(timeout);
+        let mut bus_deadline = None;
+        loop {
+            let mut core = self.shared.lock();
+            let queued = core.with_sim(|sim| {
+                sim.bus(port.bus())
+                    .and_then(|b| b.port_status(port).ok())
+                    .map(|s| s.queued)
+            })?;
+            let Some(queued) = queued else {
+                return Err(err("the port is closed"));
+            };
+            if queued < QUEUE_DEPTH {
+                let r = core
+                    .with_sim(|sim| sim.transmit(port, frame))?
+                    .map_err(|e| err(e.to_string()));
+                self.shared.delivery.pending.store(false, Ordering::Release);
+                drop(core);
+                self.shared.changed.notify_all();
+                return r;
+            }
+            match &mut core.mode {
+                Mode::Virtual(sim) => {
+                    // A full queue drains as the bus runs: run it to the next event.
+                    let deadline = *bus_deadline.get_or_insert_with(|| {
+                        sim.now().checked_add(timeout).unwrap_or(Instant::MAX)
+                    });
+                    match sim.next_event_time() {
+                        Some(n) if n <= deadline => sim.run_until(n),
+                        _ => return Err(err("the transmit queue stayed full")),
+                    }
+                }
+                Mode::Paced(_) => {
+                    drop(core);
+                    if std::time::Instant::now() >= wall_deadline {
+                        return Err(err("the transmit queue stayed full"));
+                    }
+                    std::thread::sleep(std::time::Duration::from_micros(100));
+                }
+            }
+        }
+    }
+
+    fn take(&self) -> Next {
+        let mut s = self.rx.lock();
+        match s.frames.pop_front() {
+            Some(r) => Next::Got(r),
+            None if s.closed => Next::Closed,
+            None => Next::Empty,
+        }
+    }
+
+    /// Receive in either mode; `timeout` in seconds, `None` waits until a frame arrives.
+    fn receive(&self, timeout: Option<Duration>) -> PyResult<Option<Rx>> {
+        let wall_deadline = timeout.map(|t| std::time::Instant::now() + t.into());
+        let mut core = self.shared.lock();
+        let mut bus_deadline: Option<Option<Instant>> = None;
+        loop {
+            match self.take() {
+                Next::Got(r) => return Ok(Some(r)),
+                Next::Closed => return Err(err("the port is closed")),
+                Next::Empty => {}
+            }
+            let sim = match &mut core.mode {
+                Mode::Virtual(sim) => sim,
+                Mode::Paced(_) => {
+                    // Wait on the wall clock; the pacing thread fills the buffer. Wake at
+                    // least every 100 ms to notice a switch back to virtual time.
+                    drop(core);
+                    let left = match wall_deadline {
+                        Some(d) => d.saturating_duration_since(std::time::Instant::now()),
+                        None => std::time::Duration::from_millis(100),
+                    };
+                    if left.is_zero() {
+                        return Ok(None);
+                    }
+                    let s = self.rx.lock();
+                    if s.frames.is_empty() && !s.closed {
+                        drop(
+                            self.rx
+                                .ready
+                                .wait_timeout(s, left.min(std::time::Duration::from_millis(100)))
+                                .unwrap_or_else(PoisonError::into_inner),
+                        );
+                    }
+                    core = self.shared.lock();
+                    continue;
+                }
+            };
+            let deadline = *bus_deadline.get_or_insert_with(|| {
+                timeout.map(|t| sim.now().checked_add(t).unwrap_or(Instant::MAX))
+            });
+            let next = sim.next_event_time();
+            let target = match (next, deadline) {
+                (Some(n), Some(d)) if n <= d => Some(n),
+                (Some(n), None) => Some(n),
+                _ => None,
+            };
+            // The reaction rule (module documentation).
+            let horizon = target.or(deadline);
+            let delivery = &self.shared.delivery;
+            if let Some(h) = horizon
+                && delivery.pending.load(Ordering::Acquire)
+            {
+                let at = Instant::from_nanos(delivery.at.load(Ordering::Relaxed));
+                if h > at.checked_add(REACTION_GAP).unwrap_or(Instant::MAX) {
+                    delivery.pending.store(false, Ordering::Release);
+                    let wait = core.reaction_time;
+                    core = self
+                        .shared
+                        .changed
+                        .wait_timeout(core, wait)
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .0;
+                    continue;
+                }
+            }
+            match (target, deadline) {
+                (Some(n), _) => sim.run_until(n),
+                (None, Some(d)) => {
+                    sim.run_until(d);
+                    return match self.take() {
+                        Next::Got(r) => Ok(Some(r)),
+                        Next::Closed => Err(err("the port is closed")),
+                        Next::Empty => Ok(None),
+                    };
+                }
+                (None, None) => {
+                    // Nothing will ever happen unless another thread sends: wait for that.
+                    core = self
+                        .shared
+                        .changed
+                        .wait_timeout(core, std::time::Duration::from_millis(100))
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .0;
+                    continue;
+                }
+            }
+            // Let other threads in between events.
+            drop(core);
+            core = self.shared.lock();
+        }
+    }
+}
+
+#[pymethods]
+impl Port {
+    /// The bus the port is on.
+    #[getter]
+    fn bus(&self) -> String {
+        self.bus.clone()
+    }
+
+    /// Queue a frame for transmission now. `arbitration_id` is 11-bit unless `extended`;
+    /// a remote frame sends no data and requests `dlc` bytes.
+    ///
+    /// When the port's transmit queue is full the call waits for room, at most `timeout`
+    /// seconds (default 1 s): of bus time in virtual time (the simulation runs meanwhile),
+    /// of wall time when paced.
+    #[pyo3(signature = (arbitration_id, data, *, extended=false, remote=false, dlc=None, timeout=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn send(
+        &self,
+        py: Python<'_>,
+        arbitration_id: u32,
+        data: &[u8],
+        extended: bool,
+        remote: bool,
+        dlc: Option<u8>,
+        timeout: Option<f64>,
+    ) -> PyResult<()> {
+        let id: Id = if extended {
+            ExtendedId::new(arbitration_id)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?
+                .into()
+        } else {
+            let raw = u16::try_from(arbitration_id)
+                .map_err(|_| PyValueError::new_err("a standard identifier is 11 bits"))?;
+            StandardId::new(raw)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?
+                .into()
+        };
+        let frame = if remote {
+            let dlc = dlc.unwrap_or(u8::try_from(data.len()).unwrap_or(u8::MAX));
+            Frame::remote(id, dlc)
+        } else {
+            Frame::data(id, data)
+        }
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
+        py.detach(|| self.transmit(frame, timeout))
+    }
+
+    /// The next frame as ``(arbitration_id, extended, remote, dlc, data, time)`` (time: bus time
+    /// in seconds at its end of frame), or `None` after `timeout` seconds (`None`: wait until
+    /// one arrives). In virtual time the wait runs the simulation (module documentation).
+    #[pyo3(signature = (timeout=None))]
+    fn recv(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<Option<Received>> {
+        let timeout = timeout.map(secs).transpose()?;
+        py.detach(|| self.receive(timeout)).map(|r| r.map(to_py))
+    }
+
+    /// Frames lost because the receive buffer was full.
+    #[getter]
+    fn overruns(&self) -> u64 {
+        self.rx.lock().overruns
+    }
+
+    /// Frames this port sent successfully.
+    #[getter]
+    fn tx_frames(&self) -> PyResult<u64> {
+        let port = self.port;
+        self.shared.lock().with_sim(|sim| {
+            sim.bus(port.bus())
+                .and_then(|b| b.port_status(port).ok())
+                .map_or(0, |s| s.stats.tx_frames)
+        })
+    }
+
+    /// Detach the port from its bus; further calls fail, buffered frames are dropped.
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        {
+            let mut s = self.rx.lock();
+            if s.closed {
+                return Ok(());
+            }
+            s.closed = true;
+            s.frames.clear();
+        }
+        self.rx.ready.notify_all();
+        let shared = Arc::clone(&self.shared);
+        let port = self.port;
+        py.detach(move || {
+            let mut core = shared.lock();
+            let r = core.with_sim(|sim| match sim.bus_mut(port.bus()) {
+                Some(bus) => bus.detach(port).map(drop).map_err(|e| err(e.to_string())),
+                None => Ok(()),
+            });
+            drop(core);
+            shared.changed.notify_all();
+            r?
+        })
+    }
+}
+
+impl Drop for Port {
+    fn drop(&mut self) {
+        let closed = {
+            let mut s = self.rx.lock();
+            std::mem::replace(&mut s.closed, true)
+        };
+        if !closed {
+            let port = self.port;
+            let mut core = self.shared.lock();
+            let _ = core.with_sim(|sim| sim.bus_mut(port.bus()).map(|b| b.detach(port)));
+        }
+    }
+}
