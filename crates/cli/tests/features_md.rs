@@ -24,8 +24,11 @@ fn every_test_named_in_features_md_exists() {
     let features = std::fs::read_to_string(root.join("docs/FEATURES.md")).unwrap();
     let mut files = Vec::new();
     sources(&root.join("crates"), &mut files);
-    if root.join("tests").is_dir() {
-        sources(&root.join("tests"), &mut files);
+    // The interop suite and the Python package's tests (`def test_…`) name tests too.
+    for dir in ["tests", "python"] {
+        if root.join(dir).is_dir() {
+            sources(&root.join(dir), &mut files);
+        }
     }
     let mut functions = Vec::new();
     for f in &files {
