@@ -13,13 +13,15 @@ the frame).
 
 In virtual time, :meth:`recv` runs the simulation instead of sleeping: by up to `timeout`
 of bus time, stopping as soon as a frame for this node arrives. After a frame reached Python
-the simulation waits up to the simulation's ``reaction_time`` (wall clock) for another
-thread to answer before it runs on, so python-canopen's Notifier thread and the thread
-that answers (an SDO client, say) behave as on a fast host.
+on a thread other than the one that opened the bus (python-can's Notifier), the simulation
+waits up to the simulation's ``reaction_time`` (wall clock) for another thread to answer
+before it runs on, so python-canopen's Notifier thread and the thread that answers (an SDO
+client, say) behave as on a fast host.
 """
 
 from __future__ import annotations
 
+import threading
 from typing import Any, Optional, Union
 
 import can
@@ -63,6 +65,10 @@ class CantwinBus(can.BusABC):
             self._port = self._sim.attach(str(channel), rx_capacity=rx_capacity)
         except (KeyError, CantwinError) as e:
             raise can.CanInitializationError(str(e)) from e
+        # The thread that opened the bus answers what it receives itself; frames received on
+        # other threads (python-can's Notifier) are answered by this one, which gets its
+        # reaction time.
+        self._owner = threading.get_ident()
         self.channel = str(channel)
         self.channel_info = f"cantwin {self.channel}"
         super().__init__(channel=channel, can_filters=can_filters, **kwargs)
@@ -98,7 +104,9 @@ class CantwinBus(can.BusABC):
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
         try:
-            got = self._port.recv(timeout)
+            got = self._port.recv(
+                timeout, wait_for_answers=threading.get_ident() != self._owner
+            )
         except CantwinError as e:
             raise can.CanOperationError(str(e)) from e
         if got is None:

@@ -226,7 +226,7 @@ impl Port {
     }
 
     /// Receive in either mode; `timeout` in seconds, `None` waits until a frame arrives.
-    fn receive(&self, timeout: Option<Duration>) -> PyResult<Option<Rx>> {
+    fn receive(&self, timeout: Option<Duration>, wait_for_answers: bool) -> PyResult<Option<Rx>> {
         let wall_deadline = timeout.map(|t| std::time::Instant::now() + t.into());
         let mut core = self.shared.lock();
         let mut bus_deadline: Option<Option<Instant>> = None;
@@ -275,6 +275,7 @@ impl Port {
             let horizon = target.or(deadline);
             let delivery = &self.shared.delivery;
             if let Some(h) = horizon
+                && wait_for_answers
                 && delivery.pending.load(Ordering::Acquire)
             {
                 let at = Instant::from_nanos(delivery.at.load(Ordering::Relaxed));
@@ -369,10 +370,19 @@ impl Port {
     /// The next frame as ``(arbitration_id, extended, remote, dlc, data, time)`` (time: bus time
     /// in seconds at its end of frame), or `None` after `timeout` seconds (`None`: wait until
     /// one arrives). In virtual time the wait runs the simulation (module documentation).
-    #[pyo3(signature = (timeout=None))]
-    fn recv(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<Option<Received>> {
+    ///
+    /// `wait_for_answers` applies the reaction rule (let other threads answer a frame before
+    /// the simulation runs past it); a thread that both receives and answers passes `False`.
+    #[pyo3(signature = (timeout=None, *, wait_for_answers=true))]
+    fn recv(
+        &self,
+        py: Python<'_>,
+        timeout: Option<f64>,
+        wait_for_answers: bool,
+    ) -> PyResult<Option<Received>> {
         let timeout = timeout.map(secs).transpose()?;
-        py.detach(|| self.receive(timeout)).map(|r| r.map(to_py))
+        py.detach(|| self.receive(timeout, wait_for_answers))
+            .map(|r| r.map(to_py))
     }
 
     /// Frames lost because the receive buffer was full.
