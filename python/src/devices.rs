@@ -9,7 +9,7 @@ use cantwin_adv200::alarms::Alarm;
 use cantwin_bus::{Bus, PortId};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::Device;
-use cantwin_canopen::od::{ObjectDictionary, Value};
+use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
 use cantwin_opendrive::{OpenDrive, ParId};
 use cantwin_scenario::kinds::cia301::Cia301Node;
 use cantwin_tm3::Tm3Coupler;
@@ -112,18 +112,27 @@ pub(crate) fn write_object(
     let data = data.to_vec();
     let r = core.with_sim(move |sim| {
         let bus = sim.bus_mut(port.bus())?;
-        let set = |dev: &mut Device| -> Result<(), AbortCode> {
-            let v = value_for(dev.od(), index, sub, &data)?;
+        fn set<H: OdHooks>(
+            dev: &mut Device<H>,
+            index: u16,
+            sub: u8,
+            data: &[u8],
+        ) -> Result<(), AbortCode> {
+            let v = value_for(dev.od(), index, sub, data)?;
             dev.set_value(index, sub, &v)
-        };
+        }
         if bus.node::<Cia301Node>(port).is_some() {
-            return bus.with_node::<Cia301Node, _>(port, |n, _, _| set(n.device_mut()));
+            return bus.with_node::<Cia301Node, _>(port, |n, _, _| {
+                set(n.device_mut(), index, sub, &data)
+            });
         }
         if bus.node::<Device>(port).is_some() {
-            return bus.with_node::<Device, _>(port, |n, _, _| set(n));
+            return bus.with_node::<Device, _>(port, |n, _, _| set(n, index, sub, &data));
         }
         if bus.node::<Tm3Coupler>(port).is_some() {
-            return bus.with_node::<Tm3Coupler, _>(port, |n, _, _| set(n.device_mut()));
+            return bus.with_node::<Tm3Coupler, _>(port, |n, _, _| {
+                set(n.device_mut(), index, sub, &data)
+            });
         }
         None
     })?;
