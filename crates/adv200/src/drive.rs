@@ -119,6 +119,19 @@ impl Drive {
         }
     }
 
+    /// Digital input k (1..=8); `false` for other k.
+    pub fn digital_input(&self, k: u8) -> bool {
+        (1..=8).contains(&k) && self.inputs & (1 << (k - 1)) != 0
+    }
+
+    /// Analog input k (1..=2) in volts, as quantised by the converter; 0 for other k.
+    pub fn analog_input(&self, k: u8) -> f64 {
+        match k {
+            1 | 2 => self.analog[usize::from(k - 1)] as f64 / 1638.4,
+            _ => 0.0,
+        }
+    }
+
     /// Sets analog input k (1..=2) in volts (±10 V = ±16384 counts).
     pub fn set_analog_input(&mut self, k: u8, volts: f64) {
         if (1..=2).contains(&k) {

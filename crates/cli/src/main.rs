@@ -22,6 +22,7 @@ mod monitor;
 mod monitor_ui;
 mod report;
 mod sim;
+mod web;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

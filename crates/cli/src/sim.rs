@@ -32,6 +32,11 @@ pub struct Args {
     /// The bus the slcan gateway serves (needed when the scenario has several).
     #[arg(long, value_name = "NAME")]
     slcan_bus: Option<String>,
+    /// Serve a live dashboard (node table, frame stream, bus load, device values and
+    /// charts, controls) for a web browser on [ADDR:]PORT (ADDR defaults to 127.0.0.1; port
+    /// 0 picks a free port).
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    web: Option<String>,
     /// Allow gateways to listen on addresses other than loopback. Anyone who can reach the
     /// address can then put frames on the simulated buses.
     #[arg(long)]
@@ -52,7 +57,7 @@ pub struct Args {
     state_dir: Option<PathBuf>,
     /// Run the scenario's script in virtual time instead, print each expectation's verdict
     /// and exit non-zero on a failure.
-    #[arg(long, conflicts_with_all = ["socketcand", "slcan", "duration", "pcap", "candump"])]
+    #[arg(long, conflicts_with_all = ["socketcand", "slcan", "duration", "pcap", "candump", "web"])]
     check: bool,
 }
 
@@ -127,6 +132,10 @@ pub fn run(args: &Args) -> Result<()> {
         ..Limits::default()
     };
 
+    let mut dashboard = args.web.as_ref().map(|_| {
+        crate::web::Dashboard::attach(&mut built.sim, &scenario, &built.buses, &built.devices)
+    });
+
     let paced = PacedSimulation::start(built.sim, PacedConfig::default());
     let handle = paced.handle();
     let connector = Arc::new(PacedBus::new(handle.clone()));
@@ -164,6 +173,13 @@ pub fn run(args: &Args) -> Result<()> {
         println!("slcan {} {bus}", server.local_addr());
         slcan_server = Some(server);
     }
+    let mut web_server = None;
+    if let (Some(spec), Some(d)) = (&args.web, &dashboard) {
+        let addr = parse_listen(spec, "--web")?;
+        let server = d.serve(addr, args.allow_remote)?;
+        println!("web http://{}/", server.local_addr());
+        web_server = Some(server);
+    }
     use std::io::Write as _;
     std::io::stdout().flush().ok();
 
@@ -178,9 +194,15 @@ pub fn run(args: &Args) -> Result<()> {
         .duration
         .map(|d| started + WallDuration::from_secs_f64(d));
     while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| WallInstant::now() < d) {
+        if let Some(d) = dashboard.as_mut() {
+            d.poll(&handle);
+        }
         std::thread::sleep(WallDuration::from_millis(20));
     }
 
+    if let Some(s) = web_server {
+        s.shutdown();
+    }
     if let Some(s) = socketcand_server {
         s.shutdown();
     }

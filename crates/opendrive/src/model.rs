@@ -397,6 +397,11 @@ impl Drive {
         self.analog_reference_hz = hz.max(0.0);
     }
 
+    /// The frequency reference on the terminal board (Hz, magnitude).
+    pub fn analog_reference_hz(&self) -> f64 {
+        self.analog_reference_hz
+    }
+
     /// Move DIP switch S1 on board CS6341 (read at power-up only, manual §2.3).
     pub fn set_dip_s1(&mut self, on: bool) {
         self.dip_s1 = on;

@@ -45,12 +45,14 @@
 mod build;
 mod error;
 pub mod kinds;
+pub mod live;
 mod model;
 mod registry;
 pub mod script;
 
 pub use build::{BuildEnv, Built, BuiltDevice};
 pub use error::{Located, ScenarioError};
+pub use live::{LiveValue, Role};
 pub use model::{BusSpec, DeviceSpec, Scenario};
 pub use registry::{DeviceKind, Registry, Settings};
 pub use script::{CheckReport, Script, check};

@@ -8,6 +8,7 @@ use serde::de::DeserializeOwned;
 
 use crate::build::BuildEnv;
 use crate::error::{Located, ScenarioError};
+use crate::live::LiveValue;
 use crate::model::{BusSpec, DeviceSpec};
 
 /// A kind of device a scenario can place on a bus.
@@ -48,6 +49,30 @@ pub trait DeviceKind: Send + Sync {
             "a {} device has no internal faults to inject",
             self.name()
         ))
+    }
+
+    /// The live values of the model of the node this kind built on `port` (measurements,
+    /// inputs, outputs), for dashboards. Empty (the default) when the kind shows none.
+    fn live_values(&self, sim: &Simulation, port: PortId) -> Vec<LiveValue> {
+        let _ = (sim, port);
+        Vec::new()
+    }
+
+    /// Sets input `name` (one of the [`Role::DigitalInput`] or [`Role::AnalogInput`]
+    /// values of [`Self::live_values`]) of the node on `port` to `value`, as a wire on its
+    /// terminal would. The default refuses: the kind has no inputs.
+    ///
+    /// [`Role::DigitalInput`]: crate::Role::DigitalInput
+    /// [`Role::AnalogInput`]: crate::Role::AnalogInput
+    fn set_input(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        name: &str,
+        value: f64,
+    ) -> Result<(), String> {
+        let _ = (sim, port, value);
+        Err(format!("a {} device has no input {name:?}", self.name()))
     }
 }
 

@@ -960,7 +960,14 @@ pub fn check(
         built.sim.run_until(t);
         match step {
             Step::Act(a) => {
-                if let Err(e) = apply(&mut built, registry, &script_ports, a) {
+                if let Err(e) = apply_action(
+                    &mut built.sim,
+                    &built.buses,
+                    &built.devices,
+                    registry,
+                    &script_ports,
+                    &a.kind,
+                ) {
                     outcomes.push(Outcome {
                         line: a.line,
                         label: format!("action at {}", fmt_ms(a.at)),
@@ -1071,48 +1078,88 @@ pub fn check(
     })
 }
 
-fn apply(
-    built: &mut Built,
+/// Parses one `[[at]]` table of `scenario`'s vocabulary (`action`, `device`, `bus`,
+/// `frame`, `fraction`, `count`, `bit_rate`, `fault`; `time_ms` is ignored and may be left
+/// out), so that a host can apply, now, the faults the scenario files express: the same
+/// names and checks as in a script.
+pub fn parse_action(scenario: &Scenario, mut table: toml::Table) -> Result<ActionKind, String> {
+    table.entry("time_ms").or_insert(toml::Value::Float(0.0));
+    let raw: RawAt = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| e.message().trim_end().to_string())?;
+    let parser = ScriptParser {
+        text: "",
+        file: &scenario.file,
+        buses: &scenario.buses,
+        devices: &scenario.devices,
+    };
+    parser
+        .action(0, 0, &raw)
+        .map(|a| a.kind)
+        .map_err(|e| match e {
+            ScenarioError::Invalid { at, message } => match at.key {
+                Some(k) => format!("{}: {message}", k.trim_start_matches("at[0].")),
+                None => message,
+            },
+            other => other.to_string(),
+        })
+}
+
+/// Applies `kind` to `sim` now. Names resolve through `buses` and `devices` (those of the
+/// built scenario) and kinds through `registry`; frames to send go out from
+/// `script_ports`, a port per bus name.
+pub fn apply_action(
+    sim: &mut Simulation,
+    buses: &[(String, cantwin_bus::BusId)],
+    devices: &[crate::BuiltDevice],
     registry: &Registry,
     script_ports: &BTreeMap<String, PortId>,
-    a: &Action,
+    kind: &ActionKind,
 ) -> Result<(), String> {
-    let port = |built: &Built, d: &str| {
-        built
-            .device(d)
+    let port = |d: &str| {
+        devices
+            .iter()
+            .find(|x| x.name == d)
             .map(|d| d.port)
             .ok_or_else(|| format!("no device {d:?}"))
+    };
+    let bus_id = |b: &str| {
+        buses
+            .iter()
+            .find(|(n, _)| n == b)
+            .map(|(_, id)| *id)
+            .ok_or_else(|| format!("no bus {b:?}"))
     };
     fn bus_of(sim: &mut Simulation, p: PortId) -> Result<&mut cantwin_bus::Bus, String> {
         sim.bus_mut(p.bus())
             .ok_or_else(|| "the device's bus is gone".to_string())
     }
-    let r = match &a.kind {
+    let r = match kind {
         ActionKind::Send { bus, frame } => {
             let p = *script_ports
                 .get(bus)
                 .ok_or_else(|| format!("no bus {bus:?}"))?;
-            built.sim.transmit(p, *frame)
+            sim.transmit(p, *frame)
         }
         ActionKind::Power { device, on } => {
-            let p = port(built, device)?;
-            bus_of(&mut built.sim, p)?.set_powered(p, *on)
+            let p = port(device)?;
+            bus_of(sim, p)?.set_powered(p, *on)
         }
         ActionKind::Connect { device, connected } => {
-            let p = port(built, device)?;
-            bus_of(&mut built.sim, p)?.set_connected(p, *connected)
+            let p = port(device)?;
+            bus_of(sim, p)?.set_connected(p, *connected)
         }
         ActionKind::BusOff { device } => {
-            let p = port(built, device)?;
-            bus_of(&mut built.sim, p)?.force_bus_off(p)
+            let p = port(device)?;
+            bus_of(sim, p)?.force_bus_off(p)
         }
         ActionKind::Babble { device, frame } => {
-            let p = port(built, device)?;
-            bus_of(&mut built.sim, p)?.set_babble(p, *frame)
+            let p = port(device)?;
+            bus_of(sim, p)?.set_babble(p, *frame)
         }
         ActionKind::BitRateMismatch { device, rate } => {
-            let p = port(built, device)?;
-            bus_of(&mut built.sim, p)?.set_bit_rate_mismatch(p, *rate)
+            let p = port(device)?;
+            bus_of(sim, p)?.set_bit_rate_mismatch(p, *rate)
         }
         ActionKind::Fault {
             bus,
@@ -1121,7 +1168,7 @@ fn apply(
             from,
             count,
         } => {
-            let id = built.bus(bus).ok_or_else(|| format!("no bus {bus:?}"))?;
+            let id = bus_id(bus)?;
             let sel = FrameSelector::Fraction(*fraction);
             let mut rule = if *corrupt {
                 FaultRule::corrupt(sel)
@@ -1129,36 +1176,33 @@ fn apply(
                 FaultRule::drop(sel)
             };
             if let Some(d) = from {
-                rule = rule.from_port(port(built, d)?);
+                rule = rule.from_port(port(d)?);
             }
             if let Some(n) = count {
                 rule = rule.times(*n);
             }
-            built
-                .sim
-                .bus_mut(id)
+            sim.bus_mut(id)
                 .ok_or_else(|| format!("no bus {bus:?}"))?
                 .inject(rule);
             Ok(())
         }
         ActionKind::ClearFaults { bus } => {
-            let id = built.bus(bus).ok_or_else(|| format!("no bus {bus:?}"))?;
-            built
-                .sim
-                .bus_mut(id)
+            let id = bus_id(bus)?;
+            sim.bus_mut(id)
                 .ok_or_else(|| format!("no bus {bus:?}"))?
                 .clear_faults();
             Ok(())
         }
         ActionKind::Inject { device, fault } => {
-            let d = built
-                .device(device)
+            let d = devices
+                .iter()
+                .find(|x| &x.name == device)
                 .ok_or_else(|| format!("no device {device:?}"))?;
             let (port, kind) = (d.port, d.kind.clone());
             let k = registry
                 .get(&kind)
                 .ok_or_else(|| format!("no kind {kind:?}"))?;
-            return k.inject(&mut built.sim, port, fault.as_deref());
+            return k.inject(sim, port, fault.as_deref());
         }
     };
     r.map_err(|e| e.to_string())

@@ -458,6 +458,31 @@ impl Tm3Coupler {
         Ok(())
     }
 
+    /// The physical state of digital input `channel` (0-based) of module `module` (the
+    /// wired terminal, whether or not the module works).
+    pub fn digital_input(&self, module: usize, channel: u8) -> Result<bool, IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.digital_inputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        Ok(self.di.get(i).is_some_and(|d| d >> channel & 1 != 0))
+    }
+
+    /// The physical value of analog input `channel` (0-based) of module `module` (raw
+    /// 16-bit, whether or not the module works).
+    pub fn analog_input(&self, module: usize, channel: u8) -> Result<i16, IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.analog_inputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        let sub = self
+            .config
+            .island
+            .offsets(i)
+            .map_or(1, |o| o.analog_input + channel + 1);
+        Ok(self.ai.get(usize::from(sub) - 1).copied().unwrap_or(0))
+    }
+
     /// The physical state of digital output `channel` (0-based) of module `module`.
     pub fn digital_output(&self, module: usize, channel: u8) -> Result<bool, IoError> {
         let (i, spec) = self.slot(module)?;

@@ -34,6 +34,7 @@ use serde::Deserialize;
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
+use crate::live::{LiveValue, Role, analog_value, digital_value};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
@@ -83,6 +84,74 @@ impl DeviceKind for Adv200Kind {
             None => node.clear_card_faults(),
         }
         Ok(())
+    }
+
+    /// The motor speed (rpm) and current (A), the thermal load, digital inputs 1–8,
+    /// analog inputs 1–2 (±10 V) and digital outputs 1–4.
+    fn live_values(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+    ) -> Vec<LiveValue> {
+        let Some(node) = sim.node::<Adv200>(port) else {
+            return Vec::new();
+        };
+        let d = node.drive();
+        let mut v = vec![
+            LiveValue::measured("speed", d.speed(), "rpm"),
+            LiveValue::measured("current", d.current(), "A"),
+            LiveValue::measured("thermal", d.thermal() * 100.0, "%"),
+        ];
+        v.extend(
+            (1..=8).map(|k| {
+                LiveValue::digital(format!("DI{k}"), d.digital_input(k), Role::DigitalInput)
+            }),
+        );
+        v.extend((1..=2).map(|k| LiveValue {
+            name: format!("AI{k}"),
+            value: d.analog_input(k),
+            unit: "V",
+            role: Role::AnalogInput {
+                min: -10.0,
+                max: 10.0,
+            },
+        }));
+        v.extend((1..=4).map(|k| {
+            LiveValue::digital(
+                format!("DO{k}"),
+                node.digital_output(k),
+                Role::DigitalOutput,
+            )
+        }));
+        v
+    }
+
+    fn set_input(
+        &self,
+        sim: &mut cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+        name: &str,
+        value: f64,
+    ) -> Result<(), String> {
+        let node = sim
+            .node_mut::<Adv200>(port)
+            .ok_or_else(|| "the device is not an ADV200".to_string())?;
+        let number = |prefix: &str, max: u8| {
+            name.strip_prefix(prefix)
+                .and_then(|k| k.parse::<u8>().ok())
+                .filter(|k| (1..=max).contains(k))
+        };
+        if let Some(k) = number("DI", 8) {
+            node.set_digital_input(k, digital_value(name, value)?);
+            Ok(())
+        } else if let Some(k) = number("AI", 2) {
+            node.set_analog_input(k, analog_value(name, value, -10.0, 10.0, "V")?);
+            Ok(())
+        } else {
+            Err(format!(
+                "an adv200 device has no input {name:?} (inputs: DI1–DI8, AI1, AI2)"
+            ))
+        }
     }
 
     fn build(

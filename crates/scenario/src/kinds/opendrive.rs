@@ -37,11 +37,16 @@ use cantwin_opendrive::{DriveData, Flash, FlashStorage, MotorData, OpenDrive, bi
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
+use crate::live::{LiveValue, Role, analog_value, digital_value};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
 /// The OPEN DRIVE kind.
 pub struct OpenDriveKind;
+
+/// The largest terminal reference a dashboard may set: the drive clamps the reference to its
+/// maximum frequency (P21 scale) anyway; this only refuses nonsense.
+const REFERENCE_MAX_HZ: f64 = 500.0;
 
 /// The drive's flash in a file.
 struct FileFlash(PathBuf);
@@ -77,6 +82,75 @@ impl DeviceKind for OpenDriveKind {
 
     fn summary(&self) -> &'static str {
         "TDE MACNO OPEN DRIVE, application 003: CAL CMS messages 0-2 (P180-P187), V/f drive and motor"
+    }
+
+    /// The motor (speed as its frequency in Hz, current in % of its rated current), the
+    /// output frequency, DC bus, heatsink and I²t state, logic inputs 1–8 and the terminal
+    /// frequency reference.
+    fn live_values(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+    ) -> Vec<LiveValue> {
+        let Some(node) = sim.node::<OpenDrive>(port) else {
+            return Vec::new();
+        };
+        let d = node.drive();
+        let mut v = vec![
+            LiveValue::measured("speed", d.motor_hz(), "Hz"),
+            LiveValue::measured("current", d.current_pct(), "%"),
+            LiveValue::measured("output frequency", d.output_hz(), "Hz"),
+            LiveValue::measured("DC bus", d.dc_bus_v(), "V"),
+            LiveValue::measured("heatsink", d.heatsink_c(), "°C"),
+            LiveValue::measured("motor thermal", d.motor_thermal() * 100.0, "%"),
+        ];
+        v.extend(
+            (1..=8).map(|n| LiveValue::digital(format!("in{n}"), d.input(n), Role::DigitalInput)),
+        );
+        v.push(LiveValue {
+            name: "reference".into(),
+            value: d.analog_reference_hz(),
+            unit: "Hz",
+            role: Role::AnalogInput {
+                min: 0.0,
+                max: REFERENCE_MAX_HZ,
+            },
+        });
+        v
+    }
+
+    fn set_input(
+        &self,
+        sim: &mut cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+        name: &str,
+        value: f64,
+    ) -> Result<(), String> {
+        let node = sim
+            .node_mut::<OpenDrive>(port)
+            .ok_or_else(|| "the device is not an OPEN DRIVE".to_string())?;
+        let drive = node.drive_mut();
+        if let Some(n) = name.strip_prefix("in").and_then(|n| n.parse::<u8>().ok())
+            && (1..=8).contains(&n)
+        {
+            drive.set_input(n, digital_value(name, value)?);
+            return Ok(());
+        }
+        match name {
+            "reference" => {
+                drive.set_analog_reference_hz(analog_value(
+                    name,
+                    value,
+                    0.0,
+                    REFERENCE_MAX_HZ,
+                    "Hz",
+                )?);
+                Ok(())
+            }
+            _ => Err(format!(
+                "an opendrive device has no input {name:?} (inputs: in1–in8, reference)"
+            )),
+        }
     }
 
     fn build(

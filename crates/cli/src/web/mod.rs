@@ -1,0 +1,1120 @@
+//! `cantwin sim --web ADDR:PORT`: a live dashboard of the running network in the browser.
+//!
+//! The simulation runs paced to the wall clock on its own thread; the web server runs on
+//! another thread with its own runtime. They meet only through channels: requests go in
+//! through an unbounded queue the sim loop drains without waiting, and the sim loop publishes
+//! each snapshot (JSON with the charts already drawn as SVG) into a watch channel that keeps
+//! only the newest. Neither side ever waits for the other.
+//!
+//! The dashboard owns one port per bus: a CANopen master ([`Master`]) from which NMT commands
+//! and SDO downloads go out on the wire, and from which the fault vocabulary's `send` action
+//! sends. Writing an object is an SDO download through the bus rather than a write into the
+//! twin's dictionary: the twin's SDO server then applies its access rights, value ranges and
+//! side effects, and answers with the abort code a real device would (CiA 301 §7.2.4.3.17).
+
+mod server;
+mod svg;
+mod tap;
+
+use std::collections::{BTreeMap, VecDeque};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::mpsc;
+use std::time::{Duration as WallDuration, Instant as WallInstant};
+
+use anyhow::Result;
+use cantwin_bus::{BusId, PortConfig, PortId, SimHandle, Simulation, TapId};
+use cantwin_can::{ErrorCounters, ErrorState, Frame, Instant};
+use cantwin_canopen::master::sdo_client::{Mode, SdoEvent};
+use cantwin_canopen::master::{Master, MasterEvent, TransferId};
+use cantwin_canopen::sdo::wire::Mux;
+use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs, PdoKind};
+use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
+use cantwin_scenario::{BuiltDevice, Registry, Role, Scenario};
+use serde_json::{Value, json};
+
+pub use server::Server;
+use tap::{Seen, WebTap};
+
+/// How often the dashboard takes a snapshot and publishes it.
+const PERIOD: WallDuration = WallDuration::from_millis(250);
+/// The window the charts show.
+const WINDOW_S: f64 = 60.0;
+/// Frames kept for the frame stream.
+const STREAM_LEN: usize = 80;
+/// How long a power cycle keeps the device off.
+const POWER_CYCLE_OFF: WallDuration = WallDuration::from_millis(500);
+
+/// What the page asks the simulation to do.
+#[derive(Debug)]
+pub enum Command {
+    /// An NMT command (CiA 301 §7.2.8.3.1) to one device or, with `None`, to all nodes
+    /// of every bus (node-ID 0).
+    Nmt {
+        /// The device, or all.
+        device: Option<String>,
+        /// The command.
+        cs: NmtCs,
+    },
+    /// Set an input of a device's model.
+    SetInput {
+        /// The device.
+        device: String,
+        /// The input's name (see [`cantwin_scenario::DeviceKind::set_input`]).
+        input: String,
+        /// The value.
+        value: f64,
+    },
+    /// An SDO download of `data` to `index`/`sub` of a device.
+    Sdo {
+        /// The device.
+        device: String,
+        /// The object.
+        index: u16,
+        /// The sub-index.
+        sub: u8,
+        /// Little-endian bytes.
+        data: Vec<u8>,
+    },
+    /// Power a device off and on again.
+    PowerCycle {
+        /// The device.
+        device: String,
+    },
+    /// An action in the vocabulary of the scenarios' `[[at]]` tables (faults and repairs).
+    Fault(toml::Table),
+}
+
+/// How a command ended: `Ok` with a message for the page, or `Err`.
+pub type Outcome = Result<String, Refusal>;
+
+/// Why a command did not succeed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Refusal {
+    /// The request names something that does not exist or a value out of range (HTTP 400).
+    BadRequest(String),
+    /// The device answered with an error (an SDO abort) or could not carry it out (HTTP 422).
+    Failed(String),
+}
+
+/// A command with the channel its outcome goes back on.
+#[derive(Debug)]
+pub struct Request {
+    /// What to do.
+    pub command: Command,
+    /// Where the outcome goes.
+    pub reply: tokio::sync::oneshot::Sender<Outcome>,
+}
+
+/// What the sim loop knows about a device between snapshots.
+#[derive(Debug, Clone)]
+struct DeviceState {
+    info: BuiltDevice,
+    bus: String,
+    /// Learned from the COB-IDs of its boot-up and heartbeat messages.
+    node_id: Option<u8>,
+    nmt: Option<u8>,
+    last_heard: Option<Instant>,
+    emcy: Option<(Instant, wire::Emcy)>,
+}
+
+#[derive(Debug, Clone)]
+struct StreamRow {
+    at: Instant,
+    bus: usize,
+    /// `None` for controller events.
+    frame: Option<Frame>,
+    from: String,
+    text: String,
+    flag: &'static str,
+}
+
+/// A sliding window of samples.
+#[derive(Debug, Default)]
+struct History(VecDeque<(WallInstant, f64)>);
+
+impl History {
+    fn push(&mut self, t: WallInstant, v: f64) {
+        self.0.push_back((t, v));
+        while self
+            .0
+            .front()
+            .is_some_and(|(s, _)| t.duration_since(*s).as_secs_f64() > WINDOW_S)
+        {
+            self.0.pop_front();
+        }
+    }
+
+    fn points(&self, now: WallInstant) -> Vec<(f64, f64)> {
+        self.0
+            .iter()
+            .map(|(t, v)| (now.duration_since(*t).as_secs_f64(), *v))
+            .collect()
+    }
+}
+
+struct PendingSdo {
+    bus: BusId,
+    id: TransferId,
+    what: String,
+    reply: tokio::sync::oneshot::Sender<Outcome>,
+}
+
+struct Scheduled {
+    at: WallInstant,
+    device: String,
+}
+
+/// The simulation's side of the dashboard.
+pub struct Dashboard {
+    scenario: Scenario,
+    registry: Registry,
+    buses: Vec<(String, BusId)>,
+    devices: Vec<DeviceState>,
+    taps: Vec<(BusId, TapId)>,
+    masters: BTreeMap<String, PortId>,
+    requests: mpsc::Receiver<Request>,
+    sender: mpsc::Sender<Request>,
+    publish: tokio::sync::watch::Sender<Arc<String>>,
+    stream: VecDeque<StreamRow>,
+    missed: u64,
+    bus_history: Vec<(History, History, u64)>,
+    value_history: BTreeMap<(usize, String), History>,
+    pending: Vec<PendingSdo>,
+    scheduled: Vec<Scheduled>,
+    next_snapshot: WallInstant,
+    last_snapshot: Option<(WallInstant, Vec<u64>)>,
+    started: WallInstant,
+}
+
+impl Dashboard {
+    /// Attaches the dashboard's taps and master ports to `sim` (before it is paced).
+    pub fn attach(
+        sim: &mut Simulation,
+        scenario: &Scenario,
+        buses: &[(String, BusId)],
+        devices: &[BuiltDevice],
+    ) -> Dashboard {
+        let mut taps = Vec::new();
+        let mut masters = BTreeMap::new();
+        for (name, id) in buses {
+            if let Some(bus) = sim.bus_mut(*id) {
+                taps.push((*id, bus.add_tap(WebTap::default())));
+                let port = bus.attach(Master::new(), PortConfig::default().with_queue_depth(64));
+                masters.insert(name.clone(), port);
+            }
+        }
+        let devices = devices
+            .iter()
+            .map(|d| DeviceState {
+                info: d.clone(),
+                bus: buses
+                    .iter()
+                    .find(|(_, id)| *id == d.port.bus())
+                    .map(|(n, _)| n.clone())
+                    .unwrap_or_default(),
+                node_id: None,
+                nmt: None,
+                last_heard: None,
+                emcy: None,
+            })
+            .collect();
+        let (sender, requests) = mpsc::channel();
+        let (publish, _) = tokio::sync::watch::channel(Arc::new(String::from("{}")));
+        let now = WallInstant::now();
+        Dashboard {
+            scenario: scenario.clone(),
+            registry: Registry::builtin(),
+            buses: buses.to_vec(),
+            devices,
+            taps,
+            masters,
+            requests,
+            sender,
+            publish,
+            stream: VecDeque::new(),
+            missed: 0,
+            bus_history: buses
+                .iter()
+                .map(|_| (History::default(), History::default(), 0))
+                .collect(),
+            value_history: BTreeMap::new(),
+            pending: Vec::new(),
+            scheduled: Vec::new(),
+            next_snapshot: now,
+            last_snapshot: None,
+            started: now,
+        }
+    }
+
+    /// Starts the web server on `addr` (refusing non-loopback addresses unless
+    /// `allow_remote`).
+    pub fn serve(&self, addr: SocketAddr, allow_remote: bool) -> Result<Server> {
+        server::Server::start(
+            addr,
+            allow_remote,
+            self.sender.clone(),
+            self.publish.subscribe(),
+        )
+    }
+
+    /// Handles what arrived and publishes a snapshot when one is due. Never waits for the
+    /// web server.
+    pub fn poll(&mut self, handle: &SimHandle) {
+        let now = WallInstant::now();
+        let mut due: Vec<Scheduled> = Vec::new();
+        self.scheduled.retain_mut(|s| {
+            if s.at <= now {
+                due.push(Scheduled {
+                    at: s.at,
+                    device: std::mem::take(&mut s.device),
+                });
+                false
+            } else {
+                true
+            }
+        });
+        for s in due {
+            let action = ActionKind::Power {
+                device: s.device,
+                on: true,
+            };
+            let _ = self.apply(handle, &action);
+        }
+        while let Ok(req) = self.requests.try_recv() {
+            self.handle(handle, req);
+        }
+        self.sdo_results(handle);
+        if now >= self.next_snapshot {
+            self.next_snapshot = now + PERIOD;
+            self.snapshot(handle, now);
+        }
+    }
+
+    fn device(&self, name: &str) -> Result<usize, Refusal> {
+        self.devices
+            .iter()
+            .position(|d| d.info.name == name)
+            .ok_or_else(|| {
+                let known: Vec<&str> = self.devices.iter().map(|d| d.info.name.as_str()).collect();
+                Refusal::BadRequest(format!(
+                    "no device {name:?} (devices: {})",
+                    known.join(", ")
+                ))
+            })
+    }
+
+    fn apply(&self, handle: &SimHandle, action: &ActionKind) -> Result<(), String> {
+        let devices: Vec<BuiltDevice> = self.devices.iter().map(|d| d.info.clone()).collect();
+        handle
+            .with(|sim| {
+                apply_action(
+                    sim,
+                    &self.buses,
+                    &devices,
+                    &self.registry,
+                    &self.masters,
+                    action,
+                )
+            })
+            .map_err(|e| e.to_string())?
+    }
+
+    fn handle(&mut self, handle: &SimHandle, req: Request) {
+        let Request { command, reply } = req;
+        let outcome = match command {
+            Command::Nmt { device, cs } => self.nmt(handle, device.as_deref(), cs),
+            Command::SetInput {
+                device,
+                input,
+                value,
+            } => self.set_input(handle, &device, &input, value),
+            Command::PowerCycle { device } => self.power_cycle(handle, &device),
+            Command::Fault(table) => self.fault(handle, table),
+            Command::Sdo {
+                device,
+                index,
+                sub,
+                data,
+            } => match self.sdo(handle, &device, index, sub, data) {
+                Ok(p) => {
+                    self.pending.push(PendingSdo { reply, ..p });
+                    return;
+                }
+                Err(e) => Err(e),
+            },
+        };
+        // The page may have gone; nobody else waits for the outcome.
+        let _ = reply.send(outcome);
+    }
+
+    fn nmt(&mut self, handle: &SimHandle, device: Option<&str>, cs: NmtCs) -> Outcome {
+        let targets: Vec<(PortId, u8, String)> = match device {
+            None => self
+                .masters
+                .iter()
+                .map(|(bus, p)| (*p, 0, format!("all nodes on {bus}")))
+                .collect(),
+            Some(name) => {
+                let d = &self.devices[self.device(name)?];
+                let node = d.node_id.ok_or_else(|| {
+                    Refusal::BadRequest(format!(
+                        "{name} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
+                    ))
+                })?;
+                let port = *self.masters.get(&d.bus).ok_or_else(|| {
+                    Refusal::Failed(format!("no dashboard port on bus {}", d.bus))
+                })?;
+                vec![(port, node, format!("{name} (node {node})"))]
+            }
+        };
+        let mut done = Vec::new();
+        for (port, node, who) in targets {
+            let r = handle
+                .with(|sim| {
+                    let bus = sim.bus_mut(port.bus())?;
+                    bus.with_node::<Master, _>(port, |m, _now, out| m.nmt(cs, node, out))
+                })
+                .map_err(|e| Refusal::Failed(e.to_string()))?;
+            match r {
+                Some(Ok(())) => done.push(who),
+                Some(Err(e)) => return Err(Refusal::BadRequest(e.to_string())),
+                None => return Err(Refusal::Failed("the dashboard's port is gone".into())),
+            }
+        }
+        Ok(format!("NMT {} sent to {}", cs_name(cs), done.join(", ")))
+    }
+
+    fn set_input(&mut self, handle: &SimHandle, device: &str, input: &str, value: f64) -> Outcome {
+        let d = &self.devices[self.device(device)?];
+        let kind = self
+            .registry
+            .get(&d.info.kind)
+            .ok_or_else(|| Refusal::Failed(format!("unknown kind {}", d.info.kind)))?;
+        let port = d.info.port;
+        handle
+            .with(|sim| kind.set_input(sim, port, input, value))
+            .map_err(|e| Refusal::Failed(e.to_string()))?
+            .map_err(Refusal::BadRequest)?;
+        Ok(format!("{device}: {input} = {value}"))
+    }
+
+    fn power_cycle(&mut self, handle: &SimHandle, device: &str) -> Outcome {
+        self.device(device)?;
+        if self.scheduled.iter().any(|s| s.device == device) {
+            return Err(Refusal::BadRequest(format!(
+                "{device} is already being power-cycled"
+            )));
+        }
+        let off = ActionKind::Power {
+            device: device.to_string(),
+            on: false,
+        };
+        self.apply(handle, &off).map_err(Refusal::Failed)?;
+        self.scheduled.push(Scheduled {
+            at: WallInstant::now() + POWER_CYCLE_OFF,
+            device: device.to_string(),
+        });
+        Ok(format!(
+            "{device} powered off; power returns in {} ms",
+            POWER_CYCLE_OFF.as_millis()
+        ))
+    }
+
+    fn fault(&mut self, handle: &SimHandle, table: toml::Table) -> Outcome {
+        let what = table
+            .get("action")
+            .and_then(|v| v.as_str())
+            .unwrap_or("?")
+            .to_string();
+        let action = parse_action(&self.scenario, table).map_err(Refusal::BadRequest)?;
+        self.apply(handle, &action).map_err(Refusal::Failed)?;
+        Ok(format!("{what}: applied ({})", describe_action(&action)))
+    }
+
+    fn sdo(
+        &mut self,
+        handle: &SimHandle,
+        device: &str,
+        index: u16,
+        sub: u8,
+        data: Vec<u8>,
+    ) -> Result<PendingSdo, Refusal> {
+        let d = &self.devices[self.device(device)?];
+        let node = d.node_id.ok_or_else(|| {
+            Refusal::BadRequest(format!(
+                "{device} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
+            ))
+        })?;
+        let port = *self
+            .masters
+            .get(&d.bus)
+            .ok_or_else(|| Refusal::Failed(format!("no dashboard port on bus {}", d.bus)))?;
+        let bytes = hex(&data);
+        let r = handle
+            .with(|sim| {
+                let bus = sim.bus_mut(port.bus())?;
+                bus.with_node::<Master, _>(port, |m, now, out| {
+                    m.download(node, Mux::new(index, sub), data, Mode::Auto, now, out)
+                })
+            })
+            .map_err(|e| Refusal::Failed(e.to_string()))?;
+        let id = match r {
+            Some(Ok(id)) => id,
+            Some(Err(e)) => return Err(Refusal::BadRequest(e.to_string())),
+            None => return Err(Refusal::Failed("the dashboard's port is gone".into())),
+        };
+        let (reply, _) = tokio::sync::oneshot::channel();
+        Ok(PendingSdo {
+            bus: port.bus(),
+            id,
+            what: format!("{device} (node {node}) {index:04X}sub{sub} = {bytes}"),
+            reply,
+        })
+    }
+
+    /// Answers the SDO downloads that completed or were aborted.
+    fn sdo_results(&mut self, handle: &SimHandle) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let ports: Vec<PortId> = self.masters.values().copied().collect();
+        let events: Vec<(BusId, MasterEvent)> = handle
+            .with(|sim| {
+                let mut v = Vec::new();
+                for p in &ports {
+                    if let Some(m) = sim.node_mut::<Master>(*p) {
+                        while let Some((_, e)) = m.poll_event() {
+                            v.push((p.bus(), e));
+                        }
+                    }
+                }
+                v
+            })
+            .unwrap_or_default();
+        for (bus, e) in events {
+            let MasterEvent::Sdo { id, event, .. } = e else {
+                continue;
+            };
+            let outcome = match event {
+                SdoEvent::Completed { .. } => Ok(()),
+                SdoEvent::Aborted {
+                    code, by_server, ..
+                } => Err((code, by_server)),
+                _ => continue,
+            };
+            if let Some(i) = self.pending.iter().position(|p| p.bus == bus && p.id == id) {
+                let p = self.pending.swap_remove(i);
+                let msg = match outcome {
+                    Ok(()) => Ok(format!("SDO download {}: done", p.what)),
+                    Err((code, by_server)) => Err(Refusal::Failed(format!(
+                        "SDO download {}: aborted by the {} with {code}",
+                        p.what,
+                        if by_server { "device" } else { "dashboard" },
+                    ))),
+                };
+                let _ = p.reply.send(msg);
+            }
+        }
+    }
+
+    fn name_of(&self, port: PortId) -> String {
+        if let Some(d) = self.devices.iter().find(|d| d.info.port == port) {
+            d.info.name.clone()
+        } else if self.masters.values().any(|p| *p == port) {
+            "dashboard".to_string()
+        } else {
+            format!("{port:?}")
+        }
+    }
+
+    fn absorb(&mut self, bus: usize, events: Vec<Seen>) {
+        for e in events {
+            match e {
+                Seen::Frame {
+                    at,
+                    frame,
+                    sender,
+                    dropped,
+                } => {
+                    let canopen = self.speaks_canopen(sender);
+                    if canopen && !dropped {
+                        self.learn(at, &frame, sender);
+                    }
+                    let text = if canopen {
+                        describe(&frame)
+                    } else {
+                        String::new()
+                    };
+                    self.push_row(StreamRow {
+                        at,
+                        bus,
+                        frame: Some(frame),
+                        from: self.name_of(sender),
+                        text,
+                        flag: if dropped { "dropped" } else { "" },
+                    });
+                }
+                Seen::Error {
+                    at,
+                    frame,
+                    sender,
+                    kind,
+                } => self.push_row(StreamRow {
+                    at,
+                    bus,
+                    frame: Some(frame),
+                    from: self.name_of(sender),
+                    text: format!("error frame: {kind:?}"),
+                    flag: "error",
+                }),
+                Seen::Controller { at, port, event } => {
+                    let from = self.name_of(port);
+                    self.push_row(StreamRow {
+                        at,
+                        bus,
+                        frame: None,
+                        from,
+                        text: format!("controller: {event:?}"),
+                        flag: "controller",
+                    });
+                }
+            }
+        }
+    }
+
+    fn push_row(&mut self, row: StreamRow) {
+        self.stream.push_back(row);
+        while self.stream.len() > STREAM_LEN {
+            self.stream.pop_front();
+        }
+    }
+
+    /// Whether frames from `port` are CANopen (the dashboard's master, or a device of a
+    /// CANopen kind): other protocols on the same identifiers mean other things.
+    fn speaks_canopen(&self, port: PortId) -> bool {
+        if self.masters.values().any(|p| *p == port) {
+            return true;
+        }
+        self.devices
+            .iter()
+            .find(|d| d.info.port == port)
+            .is_some_and(|d| {
+                matches!(
+                    d.info.kind.as_str(),
+                    "cia301" | "eds" | "tm3" | "adv200" | "master"
+                )
+            })
+    }
+
+    /// Learns node-IDs, NMT states and emergencies from what a device sends (CiA 301
+    /// §7.2.8.3.2.4 boot-up, §7.2.8.3.2.2 heartbeat, §7.2.7 EMCY).
+    fn learn(&mut self, at: Instant, frame: &Frame, sender: PortId) {
+        let Some(d) = self.devices.iter_mut().find(|d| d.info.port == sender) else {
+            return;
+        };
+        match wire::decode(frame) {
+            Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
+                d.node_id = Some(node);
+                // After its boot-up message a node is pre-operational (CiA 301
+                // §7.3.2.2.1, figure 48: transition 2 is automatic).
+                d.nmt = Some(if state == 0 { 127 } else { state });
+                d.last_heard = Some(at);
+            }
+            Message::Emcy { node, emcy } => {
+                d.node_id.get_or_insert(node);
+                d.emcy = Some((at, emcy));
+            }
+            _ => {}
+        }
+    }
+
+    fn snapshot(&mut self, handle: &SimHandle, wall: WallInstant) {
+        let taps = self.taps.clone();
+        let registry = &self.registry;
+        let devices = &self.devices;
+        let grabbed = handle.with(|sim| {
+            let now = sim.now();
+            let mut events = Vec::new();
+            for (bus, tap) in &taps {
+                let drained = sim
+                    .bus_mut(*bus)
+                    .and_then(|b| b.tap_mut::<WebTap>(*tap))
+                    .map(WebTap::drain)
+                    .unwrap_or_default();
+                events.push(drained);
+            }
+            let buses: Vec<(u64, u64, f64, String)> = sim
+                .buses()
+                .iter()
+                .map(|b| {
+                    let s = b.stats();
+                    (
+                        s.frames(),
+                        s.error_frames(),
+                        s.window_load_percent(now),
+                        b.bit_rate().to_string(),
+                    )
+                })
+                .collect();
+            let live: Vec<_> = devices
+                .iter()
+                .map(|d| {
+                    let kind = registry.get(&d.info.kind);
+                    let status = sim
+                        .bus(d.info.port.bus())
+                        .and_then(|b| b.port_status(d.info.port).ok());
+                    let values = kind
+                        .map(|k| k.live_values(sim, d.info.port))
+                        .unwrap_or_default();
+                    let register = kind
+                        .and_then(|k| k.read_object(sim, d.info.port, 0x1001, 0))
+                        .and_then(|b| b.first().copied());
+                    (status, values, register)
+                })
+                .collect();
+            (now, events, buses, live)
+        });
+        let Ok((now, events, bus_stats, live)) = grabbed else {
+            return;
+        };
+        for (i, (seen, missed)) in events.into_iter().enumerate() {
+            self.missed += missed;
+            self.absorb(i, seen);
+        }
+        let elapsed = self
+            .last_snapshot
+            .as_ref()
+            .map(|(t, _)| wall.duration_since(*t).as_secs_f64());
+        let frames_now: Vec<u64> = bus_stats.iter().map(|b| b.0).collect();
+        let mut bus_json = Vec::new();
+        for (i, ((name, _), (frames, errors, load, rate))) in
+            self.buses.iter().zip(&bus_stats).enumerate()
+        {
+            let fps = match (&self.last_snapshot, elapsed) {
+                (Some((_, before)), Some(dt)) if dt > 0.0 => {
+                    frames.saturating_sub(before.get(i).copied().unwrap_or(0)) as f64 / dt
+                }
+                _ => 0.0,
+            };
+            if let Some(h) = self.bus_history.get_mut(i) {
+                h.0.push(wall, *load);
+                h.1.push(wall, fps);
+                h.2 = *frames;
+            }
+            let (load_chart, fps_chart) = self
+                .bus_history
+                .get(i)
+                .map(|h| {
+                    (
+                        svg::chart(
+                            &format!("{name} bus load"),
+                            "%",
+                            WINDOW_S,
+                            &[svg::Series {
+                                label: "load",
+                                points: &h.0.points(wall),
+                            }],
+                        ),
+                        svg::chart(
+                            &format!("{name} frames per second"),
+                            "1/s",
+                            WINDOW_S,
+                            &[svg::Series {
+                                label: "frames/s",
+                                points: &h.1.points(wall),
+                            }],
+                        ),
+                    )
+                })
+                .unwrap_or_default();
+            bus_json.push(json!({
+                "name": name,
+                "bit_rate": rate,
+                "frames": frames,
+                "error_frames": errors,
+                "load": round2(*load),
+                "fps": round2(fps),
+                "charts": [load_chart, fps_chart],
+            }));
+        }
+        self.last_snapshot = Some((wall, frames_now));
+
+        let mut nodes = Vec::new();
+        let mut panels = Vec::new();
+        for (k, (d, (status, values, register))) in self.devices.iter().zip(live).enumerate() {
+            let powered = status.as_ref().is_none_or(|s| s.powered);
+            let counters = status.as_ref().map(|s| s.counters).unwrap_or_default();
+            let heard_ms = d.last_heard.map(|t| (now - t).as_nanos() as f64 / 1e6);
+            let register = register.or(d.emcy.map(|(_, e)| e.register));
+            let leds = leds(powered, d.nmt, &counters);
+            nodes.push(json!({
+                "device": d.info.name,
+                "kind": d.info.kind,
+                "bus": d.bus,
+                "node_id": d.node_id,
+                "nmt": d.nmt.map(nmt_name),
+                "heartbeat_age_ms": heard_ms.map(|v| v.round()),
+                "error_register": register.map(|r| format!("0x{r:02X}")),
+                "emcy": d.emcy.map(|(t, e)| json!({
+                    "code": format!("0x{:04X}", e.code),
+                    "meaning": emcy_meaning(e.code),
+                    "register": format!("0x{:02X}", e.register),
+                    "age_ms": ((now - t).as_nanos() as f64 / 1e6).round(),
+                })),
+                "powered": powered,
+                "connected": status.as_ref().is_none_or(|s| s.connected),
+                "controller": state_name(counters.state()),
+                "tec": counters.tec(),
+                "rec": counters.rec(),
+                "leds": { "run": leds.0, "err": leds.1 },
+            }));
+            let mut charts = Vec::new();
+            let mut vals = Vec::new();
+            for v in &values {
+                let key = (k, v.name.clone());
+                let (min, max) = match v.role {
+                    Role::AnalogInput { min, max } => (Some(min), Some(max)),
+                    _ => (None, None),
+                };
+                vals.push(json!({
+                    "name": v.name,
+                    "value": round3(v.value),
+                    "unit": v.unit,
+                    "role": role_name(v.role),
+                    "min": min,
+                    "max": max,
+                }));
+                if v.role.is_analog() {
+                    let h = self.value_history.entry(key).or_default();
+                    h.push(wall, v.value);
+                    charts.push(svg::chart(
+                        &format!("{} {}", d.info.name, v.name),
+                        v.unit,
+                        WINDOW_S,
+                        &[svg::Series {
+                            label: &v.name,
+                            points: &h.points(wall),
+                        }],
+                    ));
+                }
+            }
+            panels.push(json!({
+                "name": d.info.name,
+                "kind": d.info.kind,
+                "values": vals,
+                "charts": charts,
+            }));
+        }
+        let stream: Vec<Value> = self
+            .stream
+            .iter()
+            .rev()
+            .map(|r| {
+                json!({
+                    "t_ms": round3(r.at.as_nanos() as f64 / 1e6),
+                    "bus": self.buses.get(r.bus).map(|b| b.0.as_str()).unwrap_or("?"),
+                    "id": r.frame.as_ref().map(id_text).unwrap_or_default(),
+                    "data": match &r.frame {
+                        Some(f) if f.is_remote() => format!("R{}", f.dlc()),
+                        Some(f) => hex_spaced(f.data_bytes()),
+                        None => String::new(),
+                    },
+                    "from": r.from,
+                    "text": r.text,
+                    "flag": r.flag,
+                })
+            })
+            .collect();
+        let snapshot = json!({
+            "scenario": self.scenario.name,
+            "time_ms": round3(now.as_nanos() as f64 / 1e6),
+            "uptime_s": round2(wall.duration_since(self.started).as_secs_f64()),
+            "buses": bus_json,
+            "nodes": nodes,
+            "devices": panels,
+            "frames": stream,
+            "missed": self.missed,
+        });
+        self.publish.send_replace(Arc::new(snapshot.to_string()));
+    }
+}
+
+fn round2(v: f64) -> f64 {
+    (v * 100.0).round() / 100.0
+}
+
+fn round3(v: f64) -> f64 {
+    (v * 1000.0).round() / 1000.0
+}
+
+fn hex(b: &[u8]) -> String {
+    b.iter().map(|b| format!("{b:02X}")).collect()
+}
+
+fn hex_spaced(b: &[u8]) -> String {
+    b.iter()
+        .map(|b| format!("{b:02X}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn id_text(f: &Frame) -> String {
+    match f.id() {
+        cantwin_can::Id::Standard(s) => format!("{:03X}", s.as_raw()),
+        cantwin_can::Id::Extended(e) => format!("{:08X}", e.as_raw()),
+    }
+}
+
+fn role_name(r: Role) -> &'static str {
+    match r {
+        Role::Measured => "measured",
+        Role::DigitalInput => "digital-input",
+        Role::AnalogInput { .. } => "analog-input",
+        Role::DigitalOutput => "digital-output",
+        Role::AnalogOutput => "analog-output",
+    }
+}
+
+fn state_name(s: ErrorState) -> &'static str {
+    match s {
+        ErrorState::Active => "error-active",
+        ErrorState::Passive => "error-passive",
+        ErrorState::BusOff => "bus-off",
+    }
+}
+
+/// The NMT state of a heartbeat's state code (CiA 301 §7.2.8.3.2.2, table 51).
+fn nmt_name(code: u8) -> &'static str {
+    match code {
+        0 => "initialising",
+        4 => "stopped",
+        5 => "operational",
+        127 => "pre-operational",
+        _ => "unknown",
+    }
+}
+
+fn cs_name(cs: NmtCs) -> &'static str {
+    match cs {
+        NmtCs::Start => "start",
+        NmtCs::Stop => "stop",
+        NmtCs::EnterPreOperational => "enter pre-operational",
+        NmtCs::ResetNode => "reset node",
+        NmtCs::ResetCommunication => "reset communication",
+    }
+}
+
+/// The indicator states of CiA 303-3 §4: the RUN LED shows the NMT state (on: operational,
+/// blinking: pre-operational, single flash: stopped), the ERR LED the controller (off: no
+/// error, single flash: a counter reached the warning limit, on: bus-off).
+fn leds(powered: bool, nmt: Option<u8>, c: &ErrorCounters) -> (&'static str, &'static str) {
+    if !powered {
+        return ("off", "off");
+    }
+    let run = match nmt {
+        Some(5) => "on",
+        Some(127) => "blinking",
+        Some(4) => "single-flash",
+        _ => "off",
+    };
+    let err = match c.state() {
+        ErrorState::BusOff => "on",
+        _ if c.tec() >= ErrorCounters::WARNING_LIMIT || c.rec() >= ErrorCounters::WARNING_LIMIT => {
+            "single-flash"
+        }
+        _ => "off",
+    };
+    (run, err)
+}
+
+/// The meaning of an emergency error code (CiA 301 §7.2.7.1, table 21): the specific codes
+/// the standard names, else the class of the high byte.
+fn emcy_meaning(code: u16) -> &'static str {
+    match code {
+        0x0000 => "error reset or no error",
+        0x8110 => "CAN overrun (objects lost)",
+        0x8120 => "CAN in error passive mode",
+        0x8130 => "life guard error or heartbeat error",
+        0x8140 => "recovered from bus off",
+        0x8150 => "CAN-ID collision",
+        0x8210 => "PDO not processed due to length error",
+        0x8220 => "PDO length exceeded",
+        0x8230 => "DAM MPDO not processed, destination object not available",
+        0x8240 => "unexpected SYNC data length",
+        0x8250 => "RPDO timeout",
+        _ => match code >> 8 {
+            0x10 => "generic error",
+            0x20..=0x2F => "current",
+            0x30..=0x3F => "voltage",
+            0x40..=0x4F => "temperature",
+            0x50 => "device hardware",
+            0x60..=0x6F => "device software",
+            0x70 => "additional modules",
+            0x80 | 0x81 => "monitoring: communication",
+            0x82 => "monitoring: protocol error",
+            0x80..=0x8F => "monitoring",
+            0x90 => "external error",
+            0xF0 => "additional functions",
+            0xFF => "device specific",
+            _ => "unknown class",
+        },
+    }
+}
+
+fn describe_action(a: &ActionKind) -> String {
+    match a {
+        ActionKind::Send { bus, frame } => format!("{frame} sent on {bus}"),
+        ActionKind::Power { device, on } => {
+            format!("{device} powered {}", if *on { "on" } else { "off" })
+        }
+        ActionKind::Connect { device, connected } => format!(
+            "{device} {}",
+            if *connected {
+                "reconnected"
+            } else {
+                "disconnected"
+            }
+        ),
+        ActionKind::BusOff { device } => format!("{device} forced bus-off"),
+        ActionKind::Babble { device, frame } => match frame {
+            Some(f) => format!("{device} babbles {f}"),
+            None => format!("{device} stops babbling"),
+        },
+        ActionKind::BitRateMismatch { device, rate } => match rate {
+            Some(r) => format!("{device} misconfigured to {r}"),
+            None => format!("{device} back at the bus's bit rate"),
+        },
+        ActionKind::Fault {
+            bus,
+            corrupt,
+            fraction,
+            from,
+            count,
+        } => format!(
+            "{} {:.1} % of the frames on {bus}{}{}",
+            if *corrupt { "corrupt" } else { "drop" },
+            fraction * 100.0,
+            from.as_ref()
+                .map(|f| format!(" from {f}"))
+                .unwrap_or_default(),
+            count.map(|n| format!(", at most {n}")).unwrap_or_default()
+        ),
+        ActionKind::ClearFaults { bus } => format!("faults on {bus} cleared"),
+        ActionKind::Inject { device, fault } => match fault {
+            Some(f) => format!("{device}: internal fault {f} injected"),
+            None => format!("{device}: internal faults repaired"),
+        },
+    }
+}
+
+/// A one-line reading of a CANopen frame for the stream.
+fn describe(frame: &Frame) -> String {
+    match wire::decode(frame) {
+        Message::Nmt(c) => format!(
+            "NMT {} → {}",
+            cs_name(c.cs),
+            if c.node == 0 {
+                "all".to_string()
+            } else {
+                format!("node {}", c.node)
+            }
+        ),
+        Message::Sync(_) => "SYNC".into(),
+        Message::Emcy { node, emcy } => format!(
+            "EMCY node {node}: 0x{:04X} {} (reg 0x{:02X})",
+            emcy.code,
+            emcy_meaning(emcy.code),
+            emcy.register
+        ),
+        Message::Time(_) => "TIME".into(),
+        Message::Pdo { kind, node, .. } => match kind {
+            PdoKind::Transmit(n) => format!("TPDO{n} node {node}"),
+            PdoKind::Receive(n) => format!("RPDO{n} node {node}"),
+        },
+        Message::SdoRequest { node, data, .. } => {
+            let what = match data[0] >> 5 {
+                0 => "download segment",
+                1 => "initiate download",
+                2 => "initiate upload",
+                3 => "upload segment",
+                4 => "abort",
+                5 => "block upload",
+                6 => "block download",
+                _ => "?",
+            };
+            format!("SDO → node {node}: {what}{}", mux_text(&data))
+        }
+        Message::SdoResponse { node, data, .. } => {
+            let what = match data[0] >> 5 {
+                0 => "upload segment",
+                1 => "download segment response",
+                2 => "initiate upload response",
+                3 => "initiate download response",
+                4 => "abort",
+                5 => "block download",
+                6 => "block upload",
+                _ => "?",
+            };
+            format!("SDO ← node {node}: {what}{}", mux_text(&data))
+        }
+        Message::ErrorControl(ErrorControl::State { node, state: 0, .. }) => {
+            format!("boot-up node {node}")
+        }
+        Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
+            format!("heartbeat node {node}: {}", nmt_name(state))
+        }
+        Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
+            format!("node guarding request → node {node}")
+        }
+        Message::Malformed { error, .. } => format!("malformed: {error}"),
+        Message::Other(_) => String::new(),
+    }
+}
+
+/// The object of an initiate or abort SDO frame (bytes 1–3), and the abort code.
+fn mux_text(data: &[u8; 8]) -> String {
+    let cs = data[0] >> 5;
+    let index = u16::from_le_bytes([data[1], data[2]]);
+    match cs {
+        1..=3 if data[0] & 0xE0 != 0 => format!(" {index:04X}sub{}", data[3]),
+        4 => format!(
+            " {index:04X}sub{} code 0x{:08X}",
+            data[3],
+            u32::from_le_bytes([data[4], data[5], data[6], data[7]])
+        ),
+        _ => String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cia301_table_21_codes_have_their_meaning() {
+        assert_eq!(emcy_meaning(0x8130), "life guard error or heartbeat error");
+        assert_eq!(emcy_meaning(0x2310), "current");
+        assert_eq!(emcy_meaning(0xFF01), "device specific");
+    }
+
+    #[test]
+    fn cia303_3_leds_follow_nmt_state_and_controller() {
+        let c = ErrorCounters::new();
+        assert_eq!(leds(true, Some(5), &c), ("on", "off"));
+        assert_eq!(leds(true, Some(127), &c), ("blinking", "off"));
+        assert_eq!(leds(true, Some(4), &c), ("single-flash", "off"));
+        assert_eq!(leds(false, Some(5), &c), ("off", "off"));
+    }
+
+    #[test]
+    fn frames_are_described_by_the_predefined_connection_set() {
+        let hb = Frame::std(0x705, &[0x05]).unwrap_or_else(|_| unreachable!());
+        assert_eq!(describe(&hb), "heartbeat node 5: operational");
+        let nmt = Frame::std(0x000, &[0x02, 0x05]).unwrap_or_else(|_| unreachable!());
+        assert_eq!(describe(&nmt), "NMT stop → node 5");
+        let sdo = Frame::std(0x605, &[0x2B, 0x17, 0x10, 0x00, 0xE8, 0x03, 0, 0])
+            .unwrap_or_else(|_| unreachable!());
+        assert_eq!(describe(&sdo), "SDO → node 5: initiate download 1017sub0");
+    }
+}
