@@ -28,7 +28,8 @@ use cantwin_can::{ErrorCounters, ErrorState, Frame, Instant};
 use cantwin_canopen::master::sdo_client::{Mode, SdoEvent};
 use cantwin_canopen::master::{Master, MasterEvent, TransferId};
 use cantwin_canopen::sdo::wire::Mux;
-use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs, PdoKind};
+use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
+use cantwin_monitor::{Led, NetworkView};
 use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
 use cantwin_scenario::{BuiltDevice, Registry, Role, Scenario};
 use serde_json::{Value, json};
@@ -110,12 +111,11 @@ pub struct Request {
 #[derive(Debug, Clone)]
 struct DeviceState {
     info: BuiltDevice,
-    bus: String,
-    /// Learned from the COB-IDs of its boot-up and heartbeat messages.
+    /// The index of its bus.
+    bus: usize,
+    bus_name: String,
+    /// Learned from the COB-IDs of the boot-up, heartbeat and EMCY messages its port sends.
     node_id: Option<u8>,
-    nmt: Option<u8>,
-    last_heard: Option<Instant>,
-    emcy: Option<(Instant, wire::Emcy)>,
 }
 
 #[derive(Debug, Clone)]
@@ -172,6 +172,8 @@ pub struct Dashboard {
     buses: Vec<(String, BusId)>,
     devices: Vec<DeviceState>,
     taps: Vec<(BusId, TapId)>,
+    /// The CANopen model of each bus, fed with the frames of CANopen senders.
+    views: Vec<NetworkView>,
     masters: BTreeMap<String, PortId>,
     requests: mpsc::Receiver<Request>,
     sender: mpsc::Sender<Request>,
@@ -197,8 +199,14 @@ impl Dashboard {
     ) -> Dashboard {
         let mut taps = Vec::new();
         let mut masters = BTreeMap::new();
+        let mut views = Vec::new();
         for (name, id) in buses {
             if let Some(bus) = sim.bus_mut(*id) {
+                views.push(NetworkView::new(cantwin_monitor::Config {
+                    bit_rate: bus.bit_rate(),
+                    ring: STREAM_LEN,
+                    ..cantwin_monitor::Config::default()
+                }));
                 taps.push((*id, bus.add_tap(WebTap::default())));
                 let port = bus.attach(Master::new(), PortConfig::default().with_queue_depth(64));
                 masters.insert(name.clone(), port);
@@ -206,17 +214,17 @@ impl Dashboard {
         }
         let devices = devices
             .iter()
-            .map(|d| DeviceState {
-                info: d.clone(),
-                bus: buses
+            .map(|d| {
+                let bus = buses
                     .iter()
-                    .find(|(_, id)| *id == d.port.bus())
-                    .map(|(n, _)| n.clone())
-                    .unwrap_or_default(),
-                node_id: None,
-                nmt: None,
-                last_heard: None,
-                emcy: None,
+                    .position(|(_, id)| *id == d.port.bus())
+                    .unwrap_or(0);
+                DeviceState {
+                    info: d.clone(),
+                    bus,
+                    bus_name: buses.get(bus).map(|b| b.0.clone()).unwrap_or_default(),
+                    node_id: None,
+                }
             })
             .collect();
         let (sender, requests) = mpsc::channel();
@@ -228,6 +236,7 @@ impl Dashboard {
             buses: buses.to_vec(),
             devices,
             taps,
+            views,
             masters,
             requests,
             sender,
@@ -362,8 +371,8 @@ impl Dashboard {
                         "{name} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
                     ))
                 })?;
-                let port = *self.masters.get(&d.bus).ok_or_else(|| {
-                    Refusal::Failed(format!("no dashboard port on bus {}", d.bus))
+                let port = *self.masters.get(&d.bus_name).ok_or_else(|| {
+                    Refusal::Failed(format!("no dashboard port on bus {}", d.bus_name))
                 })?;
                 vec![(port, node, format!("{name} (node {node})"))]
             }
@@ -448,8 +457,8 @@ impl Dashboard {
         })?;
         let port = *self
             .masters
-            .get(&d.bus)
-            .ok_or_else(|| Refusal::Failed(format!("no dashboard port on bus {}", d.bus)))?;
+            .get(&d.bus_name)
+            .ok_or_else(|| Refusal::Failed(format!("no dashboard port on bus {}", d.bus_name)))?;
         let bytes = hex(&data);
         let r = handle
             .with(|sim| {
@@ -538,14 +547,18 @@ impl Dashboard {
                     dropped,
                 } => {
                     let canopen = self.speaks_canopen(sender);
+                    let mut text = String::new();
                     if canopen && !dropped {
-                        self.learn(at, &frame, sender);
+                        self.learn(bus, &frame, sender);
+                        if let Some(view) = self.views.get_mut(bus) {
+                            view.push(at, &frame);
+                            text = view
+                                .frames()
+                                .next_back()
+                                .map(|e| e.text.clone())
+                                .unwrap_or_default();
+                        }
                     }
-                    let text = if canopen {
-                        describe(&frame)
-                    } else {
-                        String::new()
-                    };
                     self.push_row(StreamRow {
                         at,
                         bus,
@@ -607,25 +620,26 @@ impl Dashboard {
             })
     }
 
-    /// Learns node-IDs, NMT states and emergencies from what a device sends (CiA 301
-    /// §7.2.8.3.2.4 boot-up, §7.2.8.3.2.2 heartbeat, §7.2.7 EMCY).
-    fn learn(&mut self, at: Instant, frame: &Frame, sender: PortId) {
+    /// Learns which node-ID a device has from the COB-IDs of what its port sends (CiA 301
+    /// §7.2.8.3.2 boot-up and heartbeat, §7.2.7 EMCY), and names the node in its bus's view.
+    fn learn(&mut self, bus: usize, frame: &Frame, sender: PortId) {
         let Some(d) = self.devices.iter_mut().find(|d| d.info.port == sender) else {
             return;
         };
-        match wire::decode(frame) {
-            Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
-                d.node_id = Some(node);
-                // After its boot-up message a node is pre-operational (CiA 301
-                // §7.3.2.2.1, figure 48: transition 2 is automatic).
-                d.nmt = Some(if state == 0 { 127 } else { state });
-                d.last_heard = Some(at);
+        let node = match wire::decode(frame) {
+            Message::ErrorControl(ErrorControl::State { node, .. }) => node,
+            Message::Emcy { node, .. } => node,
+            _ => return,
+        };
+        if d.node_id != Some(node) {
+            d.node_id = Some(node);
+            if let Some(view) = self.views.get_mut(bus) {
+                view.declare(
+                    node,
+                    Some(d.info.name.clone()),
+                    cantwin_monitor::DeviceKind::builtin(&d.info.kind),
+                );
             }
-            Message::Emcy { node, emcy } => {
-                d.node_id.get_or_insert(node);
-                d.emcy = Some((at, emcy));
-            }
-            _ => {}
         }
     }
 
@@ -681,6 +695,9 @@ impl Dashboard {
         for (i, (seen, missed)) in events.into_iter().enumerate() {
             self.missed += missed;
             self.absorb(i, seen);
+            if let Some(v) = self.views.get_mut(i) {
+                v.advance(now);
+            }
         }
         let elapsed = self
             .last_snapshot
@@ -745,29 +762,38 @@ impl Dashboard {
         for (k, (d, (status, values, register))) in self.devices.iter().zip(live).enumerate() {
             let powered = status.as_ref().is_none_or(|s| s.powered);
             let counters = status.as_ref().map(|s| s.counters).unwrap_or_default();
-            let heard_ms = d.last_heard.map(|t| (now - t).as_nanos() as f64 / 1e6);
-            let register = register.or(d.emcy.map(|(_, e)| e.register));
-            let leds = leds(powered, d.nmt, &counters);
+            let info = d
+                .node_id
+                .and_then(|n| self.views.get(d.bus).and_then(|v| v.node(n)));
+            let (run, err) = leds(powered, info.map(|i| i.leds(now)), &counters);
+            let emcy = info.and_then(|i| {
+                let e = i.last_emcy.as_ref()?;
+                Some(json!({
+                    "code": format!("0x{:04X}", e.code),
+                    "meaning": i.emcy_meaning().unwrap_or(""),
+                    "register": format!("0x{:02X}", e.register),
+                    "age_ms": (now.as_nanos().saturating_sub(e.at.as_nanos()) as f64 / 1e6).round(),
+                    "active": i.emcy_active,
+                }))
+            });
+            let register = register.or(info.and_then(|i| i.error_register));
             nodes.push(json!({
                 "device": d.info.name,
                 "kind": d.info.kind,
-                "bus": d.bus,
+                "bus": d.bus_name,
                 "node_id": d.node_id,
-                "nmt": d.nmt.map(nmt_name),
-                "heartbeat_age_ms": heard_ms.map(|v| v.round()),
+                "nmt": info.filter(|i| i.state.is_some()).map(|i| i.state_name()),
+                "heartbeat_age_ms": info
+                    .and_then(|i| i.heartbeat_age(now))
+                    .map(|a| (a.as_nanos() as f64 / 1e6).round()),
                 "error_register": register.map(|r| format!("0x{r:02X}")),
-                "emcy": d.emcy.map(|(t, e)| json!({
-                    "code": format!("0x{:04X}", e.code),
-                    "meaning": emcy_meaning(e.code),
-                    "register": format!("0x{:02X}", e.register),
-                    "age_ms": ((now - t).as_nanos() as f64 / 1e6).round(),
-                })),
+                "emcy": emcy,
                 "powered": powered,
                 "connected": status.as_ref().is_none_or(|s| s.connected),
                 "controller": state_name(counters.state()),
                 "tec": counters.tec(),
                 "rec": counters.rec(),
-                "leds": { "run": leds.0, "err": leds.1 },
+                "leds": { "run": run, "err": err },
             }));
             let mut charts = Vec::new();
             let mut vals = Vec::new();
@@ -884,17 +910,6 @@ fn state_name(s: ErrorState) -> &'static str {
     }
 }
 
-/// The NMT state of a heartbeat's state code (CiA 301 §7.2.8.3.2.2, table 51).
-fn nmt_name(code: u8) -> &'static str {
-    match code {
-        0 => "initialising",
-        4 => "stopped",
-        5 => "operational",
-        127 => "pre-operational",
-        _ => "unknown",
-    }
-}
-
 fn cs_name(cs: NmtCs) -> &'static str {
     match cs {
         NmtCs::Start => "start",
@@ -902,63 +917,6 @@ fn cs_name(cs: NmtCs) -> &'static str {
         NmtCs::EnterPreOperational => "enter pre-operational",
         NmtCs::ResetNode => "reset node",
         NmtCs::ResetCommunication => "reset communication",
-    }
-}
-
-/// The indicator states of CiA 303-3 §4: the RUN LED shows the NMT state (on: operational,
-/// blinking: pre-operational, single flash: stopped), the ERR LED the controller (off: no
-/// error, single flash: a counter reached the warning limit, on: bus-off).
-fn leds(powered: bool, nmt: Option<u8>, c: &ErrorCounters) -> (&'static str, &'static str) {
-    if !powered {
-        return ("off", "off");
-    }
-    let run = match nmt {
-        Some(5) => "on",
-        Some(127) => "blinking",
-        Some(4) => "single-flash",
-        _ => "off",
-    };
-    let err = match c.state() {
-        ErrorState::BusOff => "on",
-        _ if c.tec() >= ErrorCounters::WARNING_LIMIT || c.rec() >= ErrorCounters::WARNING_LIMIT => {
-            "single-flash"
-        }
-        _ => "off",
-    };
-    (run, err)
-}
-
-/// The meaning of an emergency error code (CiA 301 §7.2.7.1, table 21): the specific codes
-/// the standard names, else the class of the high byte.
-fn emcy_meaning(code: u16) -> &'static str {
-    match code {
-        0x0000 => "error reset or no error",
-        0x8110 => "CAN overrun (objects lost)",
-        0x8120 => "CAN in error passive mode",
-        0x8130 => "life guard error or heartbeat error",
-        0x8140 => "recovered from bus off",
-        0x8150 => "CAN-ID collision",
-        0x8210 => "PDO not processed due to length error",
-        0x8220 => "PDO length exceeded",
-        0x8230 => "DAM MPDO not processed, destination object not available",
-        0x8240 => "unexpected SYNC data length",
-        0x8250 => "RPDO timeout",
-        _ => match code >> 8 {
-            0x10 => "generic error",
-            0x20..=0x2F => "current",
-            0x30..=0x3F => "voltage",
-            0x40..=0x4F => "temperature",
-            0x50 => "device hardware",
-            0x60..=0x6F => "device software",
-            0x70 => "additional modules",
-            0x80 | 0x81 => "monitoring: communication",
-            0x82 => "monitoring: protocol error",
-            0x80..=0x8F => "monitoring",
-            0x90 => "external error",
-            0xF0 => "additional functions",
-            0xFF => "device specific",
-            _ => "unknown class",
-        },
     }
 }
 
@@ -1008,83 +966,35 @@ fn describe_action(a: &ActionKind) -> String {
     }
 }
 
-/// A one-line reading of a CANopen frame for the stream.
-fn describe(frame: &Frame) -> String {
-    match wire::decode(frame) {
-        Message::Nmt(c) => format!(
-            "NMT {} → {}",
-            cs_name(c.cs),
-            if c.node == 0 {
-                "all".to_string()
-            } else {
-                format!("node {}", c.node)
-            }
-        ),
-        Message::Sync(_) => "SYNC".into(),
-        Message::Emcy { node, emcy } => format!(
-            "EMCY node {node}: 0x{:04X} {} (reg 0x{:02X})",
-            emcy.code,
-            emcy_meaning(emcy.code),
-            emcy.register
-        ),
-        Message::Time(_) => "TIME".into(),
-        Message::Pdo { kind, node, .. } => match kind {
-            PdoKind::Transmit(n) => format!("TPDO{n} node {node}"),
-            PdoKind::Receive(n) => format!("RPDO{n} node {node}"),
-        },
-        Message::SdoRequest { node, data, .. } => {
-            let what = match data[0] >> 5 {
-                0 => "download segment",
-                1 => "initiate download",
-                2 => "initiate upload",
-                3 => "upload segment",
-                4 => "abort",
-                5 => "block upload",
-                6 => "block download",
-                _ => "?",
-            };
-            format!("SDO → node {node}: {what}{}", mux_text(&data))
-        }
-        Message::SdoResponse { node, data, .. } => {
-            let what = match data[0] >> 5 {
-                0 => "upload segment",
-                1 => "download segment response",
-                2 => "initiate upload response",
-                3 => "initiate download response",
-                4 => "abort",
-                5 => "block download",
-                6 => "block upload",
-                _ => "?",
-            };
-            format!("SDO ← node {node}: {what}{}", mux_text(&data))
-        }
-        Message::ErrorControl(ErrorControl::State { node, state: 0, .. }) => {
-            format!("boot-up node {node}")
-        }
-        Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
-            format!("heartbeat node {node}: {}", nmt_name(state))
-        }
-        Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
-            format!("node guarding request → node {node}")
-        }
-        Message::Malformed { error, .. } => format!("malformed: {error}"),
-        Message::Other(_) => String::new(),
+/// The indicator states (CiA 303-3 §3) as the page shows them: what the bus shows of the
+/// node (the view's RUN and ERROR LEDs), with what only the simulator knows on top: an
+/// unpowered device has both off, a controller that is bus-off lights ERROR, one whose error
+/// counters reached the warning limit flashes it once.
+fn leds(
+    powered: bool,
+    seen: Option<cantwin_monitor::Leds>,
+    c: &ErrorCounters,
+) -> (&'static str, &'static str) {
+    if !powered {
+        return ("off", "off");
     }
-}
-
-/// The object of an initiate or abort SDO frame (bytes 1–3), and the abort code.
-fn mux_text(data: &[u8; 8]) -> String {
-    let cs = data[0] >> 5;
-    let index = u16::from_le_bytes([data[1], data[2]]);
-    match cs {
-        1..=3 if data[0] & 0xE0 != 0 => format!(" {index:04X}sub{}", data[3]),
-        4 => format!(
-            " {index:04X}sub{} code 0x{:08X}",
-            data[3],
-            u32::from_le_bytes([data[4], data[5], data[6], data[7]])
-        ),
-        _ => String::new(),
-    }
+    let name = |l: Led| match l {
+        Led::Off => "off",
+        Led::On => "on",
+        Led::Blinking => "blinking",
+        Led::SingleFlash => "single-flash",
+        Led::DoubleFlash => "double-flash",
+        Led::Unknown => "unknown",
+    };
+    let run = seen.map_or("unknown", |l| name(l.run));
+    let err = match c.state() {
+        ErrorState::BusOff => "on",
+        _ if c.tec() >= ErrorCounters::WARNING_LIMIT || c.rec() >= ErrorCounters::WARNING_LIMIT => {
+            "single-flash"
+        }
+        _ => seen.map_or("off", |l| name(l.err)),
+    };
+    (run, err)
 }
 
 #[cfg(test)]
@@ -1092,29 +1002,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia301_table_21_codes_have_their_meaning() {
-        assert_eq!(emcy_meaning(0x8130), "life guard error or heartbeat error");
-        assert_eq!(emcy_meaning(0x2310), "current");
-        assert_eq!(emcy_meaning(0xFF01), "device specific");
-    }
-
-    #[test]
-    fn cia303_3_leds_follow_nmt_state_and_controller() {
+    fn cia303_3_leds_add_power_and_controller_state_to_what_the_bus_shows() {
         let c = ErrorCounters::new();
-        assert_eq!(leds(true, Some(5), &c), ("on", "off"));
-        assert_eq!(leds(true, Some(127), &c), ("blinking", "off"));
-        assert_eq!(leds(true, Some(4), &c), ("single-flash", "off"));
-        assert_eq!(leds(false, Some(5), &c), ("off", "off"));
-    }
-
-    #[test]
-    fn frames_are_described_by_the_predefined_connection_set() {
-        let hb = Frame::std(0x705, &[0x05]).unwrap_or_else(|_| unreachable!());
-        assert_eq!(describe(&hb), "heartbeat node 5: operational");
-        let nmt = Frame::std(0x000, &[0x02, 0x05]).unwrap_or_else(|_| unreachable!());
-        assert_eq!(describe(&nmt), "NMT stop → node 5");
-        let sdo = Frame::std(0x605, &[0x2B, 0x17, 0x10, 0x00, 0xE8, 0x03, 0, 0])
-            .unwrap_or_else(|_| unreachable!());
-        assert_eq!(describe(&sdo), "SDO → node 5: initiate download 1017sub0");
+        let seen = cantwin_monitor::Leds {
+            run: Led::On,
+            err: Led::DoubleFlash,
+        };
+        assert_eq!(leds(true, Some(seen), &c), ("on", "double-flash"));
+        assert_eq!(leds(false, Some(seen), &c), ("off", "off"));
+        assert_eq!(leds(true, None, &c), ("unknown", "off"));
     }
 }
