@@ -159,3 +159,37 @@ def test_frames_sent_from_python_take_bus_time_and_arbitrate():
     assert [m.arbitration_id for m in got] == [0x200, 0x300]
     # An 8-byte standard frame at 500 kbit/s is at least 111 bits: 222 µs on the wire.
     assert got[1].timestamp - got[0].timestamp >= 222e-6
+
+
+def test_paced_time_follows_the_wall_clock_and_hands_back_to_virtual_time():
+    import time
+
+    sim = cantwin.Simulation.load(CIA301)
+    sim.start_paced()
+    with pytest.raises(cantwin.CantwinError, match="already paced"):
+        sim.start_paced()
+    start = time.monotonic()
+    sim.advance(0.3)
+    wall = time.monotonic() - start
+    assert sim.paced
+    sim.stop_paced()
+    reached = sim.now
+    # Bus time never runs ahead of the wall clock (crates/bus paced module).
+    assert 0.25 <= reached <= wall + 0.05
+    with pytest.raises(cantwin.CantwinError, match="not paced"):
+        sim.stop_paced()
+    sim.advance(5.0)
+    assert sim.now == pytest.approx(reached + 5.0)
+
+
+def test_a_shared_simulation_is_named_in_the_bus_arguments():
+    sim = cantwin.Simulation.load(CIA301)
+    cantwin.share(sim, "bench")
+    try:
+        with can.Bus(interface="cantwin", channel="can0", sim="bench") as bus:
+            assert bus.sim is sim
+            assert any(m.arbitration_id == 0x705 for m in frames(bus, 0.3))
+    finally:
+        cantwin.unshare("bench")
+    with pytest.raises(KeyError, match="bench"):
+        can.Bus(interface="cantwin", channel="can0", sim="bench")
