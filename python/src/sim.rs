@@ -563,7 +563,8 @@ impl Simulation {
         Ok(d)
     }
 
-    /// Record `bus` (every bus if `None`) into a capture file from now on; the format comes
+    /// Record the data and remote frames of `bus` (every bus if `None`) into a capture file
+    /// from now on (error frames are not recorded); the format comes
     /// from `format` (``"pcap"``, ``"pcapng"``, ``"candump"``) or the file's extension
     /// (``.pcap``, ``.pcapng``, ``.log``). Frames are stamped at their end of frame, in bus
     /// time since the Unix epoch (virtual time) or wall time (paced). Close the returned
