@@ -184,6 +184,15 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
         "{out}"
     );
     assert!(out.contains("heap per device, CiA 301 defaults"), "{out}");
+    // `cantwin sim` itself, as a child process: start-up and resident memory.
+    assert!(
+        out.contains("start-up of `cantwin sim` with 127 devices"),
+        "{out}"
+    );
+    assert!(
+        out.contains("RSS of `cantwin sim` with 127 devices"),
+        "{out}"
+    );
     assert!(err.contains("bench fleet: 2 networks"), "{err}");
     let md = std::fs::read_to_string(&file).unwrap();
     for name in ["network", "fleet", "sdo", "memory"] {

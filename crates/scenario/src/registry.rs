@@ -92,7 +92,7 @@ impl Registry {
         let mut r = Registry::new();
         r.register(Box::new(crate::kinds::generator::Generator));
         r.register(Box::new(crate::kinds::master::MasterKind));
-        r.register(Box::new(crate::kinds::cia301::Cia301));
+        r.register(Box::new(crate::kinds::cia301::Cia301::default()));
         r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
         r.register(Box::new(crate::kinds::adv200::Adv200Kind));
         r.register(Box::new(crate::kinds::tm3::Tm3Kind));

@@ -38,6 +38,10 @@
 //! With `--state-dir`, the device keeps what 0x1010 stores in the directory
 //! `STATE_DIR/<device name>/`.
 //!
+//! Devices whose settings differ only in `node_id`, `heartbeat_ms` and `sdo_timeout_ms`
+//! share one object dictionary description (each keeps its own values), so a scenario of
+//! many alike devices builds the description, with its DOMAIN default, once.
+//!
 //! `heartbeat_ms` is the power-on value of 0x1017 when no stored value sets it: after every
 //! reset communication (power-up included) the device writes it to 0x1017 if 0x1017 came
 //! out 0, so a stored non-zero heartbeat time wins, and a restore of the defaults (0x1011)
@@ -48,8 +52,9 @@ use cantwin_can::{ControllerEvent, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::ObjectAccess;
 use cantwin_canopen::device::{Device, Event};
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
-use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject, Value};
+use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
+use std::sync::{Arc, Mutex};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::build::BuildEnv;
@@ -84,8 +89,12 @@ fn domain_byte(i: usize) -> u8 {
     (i % 251) as u8
 }
 
-/// The `cia301` kind.
-pub struct Cia301;
+/// The `cia301` kind. It remembers the descriptions it built, to share them between devices
+/// of the same layout.
+#[derive(Default)]
+pub struct Cia301 {
+    descriptions: Mutex<Vec<(Layout, Arc<OdDescription>)>>,
+}
 
 /// A CiA 301 [`Device`] with the scenario's power-on heartbeat time, a SYNC counter in
 /// 0x2100 sub 1 and the EMCY trigger 0x2001 (see the [module documentation](self)).
@@ -207,6 +216,7 @@ impl Node for Cia301Node {
 }
 
 /// The object dictionary of the kind, from its settings.
+#[derive(Debug, Clone, PartialEq, Eq)]
 struct Layout {
     options: Cia301Options,
     domain_size: usize,
@@ -223,7 +233,7 @@ fn mapping(index: u16, k: u16) -> [u32; 2] {
     [entry(first), entry(first + 1)]
 }
 
-fn description(l: &Layout) -> Result<cantwin_canopen::od::OdDescription, String> {
+fn description(l: &Layout) -> Result<OdDescription, String> {
     let mut pdos = PdoObjects::new(l.rpdos, l.tpdos);
     for k in 0..l.rpdos {
         pdos = pdos.rpdo(k, l.rpdo_type, &mapping(OUTPUTS_INDEX, k));
@@ -256,6 +266,23 @@ fn description(l: &Layout) -> Result<cantwin_canopen::od::OdDescription, String>
         .array_of(INPUTS_INDEX, "Inputs", IO_ENTRIES, io("Input"))
         .array_of(OUTPUTS_INDEX, "Outputs", IO_ENTRIES, io("Output"));
     pdos.add_to(b).build().map_err(|e| e.to_string())
+}
+
+impl Cia301 {
+    /// The description of `layout`, built once and shared.
+    fn description_for(&self, layout: Layout) -> Result<Arc<OdDescription>, String> {
+        // A poisoned lock only means another build panicked; the list is still valid.
+        let mut known = self
+            .descriptions
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, d)) = known.iter().find(|(l, _)| *l == layout) {
+            return Ok(Arc::clone(d));
+        }
+        let d = Arc::new(description(&layout)?);
+        known.push((layout, Arc::clone(&d)));
+        Ok(d)
+    }
 }
 
 impl DeviceKind for Cia301 {
@@ -340,7 +367,7 @@ impl DeviceKind for Cia301 {
             rpdo_type,
             tpdo_type,
         };
-        let desc = description(&layout).map_err(|e| {
+        let desc = self.description_for(layout).map_err(|e| {
             s.error(
                 "node_id",
                 format!("the device's dictionary is invalid: {e}"),
@@ -403,6 +430,34 @@ mod tests {
         assert!(e.contains("reserved"), "{e}");
         let e = error_of("node_id = 5\nrpdos = 9");
         assert!(e.contains("rpdos"), "{e}");
+    }
+
+    /// Alike devices share one description; a device whose dictionary differs gets its own.
+    #[test]
+    fn devices_of_the_same_layout_share_their_description() {
+        let text = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\
+            [[device]]\nname = \"a\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 1\ndomain_size = 16\n\
+            [[device]]\nname = \"b\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 2\ndomain_size = 16\nheartbeat_ms = 50\n\
+            [[device]]\nname = \"c\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 3\ndomain_size = 32\n";
+        let built = built(text);
+        let desc = |name: &str| {
+            let port = built.device(name).unwrap().port;
+            Arc::clone(
+                built
+                    .sim
+                    .node::<Cia301Node>(port)
+                    .unwrap()
+                    .device()
+                    .od()
+                    .description(),
+            )
+        };
+        assert!(Arc::ptr_eq(&desc("a"), &desc("b")));
+        assert!(!Arc::ptr_eq(&desc("a"), &desc("c")));
+        // Values stay per device.
+        let port_a = built.device("a").unwrap().port;
+        let node_a = built.sim.node::<Cia301Node>(port_a).unwrap();
+        assert_eq!(node_a.device().node_id(), 1);
     }
 
     /// The boot-up message (CiA 301 §7.2.8.3.2.1: COB-ID 0x700 + node-ID, one byte 0) at

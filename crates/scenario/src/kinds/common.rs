@@ -38,7 +38,7 @@ pub(crate) fn sdo_timeout(s: &Settings<'_>) -> Result<Duration, ScenarioError> {
 pub(crate) fn canopen_device(
     s: &Settings<'_>,
     env: &BuildEnv,
-    desc: OdDescription,
+    desc: Arc<OdDescription>,
     node_id: u8,
     sdo_timeout: Duration,
 ) -> Result<Device, ScenarioError> {
@@ -46,8 +46,7 @@ pub(crate) fn canopen_device(
         sdo_timeout,
         ..DeviceConfig::new(node_id)
     };
-    let mut device =
-        Device::new(Arc::new(desc), config).map_err(|e| s.error("node_id", e.to_string()))?;
+    let mut device = Device::new(desc, config).map_err(|e| s.error("node_id", e.to_string()))?;
     if let Some(dir) = &env.state_dir {
         let dir = dir.join(&s.device().name);
         let storage = FileStorage::new(&dir).map_err(|e| {

@@ -137,7 +137,7 @@ impl DeviceKind for EdsKind {
                 format!("{}: not a usable object dictionary: {e}", path.display()),
             )
         })?;
-        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
+        let device = canopen_device(s, env, std::sync::Arc::new(desc), node_id, sdo_timeout)?;
         let port = PortConfig {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
