@@ -20,7 +20,9 @@ mod eds;
 mod fuzz;
 mod monitor;
 mod monitor_ui;
+mod output;
 mod report;
+mod scenario_cmd;
 mod sim;
 mod web;
 
@@ -35,6 +37,14 @@ use clap::{Parser, Subcommand};
     after_help = "Examples:\n  cantwin demo\n  cantwin bench bus\n  cantwin dump capture.pcap"
 )]
 struct Cli {
+    /// Print results as JSON for programs: one object per result, or one object per line
+    /// (JSON Lines) for streams (trace, dump, cal events, scenario check). Errors stay text
+    /// on standard error, with a non-zero exit status.
+    #[arg(long, global = true)]
+    json: bool,
+    /// No progress bars or other chatter on standard error.
+    #[arg(long, short, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -133,9 +143,15 @@ enum Command {
         after_help = "Examples:\n  cantwin fuzz --cases 100000\n  cantwin fuzz --list\n  cantwin fuzz --cases 5000 eds twin-cia301"
     )]
     Fuzz(fuzz::Args),
+    /// Check scenario files without running them: syntax, keys, kinds, node-IDs, script.
+    #[command(
+        after_help = "Examples:\n  cantwin scenario check scenarios/*.toml\n  cantwin scenario check --json my-rig.toml"
+    )]
+    Scenario(scenario_cmd::Args),
 }
 
 fn run(cli: Cli) -> Result<()> {
+    output::configure(cli.json, cli.quiet);
     match cli.command {
         Command::Demo(args) => demo::run(&args),
         Command::Bench(args) => bench::run(&args),
@@ -152,6 +168,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Monitor(args) => monitor::run(&args),
         Command::Gateway(args) => ascii_gateway::run(&args),
         Command::Report(args) => report::run(&args),
+        Command::Scenario(args) => scenario_cmd::run(&args),
     }
 }
 

@@ -25,6 +25,8 @@ pub struct BuiltDevice {
     pub kind: String,
     /// Its port.
     pub port: PortId,
+    /// Its CANopen node-ID, when its kind is a CANopen slave.
+    pub node_id: Option<u8>,
 }
 
 /// A scenario built into a simulation, with names resolved to ids.
@@ -104,10 +106,32 @@ impl Scenario {
                 message: format!("bus {:?} vanished while building", d.bus),
             })?;
             let port = bus.attach_boxed(node, port_config);
+            let node_id = kind.canopen_node_id(&sim, port);
+            // Two slaves with one node-ID would answer the same SDO request and send on the
+            // same COB-IDs (CiA 301 §7.3.2.1: the node-ID is unique within a network).
+            if let Some(n) = node_id
+                && let Some(other) = devices
+                    .iter()
+                    .find(|o: &&BuiltDevice| o.node_id == Some(n) && o.port.bus() == bus_id)
+            {
+                let key = if d.settings.contains_key("node_id") {
+                    "node_id"
+                } else {
+                    "name"
+                };
+                return Err(Settings::new(d, &self.file).error(
+                    key,
+                    format!(
+                        "node-ID {n} is already used by device {:?} on bus {:?}",
+                        other.name, d.bus
+                    ),
+                ));
+            }
             devices.push(BuiltDevice {
                 name: d.name.clone(),
                 kind: d.kind.clone(),
                 port,
+                node_id,
             });
         }
         Ok(Built {

@@ -74,6 +74,14 @@ pub trait DeviceKind: Send + Sync {
         let _ = (sim, port, value);
         Err(format!("a {} device has no input {name:?}", self.name()))
     }
+
+    /// The CANopen node-ID (CiA 301 §7.3.2.1) of the node this kind built on `port`, for the
+    /// duplicate check of a bus and for telling a master's frames from a twin's. `None` (the
+    /// default) when the kind is not a CANopen slave.
+    fn canopen_node_id(&self, sim: &Simulation, port: PortId) -> Option<u8> {
+        let _ = (sim, port);
+        None
+    }
 }
 
 /// The device kinds a scenario may use.

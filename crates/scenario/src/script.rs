@@ -921,6 +921,51 @@ enum Step<'a> {
     Probe(&'a Expectation, usize),
 }
 
+/// Build `scenario` without running it and check what its script refers to against the
+/// built devices: a `value` expectation must name an object the device's kind can read
+/// (it has an object dictionary holding that index and sub-index). Returns the built
+/// scenario, at time zero.
+pub fn validate(
+    scenario: &Scenario,
+    registry: &Registry,
+    env: &BuildEnv,
+) -> Result<Built, ScenarioError> {
+    let built = scenario.build(registry, env)?;
+    for (i, e) in scenario.script.expectations.iter().enumerate() {
+        if let Expect::Value {
+            device, index, sub, ..
+        } = &e.what
+        {
+            let problem = match built.device(device) {
+                None => Some(format!("no device named {device:?}")),
+                Some(d) => {
+                    let readable = registry
+                        .get(&d.kind)
+                        .and_then(|k| k.read_object(&built.sim, d.port, *index, *sub))
+                        .is_some();
+                    (!readable).then(|| {
+                        format!(
+                            "device {device:?} (kind {}) has no object {index:#06X}sub{sub} to read",
+                            d.kind
+                        )
+                    })
+                }
+            };
+            if let Some(message) = problem {
+                return Err(ScenarioError::Invalid {
+                    at: Located {
+                        file: scenario.file.clone(),
+                        line: Some(e.line),
+                        key: Some(format!("expect[{i}].value")),
+                    },
+                    message,
+                });
+            }
+        }
+    }
+    Ok(built)
+}
+
 /// Build `scenario`, run its script in virtual time and judge every expectation.
 pub fn check(
     scenario: &Scenario,

@@ -294,6 +294,14 @@ impl DeviceKind for Cia301 {
         "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs"
     }
 
+    fn canopen_node_id(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+    ) -> Option<u8> {
+        Some(sim.node::<Cia301Node>(port)?.device.node_id())
+    }
+
     fn read_object(
         &self,
         sim: &cantwin_bus::Simulation,
@@ -408,6 +416,28 @@ mod tests {
 
     fn error_of(extra: &str) -> String {
         build_error(&scenario(extra))
+    }
+
+    #[test]
+    fn duplicate_node_id_on_one_bus_names_the_second_device() {
+        let two = |bus_b: &str| {
+            format!(
+                "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\
+                 [[bus]]\nname = \"can1\"\nbit_rate = \"500k\"\n\
+                 [[device]]\nname = \"a\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 5\n\
+                 [[device]]\nname = \"b\"\nkind = \"tm3\"\nbus = \"{bus_b}\"\nnode_id = 5\n"
+            )
+        };
+        let e = build_error(&two("can0"));
+        assert!(
+            e.contains(":16: key `device[1].node_id`")
+                && e.contains("node-ID 5 is already used by device \"a\" on bus \"can0\""),
+            "{e}"
+        );
+        // The same node-ID on another bus is another network.
+        let built = built(&two("can1"));
+        let ids: Vec<Option<u8>> = built.devices.iter().map(|d| d.node_id).collect();
+        assert_eq!(ids, [Some(5), Some(5)]);
     }
 
     #[test]

@@ -68,6 +68,14 @@ impl DeviceKind for EdsKind {
         "CiA 301 device from an EDS/DCF file: file, node_id, heartbeat_ms, sdo_timeout_ms"
     }
 
+    fn canopen_node_id(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+    ) -> Option<u8> {
+        Some(sim.node::<Device>(port)?.node_id())
+    }
+
     fn read_object(
         &self,
         sim: &cantwin_bus::Simulation,

@@ -144,6 +144,14 @@ impl DeviceKind for Tm3Kind {
         r.map_err(|e| format!("{name}: {e}"))
     }
 
+    fn canopen_node_id(
+        &self,
+        sim: &cantwin_bus::Simulation,
+        port: cantwin_bus::PortId,
+    ) -> Option<u8> {
+        Some(sim.node::<Tm3Coupler>(port)?.device().node_id())
+    }
+
     fn build(
         &self,
         s: &Settings<'_>,
