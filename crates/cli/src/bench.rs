@@ -62,7 +62,10 @@ pub struct Args {
 pub fn run(args: &Args) -> Result<()> {
     if args.list {
         for (name, what) in NAMES {
-            println!("{name:8} {what}");
+            crate::output::result(
+                format_args!("{name:8} {what}"),
+                || serde_json::json!({"bench": name, "about": what}),
+            )?;
         }
         return Ok(());
     }
@@ -89,13 +92,42 @@ pub fn run(args: &Args) -> Result<()> {
         eprintln!("note: this is a debug build; figures are only meaningful with --release");
     }
     for name in names {
-        match name {
-            "bus" => bench_bus(args)?,
-            "network" => bench_network(args)?,
-            "fleet" => bench_fleet(args)?,
-            "sdo" => bench_sdo(args)?,
-            _ => bench_memory(args)?,
+        // The benchmarks run inside the simulator's loops: a spinner with the elapsed time
+        // shows the run is alive.
+        let spinner = crate::output::spinner(&format!("bench {name}"));
+        let r = match name {
+            "bus" => bench_bus(args),
+            "network" => bench_network(args),
+            "fleet" => bench_fleet(args),
+            "sdo" => bench_sdo(args),
+            _ => bench_memory(args),
+        };
+        spinner.finish_and_clear();
+        r?;
+    }
+    Ok(())
+}
+
+/// A benchmark's table (`| figure | value |` rows) as one JSON object: the benchmark's
+/// name and its figures by name, emphasis stripped.
+fn table_json(name: &str, table: &str) -> serde_json::Value {
+    let strip = |c: &str| c.replace("**", "").trim().to_string();
+    let mut figures = serde_json::Map::new();
+    for row in table.lines().skip(2) {
+        let cells: Vec<&str> = row.trim().trim_matches('|').split('|').collect();
+        if let [figure, value] = cells.as_slice() {
+            figures.insert(strip(figure), serde_json::Value::String(strip(value)));
         }
+    }
+    serde_json::json!({"bench": name, "figures": figures})
+}
+
+/// Print a benchmark's table, or its JSON object with `--json`.
+fn print_table(name: &str, table: &str) -> Result<()> {
+    if crate::output::json() {
+        crate::output::emit(&table_json(name, table))?;
+    } else {
+        println!("{table}");
     }
     Ok(())
 }
@@ -129,7 +161,7 @@ fn bench_bus(args: &Args) -> Result<()> {
         dropped = r.dropped_offers,
         load = r.bus_load_percent,
     );
-    println!("{table}");
+    print_table("bus", &table)?;
     let verdict = if rtf >= 1000.0 {
         "meets the aim (≥ 1000)"
     } else if rtf >= 300.0 {
@@ -137,7 +169,9 @@ fn bench_bus(args: &Args) -> Result<()> {
     } else {
         "BELOW THE FLOOR of 300"
     };
-    println!("real-time factor {rtf:.0}: {verdict}");
+    if !crate::output::json() {
+        println!("real-time factor {rtf:.0}: {verdict}");
+    }
     if args.write {
         let body = format!(
             "## bus — saturated 1 Mbit/s bus\n\n\
@@ -154,7 +188,11 @@ fn bench_bus(args: &Args) -> Result<()> {
             benchmarks_md::machine_description(),
         );
         benchmarks_md::write_section(&args.file, "bus", &body)?;
-        println!("recorded in {}", args.file.display());
+        if crate::output::json() {
+            eprintln!("recorded in {}", args.file.display());
+        } else {
+            println!("recorded in {}", args.file.display());
+        }
     }
     Ok(())
 }
@@ -167,7 +205,7 @@ fn seconds(args: &Args, default: f64) -> Duration {
 /// Print `table` and, with `--write`, record `body` as the section of `name`, with the
 /// machine, the date and the command that reproduces it.
 fn record(args: &Args, name: &str, title: &str, intro: &str, table: &str) -> Result<()> {
-    println!("{table}");
+    print_table(name, table)?;
     if args.write {
         let body = format!(
             "## {name} — {title}\n\n{intro}\n\n{table}\n\n\
@@ -176,7 +214,11 @@ fn record(args: &Args, name: &str, title: &str, intro: &str, table: &str) -> Res
             benchmarks_md::machine_description(),
         );
         benchmarks_md::write_section(&args.file, name, &body)?;
-        println!("recorded in {}", args.file.display());
+        if crate::output::json() {
+            eprintln!("recorded in {}", args.file.display());
+        } else {
+            println!("recorded in {}", args.file.display());
+        }
     }
     Ok(())
 }

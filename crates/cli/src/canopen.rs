@@ -14,6 +14,8 @@ use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::NmtCs;
 
 use crate::connect::{Link, Target};
+use crate::output;
+use serde_json::json;
 
 /// CiA 309-3 data type mnemonics.
 const TYPES: &[(&str, DataType)] = &[
@@ -167,30 +169,11 @@ enum SdoCommand {
     },
 }
 
-fn progress_bar(done: u32, total: Option<u32>) {
-    let mut err = std::io::stderr();
-    match total {
-        Some(t) if t > 0 => {
-            let width = 40usize;
-            let filled = (u64::from(done) * width as u64 / u64::from(t)) as usize;
-            let _ = write!(
-                err,
-                "\r[{}{}] {done}/{t} bytes",
-                "#".repeat(filled.min(width)),
-                " ".repeat(width - filled.min(width))
-            );
-        }
-        _ => {
-            let _ = write!(err, "\r{done} bytes");
-        }
-    }
-    let _ = err.flush();
-}
-
 /// Run one transfer on `master` to its end.
 fn transfer(link: &mut Link, master: &mut Master, id: TransferId, timeout: f64) -> Result<Vec<u8>> {
     let mut result = None;
-    let mut shown_progress = false;
+    // Drawn only for transfers of 4 KiB or more, where it is worth watching.
+    let mut bar: Option<indicatif::ProgressBar> = None;
     let finished = link.run(
         master,
         |m| {
@@ -201,8 +184,10 @@ fn transfer(link: &mut Link, master: &mut Master, id: TransferId, timeout: f64) 
                     match event {
                         SdoEvent::Progress { done, total } => {
                             if total.is_some_and(|t| t >= 4096) || done >= 4096 {
-                                shown_progress = true;
-                                progress_bar(done, total);
+                                bar.get_or_insert_with(|| {
+                                    output::bytes(total.map(u64::from), "SDO")
+                                })
+                                .set_position(u64::from(done));
                             }
                         }
                         SdoEvent::FellBack { code } => {
@@ -220,8 +205,8 @@ fn transfer(link: &mut Link, master: &mut Master, id: TransferId, timeout: f64) 
         // The master's own SDO timeout decides; this is only a safety net.
         WallDuration::from_secs_f64(timeout * 2.0 + 600.0),
     )?;
-    if shown_progress {
-        eprintln!();
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
     }
     match result {
         Some(Ok(data)) => Ok(data),
@@ -267,7 +252,29 @@ pub fn run_sdo(args: &SdoArgs) -> Result<()> {
             if let Some(path) = output {
                 std::fs::write(path, &data)
                     .with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("{} bytes written to {}", data.len(), path.display());
+                if output::json() {
+                    output::emit(&json!({
+                        "node": node, "index": mux.index, "sub": mux.sub,
+                        "size": data.len(), "output": path.display().to_string(),
+                    }))?;
+                } else {
+                    eprintln!("{} bytes written to {}", data.len(), path.display());
+                }
+                return Ok(());
+            }
+            if output::json() {
+                let mut v = json!({
+                    "node": node, "index": mux.index, "sub": mux.sub,
+                    "size": data.len(), "data": output::hex(&data),
+                });
+                if let Some(ty) = ty {
+                    let value = Value::from_le_bytes(ty, &data).map_err(|e| {
+                        anyhow::anyhow!("the {} bytes read are not a {ty:?}: {e}", data.len())
+                    })?;
+                    v["type"] = json!(format!("{ty:?}"));
+                    v["value"] = value_json(&value);
+                }
+                output::emit(&v)?;
                 return Ok(());
             }
             match ty {
@@ -319,13 +326,44 @@ pub fn run_sdo(args: &SdoArgs) -> Result<()> {
                 link.send(f)?;
             }
             transfer(&mut link, &mut m, id, args.timeout)?;
-            println!(
-                "written {} bytes to node {node} {:#06X}sub{}",
-                data.len(),
-                mux.index,
-                mux.sub
-            );
+            output::result(
+                format_args!(
+                    "written {} bytes to node {node} {:#06X}sub{}",
+                    data.len(),
+                    mux.index,
+                    mux.sub
+                ),
+                || {
+                    json!({
+                        "node": node, "index": mux.index, "sub": mux.sub,
+                        "written": data.len(),
+                    })
+                },
+            )?;
             Ok(())
+        }
+    }
+}
+
+/// A value read by SDO as JSON: numbers as numbers, everything else as its text.
+fn value_json(v: &Value) -> serde_json::Value {
+    match v {
+        Value::Boolean(b) => json!(b),
+        Value::Real32(x) => json!(x),
+        Value::Real64(x) => json!(x),
+        Value::VisibleString(_)
+        | Value::UnicodeString(_)
+        | Value::OctetString(_)
+        | Value::Domain(_)
+        | Value::TimeOfDay(_)
+        | Value::TimeDifference(_) => json!(v.to_string()),
+        // The integer types: their text is a decimal number.
+        _ => {
+            let text = v.to_string();
+            text.parse::<i64>()
+                .map(|n| json!(n))
+                .or_else(|_| text.parse::<u64>().map(|n| json!(n)))
+                .unwrap_or_else(|_| json!(text))
         }
     }
 }
@@ -381,7 +419,10 @@ pub fn run_nmt(args: &NmtArgs) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     for f in out.drain() {
         link.send(f)?;
-        println!("sent {f}");
+        output::result(
+            format_args!("sent {f}"),
+            || json!({"sent": f.to_string(), "command": format!("{:?}", args.command), "node": node}),
+        )?;
     }
     // Let the frame leave before the link closes.
     link.run(&mut m, |_| false, WallDuration::from_millis(100))?;
@@ -420,6 +461,17 @@ pub fn run_scan(args: &ScanArgs) -> Result<()> {
         WallDuration::from_secs_f64(args.timeout * 4.0 + 10.0),
     )?;
     let found = found.context("the scan did not finish")?;
+    if output::json() {
+        let nodes: Vec<serde_json::Value> = found
+            .iter()
+            .map(|hit| match hit.device_type {
+                Ok(t) => json!({"node": hit.node, "device_type": t, "profile": t & 0xFFFF, "additional": t >> 16}),
+                Err(code) => json!({"node": hit.node, "abort": code.to_string()}),
+            })
+            .collect();
+        output::emit(&json!({"nodes": nodes, "found": found.len()}))?;
+        return Ok(());
+    }
     for hit in &found {
         match hit.device_type {
             Ok(t) => println!(
@@ -481,7 +533,16 @@ pub fn run_trace(args: &TraceArgs) -> Result<()> {
             .map(|d| format!("{}.{:06}", d.as_secs(), d.subsec_micros()))
             .unwrap_or_default();
         let text = describe(frame, &pdos);
-        if let Err(e) = writeln!(out, "({t}) {:<20} {text}", frame.to_string()) {
+        let written = if output::json() {
+            let mut v = output::frame_json(frame);
+            v["time"] = json!(t);
+            v["frame"] = json!(frame.to_string());
+            v["decoded"] = json!(text);
+            writeln!(out, "{v}")
+        } else {
+            writeln!(out, "({t}) {:<20} {text}", frame.to_string())
+        };
+        if let Err(e) = written {
             failed = Some(e);
             return false;
         }

@@ -16,8 +16,38 @@ pub fn run(path: &Path, env: &BuildEnv) -> Result<()> {
             path.display()
         );
     }
-    let report = cantwin_scenario::check(&scenario, &Registry::builtin(), env)?;
-    println!("{report}");
+    let end_ms = scenario.script.end_time().as_nanos() / 1_000_000;
+    let bar = crate::output::steps(end_ms, "virtual ms");
+    let report = cantwin_scenario::check_with_progress(
+        &scenario,
+        &Registry::builtin(),
+        env,
+        &mut |now, _| bar.set_position(now.as_nanos() / 1_000_000),
+    );
+    bar.finish_and_clear();
+    let report = report?;
+    if crate::output::json() {
+        let outcomes: Vec<serde_json::Value> = report
+            .outcomes
+            .iter()
+            .map(|o| {
+                serde_json::json!({
+                    "line": o.line, "label": o.label, "passed": o.passed, "detail": o.detail,
+                })
+            })
+            .collect();
+        crate::output::emit(&serde_json::json!({
+            "file": report.file.display().to_string(),
+            "passed": report.passed(),
+            "outcomes": outcomes,
+            "actions": report.actions,
+            "frames": report.frames,
+            "error_frames": report.error_frames,
+            "end_s": report.end.as_nanos() as f64 / 1e9,
+        }))?;
+    } else {
+        println!("{report}");
+    }
     if !report.passed() {
         bail!("{}: check failed", path.display());
     }

@@ -198,23 +198,52 @@ pub fn run(args: &Args) -> Result<()> {
         Command::Check { file } => {
             let eds = load(file)?;
             let report = eds.check();
-            let mut errors = 0;
-            for issue in &report.issues {
-                println!("{}: {issue}", file.display());
-                if issue.severity == cantwin_eds::Severity::Error {
-                    errors += 1;
-                }
-            }
+            let errors = report
+                .issues
+                .iter()
+                .filter(|i| i.severity == cantwin_eds::Severity::Error)
+                .count();
             let advice = advice(&eds);
-            for a in &advice {
-                println!("{}: {a}", file.display());
-            }
             let warnings = report.issues.len() - errors + advice.len();
-            println!(
-                "{}: {} objects, {errors} errors, {warnings} warnings",
-                file.display(),
-                eds.objects.len()
-            );
+            if crate::output::json() {
+                let issues: Vec<serde_json::Value> = report
+                    .issues
+                    .iter()
+                    .map(|i| {
+                        serde_json::json!({
+                            "severity": format!("{:?}", i.severity).to_lowercase(),
+                            "section": i.section,
+                            "key": i.key,
+                            "message": i.message,
+                            "text": i.to_string(),
+                        })
+                    })
+                    .chain(
+                        advice
+                            .iter()
+                            .map(|a| serde_json::json!({"severity": "advice", "text": a})),
+                    )
+                    .collect();
+                crate::output::emit(&serde_json::json!({
+                    "file": file.display().to_string(),
+                    "objects": eds.objects.len(),
+                    "errors": errors,
+                    "warnings": warnings,
+                    "issues": issues,
+                }))?;
+            } else {
+                for issue in &report.issues {
+                    println!("{}: {issue}", file.display());
+                }
+                for a in &advice {
+                    println!("{}: {a}", file.display());
+                }
+                println!(
+                    "{}: {} objects, {errors} errors, {warnings} warnings",
+                    file.display(),
+                    eds.objects.len()
+                );
+            }
             if errors > 0 {
                 bail!("{} has {errors} errors", file.display());
             }

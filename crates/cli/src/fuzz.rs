@@ -437,6 +437,7 @@ pub fn campaign(
     seed: u64,
     from: u64,
     cases: u64,
+    bar: &indicatif::ProgressBar,
     mut progress: impl FnMut(&TargetResult),
 ) -> Result<Vec<TargetResult>> {
     let all = targets();
@@ -467,6 +468,7 @@ pub fn campaign(
                     .unwrap_or_else(|| "panic".into());
                 failures.push((case, msg));
             }
+            bar.inc(1);
         }
         let r = TargetResult {
             name: t.name,
@@ -482,36 +484,79 @@ pub fn campaign(
 }
 
 pub fn run(args: &Args) -> Result<()> {
+    let json = crate::output::json();
     if args.list {
         for t in targets() {
-            println!("{:24} {}", t.name, t.about);
+            crate::output::result(
+                format_args!("{:24} {}", t.name, t.about),
+                || serde_json::json!({"target": t.name, "about": t.about}),
+            )?;
         }
         return Ok(());
     }
-    println!(
-        "cantwin fuzz: seed {:#x}, cases {}..{}",
-        args.seed,
-        args.from,
-        args.from.saturating_add(args.cases)
-    );
-    let results = campaign(&args.targets, args.seed, args.from, args.cases, |r| {
+    if !json {
         println!(
-            "{:24} {:>10} cases {:>4} failures {:>8.1} s",
-            r.name,
-            r.cases,
-            r.failures.len(),
-            r.seconds
+            "cantwin fuzz: seed {:#x}, cases {}..{}",
+            args.seed,
+            args.from,
+            args.from.saturating_add(args.cases)
         );
-        for (case, msg) in r.failures.iter().take(5) {
-            println!(
-                "  case {case}: {msg}\n  replay: cantwin fuzz --seed {:#x} --from {case} --cases 1 {}",
-                args.seed, r.name
-            );
+    }
+    let chosen = targets()
+        .iter()
+        .filter(|t| args.targets.is_empty() || args.targets.iter().any(|n| n == t.name))
+        .count() as u64;
+    let bar = crate::output::steps(chosen.saturating_mul(args.cases), "fuzz cases");
+    let results = campaign(&args.targets, args.seed, args.from, args.cases, &bar, |r| {
+        if json {
+            return;
         }
+        bar.suspend(|| {
+            println!(
+                "{:24} {:>10} cases {:>4} failures {:>8.1} s",
+                r.name,
+                r.cases,
+                r.failures.len(),
+                r.seconds
+            );
+            for (case, msg) in r.failures.iter().take(5) {
+                println!(
+                    "  case {case}: {msg}\n  replay: cantwin fuzz --seed {:#x} --from {case} --cases 1 {}",
+                    args.seed, r.name
+                );
+            }
+        });
     })?;
+    bar.finish_and_clear();
     let cases: u64 = results.iter().map(|r| r.cases).sum();
     let failures: usize = results.iter().map(|r| r.failures.len()).sum();
-    println!("total: {cases} cases, {failures} failures");
+    if json {
+        let targets: Vec<serde_json::Value> = results
+            .iter()
+            .map(|r| {
+                let failed: Vec<serde_json::Value> = r
+                    .failures
+                    .iter()
+                    .map(|(case, msg)| serde_json::json!({"case": case, "message": msg}))
+                    .collect();
+                serde_json::json!({
+                    "target": r.name,
+                    "cases": r.cases,
+                    "failures": failed,
+                    "seconds": r.seconds,
+                })
+            })
+            .collect();
+        crate::output::emit(&serde_json::json!({
+            "seed": args.seed,
+            "from": args.from,
+            "cases": cases,
+            "failures": failures,
+            "targets": targets,
+        }))?;
+    } else {
+        println!("total: {cases} cases, {failures} failures");
+    }
     if failures > 0 {
         bail!("{failures} fuzz cases failed");
     }
@@ -525,7 +570,15 @@ mod tests {
     /// The suite's short campaign: every target, a fixed number of cases, no failure.
     #[test]
     fn short_campaign_of_every_target_finds_no_failure() {
-        let results = campaign(&[], 0x5EED, 0, 24, |_| {}).unwrap();
+        let results = campaign(
+            &[],
+            0x5EED,
+            0,
+            24,
+            &indicatif::ProgressBar::hidden(),
+            |_| {},
+        )
+        .unwrap();
         assert_eq!(results.len(), targets().len());
         for r in &results {
             assert_eq!(r.cases, 24);
@@ -535,10 +588,17 @@ mod tests {
 
     #[test]
     fn an_unknown_target_is_refused_with_the_list() {
-        let e = campaign(&["nope".into()], 0, 0, 1, |_| {})
-            .err()
-            .unwrap()
-            .to_string();
+        let e = campaign(
+            &["nope".into()],
+            0,
+            0,
+            1,
+            &indicatif::ProgressBar::hidden(),
+            |_| {},
+        )
+        .err()
+        .unwrap()
+        .to_string();
         assert!(
             e.contains("no fuzz target \"nope\"") && e.contains("canopen-wire"),
             "{e}"

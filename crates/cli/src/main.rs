@@ -21,6 +21,7 @@ mod fuzz;
 mod monitor;
 mod monitor_ui;
 mod output;
+mod replay;
 mod report;
 mod scenario_cmd;
 mod sim;
@@ -148,6 +149,13 @@ enum Command {
         after_help = "Examples:\n  cantwin scenario check scenarios/*.toml\n  cantwin scenario check --json my-rig.toml"
     )]
     Scenario(scenario_cmd::Args),
+    /// Re-inject a capture's master frames into a scenario's twins in virtual time and diff
+    /// the twins' answers against the capture (`--help` tells which frames are the master's).
+    #[command(
+        after_help = "Examples:\n  cantwin replay run.pcap --scenario scenarios/cia301-device.toml\n  \
+                            cantwin replay run.log --scenario rig.toml --tolerance-ms 5 --master-ids 000,605"
+    )]
+    Replay(replay::Args),
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -169,6 +177,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Gateway(args) => ascii_gateway::run(&args),
         Command::Report(args) => report::run(&args),
         Command::Scenario(args) => scenario_cmd::run(&args),
+        Command::Replay(args) => replay::run(&args),
     }
 }
 

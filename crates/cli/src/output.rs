@@ -110,3 +110,10 @@ pub fn steps(total: u64, what: &str) -> ProgressBar {
     pb.set_message(what.to_string());
     pb
 }
+
+/// A spinner with the elapsed time, for operations whose length is not known in advance.
+pub fn spinner(what: &str) -> ProgressBar {
+    let pb = bar(None, "{spinner} {msg} {elapsed}");
+    pb.set_message(what.to_string());
+    pb
+}

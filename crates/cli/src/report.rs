@@ -101,12 +101,22 @@ pub fn run(args: &Args) -> Result<()> {
     });
     std::fs::write(&out, cantwin_report::render_html(&report))
         .with_context(|| format!("writing {}", out.display()))?;
-    println!(
-        "{}: {} records, {} SDO transfers, {} anomalies",
-        out.display(),
-        records,
-        report.sdo_total,
-        report.anomalies.len()
-    );
+    crate::output::result(
+        format_args!(
+            "{}: {} records, {} SDO transfers, {} anomalies",
+            out.display(),
+            records,
+            report.sdo_total,
+            report.anomalies.len()
+        ),
+        || {
+            serde_json::json!({
+                "output": out.display().to_string(),
+                "records": records,
+                "sdo_transfers": report.sdo_total,
+                "anomalies": report.anomalies.len(),
+            })
+        },
+    )?;
     Ok(())
 }

@@ -55,4 +55,4 @@ pub use error::{Located, ScenarioError};
 pub use live::{LiveValue, Role};
 pub use model::{BusSpec, DeviceSpec, Scenario};
 pub use registry::{DeviceKind, Registry, Settings};
-pub use script::{CheckReport, Script, check, validate};
+pub use script::{CheckReport, Script, check, check_with_progress, validate};

@@ -972,8 +972,40 @@ pub fn check(
     registry: &Registry,
     env: &BuildEnv,
 ) -> Result<CheckReport, ScenarioError> {
+    check_with_progress(scenario, registry, env, &mut |_, _| {})
+}
+
+/// How much virtual time a check run covers between two calls of its progress callback.
+const PROGRESS_STEP_MS: u64 = 100;
+
+/// Run `sim` to `t` in steps of [`PROGRESS_STEP_MS`], telling `progress` the virtual time
+/// reached and the run's end after each step. Running to `t` in steps processes the same
+/// events as running to it at once.
+fn advance(
+    sim: &mut Simulation,
+    t: Instant,
+    end: Instant,
+    progress: &mut dyn FnMut(Instant, Instant),
+) {
+    let step = cantwin_can::Duration::from_millis(PROGRESS_STEP_MS);
+    while sim.now() < t {
+        let next = sim.now().checked_add(step).map_or(t, |n| n.min(t));
+        sim.run_until(next);
+        progress(next, end);
+    }
+    sim.run_until(t);
+}
+
+/// [`check`], calling `progress(now, end)` as the virtual time advances to the run's end.
+pub fn check_with_progress(
+    scenario: &Scenario,
+    registry: &Registry,
+    env: &BuildEnv,
+    progress: &mut dyn FnMut(Instant, Instant),
+) -> Result<CheckReport, ScenarioError> {
     let mut built = scenario.build(registry, env)?;
     let script = &scenario.script;
+    let run_end = script.end_time();
     let mut script_ports: BTreeMap<String, PortId> = BTreeMap::new();
     let mut taps: Vec<(String, cantwin_bus::BusId, TapId)> = Vec::new();
     for (name, id) in built.buses.clone() {
@@ -1002,7 +1034,7 @@ pub fn check(
     let mut probes: BTreeMap<usize, Outcome> = BTreeMap::new();
     let port_of = |built: &Built, d: &str| built.device(d).map(|d| d.port);
     for (t, step) in steps {
-        built.sim.run_until(t);
+        advance(&mut built.sim, t, run_end, progress);
         match step {
             Step::Act(a) => {
                 if let Err(e) = apply_action(
@@ -1035,8 +1067,8 @@ pub fn check(
             }
         }
     }
-    let end = script.end_time();
-    built.sim.run_until(end);
+    let end = run_end;
+    advance(&mut built.sim, end, end, progress);
     let mut frames = 0;
     let mut error_frames = 0;
     for bus in built.sim.buses() {

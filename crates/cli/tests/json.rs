@@ -1,0 +1,175 @@
+//! `--json`: every command that prints data prints JSON a program can parse — one object per
+//! result, one object per line for streams — and the same data as the text output.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+
+use serde_json::Value;
+
+/// `cantwin ARGS --json`, which must succeed, as one JSON object.
+fn json(args: &[&str]) -> Value {
+    let mut full = args.to_vec();
+    full.push("--json");
+    let (ok, out, err) = cantwin(&full);
+    assert!(ok, "{args:?}: {err}");
+    serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{args:?}: {e}: {out}"))
+}
+
+/// `cantwin ARGS --json` as JSON Lines.
+fn json_lines(args: &[&str]) -> Vec<Value> {
+    let mut full = args.to_vec();
+    full.push("--json");
+    let (ok, out, err) = cantwin(&full);
+    assert!(ok, "{args:?}: {err}");
+    out.lines()
+        .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l}")))
+        .collect()
+}
+
+#[test]
+fn canopen_commands_print_json_against_an_in_process_scenario() {
+    let scenario = scenario_file("cia301-device.toml");
+    let s = scenario.as_str();
+
+    let v = json(&["scan", "--scenario", s]);
+    assert_eq!(v["found"], 1);
+    assert_eq!(v["nodes"][0]["node"], 5);
+    assert!(v["nodes"][0]["device_type"].is_u64(), "{v}");
+
+    let v = json(&["sdo", "--scenario", s, "read", "5", "0x1017", "0", "u16"]);
+    assert_eq!(v["node"], 5);
+    assert_eq!(v["index"], 0x1017);
+    assert_eq!(v["sub"], 0);
+    assert_eq!(v["size"], 2);
+    assert_eq!(v["data"], "6400");
+    assert_eq!(v["value"], 100);
+
+    let v = json(&["sdo", "--scenario", s, "read", "5", "0x1008", "0", "vs"]);
+    assert!(
+        v["value"]
+            .as_str()
+            .unwrap()
+            .starts_with("cantwin generic CiA 301 device"),
+        "{v}"
+    );
+    // Without a type, the bytes only.
+    let v = json(&["sdo", "--scenario", s, "read", "5", "0x1001", "0"]);
+    assert_eq!(v["data"], "00");
+    assert!(v.get("value").is_none(), "{v}");
+
+    let v = json(&[
+        "sdo",
+        "--scenario",
+        s,
+        "write",
+        "5",
+        "0x1017",
+        "0",
+        "u16",
+        "500",
+    ]);
+    assert_eq!(v["written"], 2);
+
+    let v = json(&["nmt", "--scenario", s, "start", "5"]);
+    assert_eq!(v["sent"], "000#0105");
+    assert_eq!(v["node"], 5);
+
+    // The trace is a stream: one object per frame. The in-process node boots (705#00) as the
+    // trace starts, then sends its heartbeat every 100 ms.
+    let lines = json_lines(&["trace", "--scenario", s, "--count", "3", "--seconds", "5"]);
+    assert_eq!(lines.len(), 3);
+    for l in &lines {
+        assert_eq!(l["id"], 0x705, "{l}");
+        assert!(l["frame"] == "705#7F" || l["frame"] == "705#00", "{l}");
+        assert!(l["decoded"].as_str().unwrap().contains("node 5"), "{l}");
+        assert!(l["time"].is_string());
+    }
+    assert!(lines.iter().any(|l| l["frame"] == "705#7F"));
+
+    // Errors stay text on standard error, with a failure status and nothing on stdout.
+    let (ok, out, err) = cantwin(&["sdo", "--scenario", s, "read", "5", "0x6000", "0", "--json"]);
+    assert!(!ok);
+    assert!(out.is_empty(), "{out}");
+    assert!(err.starts_with("error: SDO aborted by the server"), "{err}");
+}
+
+#[test]
+fn dump_prints_one_json_object_per_record() {
+    let dir = temp_dir("json-dump");
+    let log = dir.join("a.log");
+    std::fs::write(
+        &log,
+        "(1700000000.000100) can0 705#00\n(1700000000.000200) can0 12345678#R4\n",
+    )
+    .unwrap();
+    let lines = json_lines(&["dump", log.to_str().unwrap()]);
+    assert_eq!(lines.len(), 2);
+    assert_eq!(lines[0]["timestamp_ns"], 1_700_000_000_000_100_000u64);
+    assert_eq!(lines[0]["channel"], "can0");
+    assert_eq!(lines[0]["id"], 0x705);
+    assert_eq!(lines[0]["data"], "00");
+    assert_eq!(lines[1]["extended"], true);
+    assert_eq!(lines[1]["remote"], true);
+    assert_eq!(lines[1]["dlc"], 4);
+}
+
+#[test]
+fn eds_check_sim_check_fuzz_and_bench_print_json() {
+    let eds = format!(
+        "{}/../../crates/eds/tests/corpus/io_module.eds",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let v = json(&["eds", "check", &eds]);
+    assert_eq!(v["errors"], 0);
+    assert!(v["objects"].as_u64().unwrap() > 10, "{v}");
+    assert!(v["issues"].is_array());
+
+    let v = json(&["sim", "--check", &scenario_file("faults/cable-cut.toml")]);
+    assert_eq!(v["passed"], true);
+    let outcomes = v["outcomes"].as_array().unwrap();
+    assert!(!outcomes.is_empty());
+    assert!(
+        outcomes
+            .iter()
+            .all(|o| o["passed"] == true && o["line"].is_u64())
+    );
+
+    let v = json(&["fuzz", "--cases", "3", "eds"]);
+    assert_eq!(v["cases"], 3);
+    assert_eq!(v["failures"], 0);
+    assert_eq!(v["targets"][0]["target"], "eds");
+
+    let v = json(&["bench", "bus", "--seconds", "0.02"]);
+    assert_eq!(v["bench"], "bus");
+    let rtf = &v["figures"]["real-time factor (bus time / wall time)"];
+    assert!(rtf.as_str().unwrap().parse::<f64>().unwrap() > 0.0, "{v}");
+}
+
+#[test]
+fn progress_bars_stay_off_stdout_and_off_a_non_terminal_stderr() {
+    // A 64 KiB DOMAIN upload draws a progress bar on a terminal; here stderr is a pipe.
+    let scenario = scenario_file("cia301-device.toml");
+    let dir = temp_dir("json-progress");
+    let file = dir.join("domain.bin");
+    let (ok, out, err) = cantwin(&[
+        "sdo",
+        "--scenario",
+        &scenario,
+        "--mode",
+        "block",
+        "read",
+        "5",
+        "0x2000",
+        "0",
+        "--output",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.is_empty(), "{out}");
+    assert_eq!(
+        err.trim(),
+        format!("65536 bytes written to {}", file.display())
+    );
+    assert_eq!(std::fs::read(&file).unwrap().len(), 65536);
+}
