@@ -222,14 +222,25 @@ fn print_state(data: &[u8]) -> Result<()> {
         .with_context(|| format!("message 0 answer {data:02X?} is malformed"))?;
     let c = s.commands;
     let on = |b: bool| if b { "on" } else { "off" };
-    println!(
-        "reference {:.2} Hz  reference-remote {}  command-remote {}  start {}  reverse {}",
-        f64::from(s.reference_centi_hz) / 100.0,
-        on(c.reference_remote),
-        on(c.command_remote),
-        on(c.can_start),
-        on(c.can_reverse)
-    );
+    crate::output::result(
+        format_args!(
+            "reference {:.2} Hz  reference-remote {}  command-remote {}  start {}  reverse {}",
+            f64::from(s.reference_centi_hz) / 100.0,
+            on(c.reference_remote),
+            on(c.command_remote),
+            on(c.can_start),
+            on(c.can_reverse)
+        ),
+        || {
+            serde_json::json!({
+                "reference_hz": f64::from(s.reference_centi_hz) / 100.0,
+                "reference_remote": c.reference_remote,
+                "command_remote": c.command_remote,
+                "start": c.can_start,
+                "reverse": c.can_reverse,
+            })
+        },
+    )?;
     Ok(())
 }
 
@@ -262,6 +273,19 @@ pub fn run(args: &Args) -> Result<()> {
         action: ParamAction::List,
     } = &args.command
     {
+        if crate::output::json() {
+            let list: Vec<serde_json::Value> = messages::MUX_TABLE
+                .iter()
+                .map(|e| {
+                    serde_json::json!({
+                        "mux": e.mux, "name": e.name, "readable": e.readable,
+                        "writable": e.writable, "data": e.data,
+                    })
+                })
+                .collect();
+            crate::output::emit(&serde_json::json!({ "multiplexors": list }))?;
+            return Ok(());
+        }
         println!("{:<6} {:<18} {:<3} data", "mux", "name", "r/w");
         for e in messages::MUX_TABLE {
             let rw = format!(
@@ -364,6 +388,14 @@ pub fn run(args: &Args) -> Result<()> {
                 }
             };
             let data = exchange(&mut link, &mut client, MESSAGE_2, request, t)?;
+            if crate::output::json() {
+                crate::output::emit(&serde_json::json!({
+                    "name": name,
+                    "value": data.as_u16(),
+                    "data": crate::output::hex(data.as_slice()),
+                }))?;
+                return Ok(());
+            }
             match data.as_u16() {
                 Some(v) => println!("{name} = {v} (0x{v:04X})"),
                 None => println!("{name} = {:02X?}", data.as_slice()),
@@ -379,10 +411,14 @@ pub fn run(args: &Args) -> Result<()> {
                 Request::ControlEvent(enable),
                 t,
             )?;
-            println!(
-                "alarm events {}",
-                if enable { "enabled" } else { "disabled" }
-            );
+            // With --watch this is a stream: this line, then one line per notification.
+            crate::output::result(
+                format_args!(
+                    "alarm events {}",
+                    if enable { "enabled" } else { "disabled" }
+                ),
+                || serde_json::json!({ "alarm_events": enable }),
+            )?;
             if let EventAction::Watch { seconds } = action {
                 let limit = seconds
                     .map(WallDuration::from_secs_f64)
@@ -392,7 +428,18 @@ pub fn run(args: &Args) -> Result<()> {
                     |c| {
                         while let Some(ev) = c.poll_event() {
                             if let ClientEvent::Notified { data, .. } = ev {
-                                println!("notification: {}", describe_flags(data.as_slice()));
+                                let text = describe_flags(data.as_slice());
+                                if crate::output::json() {
+                                    println!(
+                                        "{}",
+                                        serde_json::json!({
+                                            "notification": text,
+                                            "data": crate::output::hex(data.as_slice()),
+                                        })
+                                    );
+                                } else {
+                                    println!("notification: {text}");
+                                }
                             }
                         }
                         false

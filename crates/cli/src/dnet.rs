@@ -565,6 +565,28 @@ fn browse(s: &mut Session, from: u8, to: u8) -> Result<()> {
         }
     }
     found.sort_by_key(|(m, _)| *m);
+    if crate::output::json() {
+        let devices: Vec<serde_json::Value> = found
+            .iter()
+            .map(|(m, f)| match f.refused {
+                Some((g, a)) => serde_json::json!({
+                    "mac": m.get(),
+                    "refused": {"general_status": g, "additional_code": a, "text": general_status_text(g)},
+                }),
+                None => serde_json::json!({
+                    "mac": m.get(),
+                    "vendor": f.vendor,
+                    "device_type": f.device_type,
+                    "product_code": f.product_code,
+                    "revision": f.revision.map(|(a, b)| format!("{a}.{b:03}")),
+                    "serial": f.serial,
+                    "product_name": f.name,
+                }),
+            })
+            .collect();
+        crate::output::emit(&serde_json::json!({"devices": devices, "found": found.len()}))?;
+        return Ok(());
+    }
     println!(
         "{:<4} {:<7} {:<12} {:<8} {:<9} {:<11} product name",
         "MAC", "vendor", "device type", "product", "revision", "serial"
@@ -654,11 +676,23 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
             failure.unwrap_or_else(|| "the polled connection's produced size was not read".into())
         );
     };
-    println!(
-        "polled I/O allocated: {} bytes out, {input_size} bytes in, every {period_ms} ms (expected packet rate {} ms)",
-        output.len(),
-        epr.unwrap_or(period_ms)
-    );
+    let json = crate::output::json();
+    if json {
+        // A stream: this line, then one line per poll response.
+        crate::output::emit(&serde_json::json!({
+            "mac": slave.get(),
+            "output_bytes": output.len(),
+            "input_bytes": input_size,
+            "period_ms": period_ms,
+            "expected_packet_rate_ms": epr.unwrap_or(period_ms),
+        }))?;
+    } else {
+        println!(
+            "polled I/O allocated: {} bytes out, {input_size} bytes in, every {period_ms} ms (expected packet rate {} ms)",
+            output.len(),
+            epr.unwrap_or(period_ms)
+        );
+    }
     let now = s.link.now();
     s.scanner.start_polling(
         slave,
@@ -681,7 +715,14 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
                     && seen < count
                 {
                     seen += 1;
-                    println!("input {seen}: {}", hex(&data));
+                    if json {
+                        println!(
+                            "{}",
+                            serde_json::json!({"input": seen, "data": crate::output::hex(&data)})
+                        );
+                    } else {
+                        println!("input {seen}: {}", hex(&data));
+                    }
                 }
             }
             seen >= count
@@ -733,7 +774,14 @@ pub fn run(args: &Args) -> Result<()> {
                 *instance,
                 &[*attribute],
             )?;
-            println!("{}", decode(&data, *ty));
+            crate::output::result(decode(&data, *ty), || {
+                serde_json::json!({
+                    "mac": slave.get(),
+                    "class": class, "instance": instance, "attribute": attribute,
+                    "data": crate::output::hex(&data),
+                    "value": decode(&data, *ty),
+                })
+            })?;
             Ok(())
         }
         Command::Set {
@@ -754,7 +802,13 @@ pub fn run(args: &Args) -> Result<()> {
                 *instance,
                 &data,
             )?;
-            println!("ok");
+            crate::output::result("ok", || {
+                serde_json::json!({
+                    "mac": slave.get(),
+                    "class": class, "instance": instance, "attribute": attribute,
+                    "set": crate::output::hex(&data[1..]),
+                })
+            })?;
             Ok(())
         }
         Command::Poll {

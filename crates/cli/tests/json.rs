@@ -173,3 +173,64 @@ fn progress_bars_stay_off_stdout_and_off_a_non_terminal_stderr() {
     );
     assert_eq!(std::fs::read(&file).unwrap().len(), 65536);
 }
+
+#[test]
+fn dnet_browse_get_and_poll_print_json_against_an_in_process_scenario() {
+    let scenario = scenario_file("adv200-devicenet.toml");
+    let s = scenario.as_str();
+    let v = json(&[
+        "dnet",
+        "--scenario",
+        s,
+        "browse",
+        "--from",
+        "10",
+        "--to",
+        "13",
+    ]);
+    assert_eq!(v["found"], 1);
+    let d = &v["devices"][0];
+    assert_eq!(d["mac"], 12);
+    assert_eq!(d["device_type"], 2);
+    assert_eq!(d["product_name"], "ADV200 EXP-CAN/DN-ADV");
+    assert_eq!(d["revision"], "1.000");
+
+    // Polled I/O is a stream: the connection, then one line per response.
+    let lines = json_lines(&[
+        "dnet",
+        "--scenario",
+        s,
+        "poll",
+        "12",
+        "--out",
+        "0300E803",
+        "--count",
+        "2",
+    ]);
+    assert_eq!(lines.len(), 3);
+    assert_eq!(lines[0]["input_bytes"], 6);
+    assert_eq!(lines[0]["output_bytes"], 4);
+    for (k, l) in lines[1..].iter().enumerate() {
+        assert_eq!(l["input"], k + 1);
+        assert_eq!(l["data"].as_str().unwrap().len(), 12, "{l}");
+    }
+}
+
+#[test]
+fn cal_read_and_param_commands_print_json() {
+    let scenario = scenario_file("opendrive.toml");
+    let s = scenario.as_str();
+    let v = json(&["cal", "--scenario", s, "read"]);
+    assert_eq!(v["reference_hz"], 0.0);
+    assert_eq!(v["start"], false);
+    let v = json(&["cal", "--scenario", s, "param", "read", "max-frequency"]);
+    assert_eq!(v["name"], "max-frequency");
+    assert_eq!(v["value"], 5000);
+    assert_eq!(v["data"], "8813");
+    let v = json(&["cal", "param", "list"]);
+    let list = v["multiplexors"].as_array().unwrap();
+    assert!(
+        list.iter()
+            .any(|m| m["name"] == "max-frequency" && m["writable"] == true)
+    );
+}
