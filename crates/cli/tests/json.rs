@@ -195,6 +195,24 @@ fn dnet_browse_get_and_poll_print_json_against_an_in_process_scenario() {
     assert_eq!(d["product_name"], "ADV200 EXP-CAN/DN-ADV");
     assert_eq!(d["revision"], "1.000");
 
+    // Identity object (class 1) attribute 7, the product name.
+    let v = json(&[
+        "dnet",
+        "--scenario",
+        s,
+        "get",
+        "12",
+        "1",
+        "1",
+        "7",
+        "--type",
+        "short-string",
+    ]);
+    assert_eq!(v["mac"], 12);
+    assert_eq!(v["attribute"], 7);
+    assert!(v["data"].as_str().unwrap().starts_with("15414456"), "{v}");
+    assert!(v["value"].as_str().unwrap().contains("ADV200"), "{v}");
+
     // Polled I/O is a stream: the connection, then one line per response.
     let lines = json_lines(&[
         "dnet",
