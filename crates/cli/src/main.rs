@@ -153,7 +153,8 @@ enum Command {
     /// the twins' answers against the capture (`--help` tells which frames are the master's).
     #[command(
         after_help = "Examples:\n  cantwin replay run.pcap --scenario scenarios/cia301-device.toml\n  \
-                            cantwin replay run.log --scenario rig.toml --tolerance-ms 5 --master-ids 000,605"
+                            cantwin replay run.log --scenario rig.toml --tolerance-ms 5 --master-ids 000,605",
+        after_long_help = replay::LONG_HELP
     )]
     Replay(replay::Args),
 }

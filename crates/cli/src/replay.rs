@@ -27,8 +27,12 @@ use serde_json::json;
 
 use crate::output;
 
-/// The rule, for `--help`.
-const RULE: &str = "Master frames are those whose identifier no twin of the scenario transmits. \
+/// `--help`: examples, then the rule telling the master's frames from the twins'.
+pub const LONG_HELP: &str = "Examples:
+  cantwin replay run.pcap --scenario scenarios/cia301-device.toml
+  cantwin replay run.log --scenario rig.toml --tolerance-ms 5 --master-ids 000,605
+
+Master frames are those whose identifier no twin of the scenario transmits. \
 The twins' identifiers are learnt from the replay itself: a first run injects nothing and \
 records what the twins send on their own; each further run injects the capture's frames on \
 the identifiers no twin has sent yet and adds what the twins answer, until that set stops \
@@ -39,7 +43,6 @@ SDO requests 0x600+n, RPDOs, SYNC/TIME when no twin produces them and DeviceNet 
 master messages thus count as the master's. --master-ids replaces the rule.";
 
 #[derive(Debug, clap::Args)]
-#[command(after_long_help = RULE)]
 pub struct Args {
     /// The capture: pcap, pcapng or candump log (format recognised from its content).
     capture: PathBuf,
@@ -310,7 +313,9 @@ fn diff(captured: &[Captured], replayed: &[Captured], tolerance: i64) -> Vec<Ent
             .push((r.t, r.frame));
     }
     let mut entries = Vec::new();
-    for ((bus, _), (cap, rep)) in groups {
+    for ((bus, _), (mut cap, mut rep)) in groups {
+        cap.sort_by_key(|(t, _)| *t);
+        rep.sort_by_key(|(t, _)| *t);
         let mut used = vec![false; rep.len()];
         let mut done = vec![false; cap.len()];
         let passes: [(Kind, bool, bool); 3] = [
@@ -323,23 +328,25 @@ fn diff(captured: &[Captured], replayed: &[Captured], tolerance: i64) -> Vec<Ent
                 if done[ci] {
                     continue;
                 }
-                let best = rep
-                    .iter()
-                    .enumerate()
-                    .filter(|(ri, (rt, rf))| {
-                        !used[*ri]
-                            && (!within || (rt - ct).abs() <= tolerance)
-                            && ((rf == cf) == same_data)
-                    })
-                    .min_by_key(|(_, (rt, _))| (rt - ct).abs());
-                if let Some((ri, r)) = best {
+                // Both lists are in time order: within the tolerance only a window of the
+                // replayed frames can pair.
+                let range = if within {
+                    rep.partition_point(|(rt, _)| *rt < ct - tolerance)
+                        ..rep.partition_point(|(rt, _)| *rt <= ct + tolerance)
+                } else {
+                    0..rep.len()
+                };
+                let best = range
+                    .filter(|ri| !used[*ri] && ((rep[*ri].1 == *cf) == same_data))
+                    .min_by_key(|ri| (rep[*ri].0 - ct).abs());
+                if let Some(ri) = best {
                     used[ri] = true;
                     done[ci] = true;
                     entries.push(Entry {
                         kind,
                         bus,
                         captured: Some((*ct, *cf)),
-                        replayed: Some(*r),
+                        replayed: Some(rep[ri]),
                     });
                 }
             }
