@@ -43,7 +43,7 @@ struct Cli {
     /// on standard error, with a non-zero exit status.
     #[arg(long, global = true)]
     json: bool,
-    /// No progress bars or other chatter on standard error.
+    /// No progress bars on standard error.
     #[arg(long, short, global = true)]
     quiet: bool,
     #[command(subcommand)]

@@ -29,7 +29,7 @@ pub fn json() -> bool {
     JSON.load(Ordering::Relaxed)
 }
 
-/// Whether progress bars and other chatter on standard error are off.
+/// Whether progress bars are off.
 fn silent() -> bool {
     json() || QUIET.load(Ordering::Relaxed)
 }
@@ -116,4 +116,13 @@ pub fn spinner(what: &str) -> ProgressBar {
     let pb = bar(None, "{spinner} {msg} {elapsed}");
     pb.set_message(what.to_string());
     pb
+}
+
+/// The line `cantwin sim` prints for each bus a gateway serves once it accepts connections:
+/// `KIND ADDR BUS`, or `{"gateway", "addr", "bus"}` with `--json`.
+pub fn gateway(kind: &str, addr: std::net::SocketAddr, bus: &str) -> std::io::Result<()> {
+    result(
+        format_args!("{kind} {addr} {bus}"),
+        || serde_json::json!({"gateway": kind, "addr": addr.to_string(), "bus": bus}),
+    )
 }

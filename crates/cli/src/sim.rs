@@ -161,7 +161,7 @@ pub fn run(args: &Args) -> Result<()> {
         let server = socketcand::Server::bind(addr, connector.clone(), limits.clone())
             .with_context(|| format!("starting the socketcand gateway on {addr}"))?;
         for name in &bus_names {
-            println!("socketcand {} {name}", server.local_addr());
+            crate::output::gateway("socketcand", server.local_addr(), name)?;
         }
         socketcand_server = Some(server);
     }
@@ -170,7 +170,7 @@ pub fn run(args: &Args) -> Result<()> {
         let addr = parse_listen(spec, "--slcan")?;
         let server = slcan::Server::bind(addr, connector.clone(), bus, limits.clone())
             .with_context(|| format!("starting the slcan gateway on {addr}"))?;
-        println!("slcan {} {bus}", server.local_addr());
+        crate::output::gateway("slcan", server.local_addr(), bus)?;
         slcan_server = Some(server);
     }
     let mut web_server = None;

@@ -252,3 +252,20 @@ fn cal_read_and_param_commands_print_json() {
             .any(|m| m["name"] == "max-frequency" && m["writable"] == true)
     );
 }
+
+#[test]
+fn sim_prints_its_gateway_lines_as_json() {
+    let lines = json_lines(&[
+        "sim",
+        &scenario_file("cia301-device.toml"),
+        "--socketcand",
+        "0",
+        "--duration",
+        "0.2",
+    ]);
+    assert_eq!(lines.len(), 1);
+    assert_eq!(lines[0]["gateway"], "socketcand");
+    assert_eq!(lines[0]["bus"], "can0");
+    let addr: std::net::SocketAddr = lines[0]["addr"].as_str().unwrap().parse().unwrap();
+    assert!(addr.ip().is_loopback() && addr.port() != 0);
+}
