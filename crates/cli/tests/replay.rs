@@ -80,12 +80,18 @@ fn write_pcap(path: &std::path::Path, records: &[Record]) {
 }
 
 fn replay_json(capture: &std::path::Path) -> (bool, serde_json::Value, String) {
-    let scenario = scenario_file("cia301-device.toml");
+    replay_json_with(capture, &scenario_file("cia301-device.toml"))
+}
+
+fn replay_json_with(
+    capture: &std::path::Path,
+    scenario: &str,
+) -> (bool, serde_json::Value, String) {
     let (ok, out, err) = cantwin(&[
         "replay",
         capture.to_str().unwrap(),
         "--scenario",
-        &scenario,
+        scenario,
         "--json",
     ]);
     let v = serde_json::from_str(out.trim()).unwrap_or_else(|e| panic!("{e}: {out} {err}"));
@@ -225,4 +231,56 @@ fn replay_refuses_bad_tolerances_master_ids_and_foreign_channels() {
     std::fs::write(&two, "(1.000000) can0 705#00\n(1.100000) can1 705#00\n").unwrap();
     let (ok, _, err) = cantwin(&["replay", two.to_str().unwrap(), "--scenario", &scenario]);
     assert!(!ok && err.contains("2 channels (can0, can1)"), "{err}");
+}
+
+#[test]
+fn a_devicenet_capture_recorded_by_sim_replays_without_difference() {
+    // Recorded in wall time by `cantwin sim --candump` while a scanner polls the drive
+    // through socketcand: the scanner's frames (group 2 master messages, its duplicate MAC ID
+    // check) are learnt as the master's, the drive's answers match.
+    let dir = temp_dir("replay-dnet");
+    let log = dir.join("dnet.log");
+    let scenario = scenario_file("adv200-devicenet.toml");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["sim", &scenario, "--socketcand", "0", "--duration", "4"])
+        .arg("--candump")
+        .arg(&log)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let addr = line.split_whitespace().nth(1).unwrap().to_string();
+    let (ok, out, err) = cantwin(&[
+        "dnet",
+        "--socketcand",
+        &addr,
+        "poll",
+        "12",
+        "--out",
+        "0300E803",
+        "--count",
+        "3",
+    ]);
+    assert!(ok, "{out} {err}");
+    assert!(child.wait().unwrap().success());
+    let (ok, v, err) = replay_json_with(&log, &scenario);
+    assert!(ok, "{v} {err}");
+    assert_eq!(v["missing"], 0, "{v}");
+    assert_eq!(v["unexpected"], 0, "{v}");
+    assert_eq!(v["different"], 0, "{v}");
+    // The allocation, the explicit requests and 3 polls were answered.
+    assert!(v["matching"].as_u64().unwrap() >= 6, "{v}");
+    // Poll commands to MAC 12: group 2, message ID 5 (0x400 | 12 << 3 | 5).
+    let ids = v["master_ids"].as_array().unwrap();
+    assert!(ids.contains(&serde_json::json!("465")), "{v}");
+    // The drive's responses (message ID 3) and its duplicate MAC ID checks (message ID 7)
+    // are the twin's.
+    assert!(!ids.contains(&serde_json::json!("463")), "{v}");
+    assert!(!ids.contains(&serde_json::json!("467")), "{v}");
 }
