@@ -422,6 +422,16 @@ impl Drive {
         self.ambient_c = c;
     }
 
+    /// The ambient temperature around the heatsink (°C).
+    pub fn ambient_c(&self) -> f64 {
+        self.ambient_c
+    }
+
+    /// The load torque (% of the motor's rated torque).
+    pub fn load_torque_pct(&self) -> f64 {
+        self.load_torque_pct
+    }
+
     /// Reset the alarms (the keypad's or a terminal's reset).
     pub fn reset_alarms(&mut self) {
         self.alarms = Alarms::NONE;

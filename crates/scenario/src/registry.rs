@@ -82,6 +82,38 @@ pub trait DeviceKind: Send + Sync {
         let _ = (sim, port);
         None
     }
+
+    /// Sets the physical quantity `name` (an input, a load, a module pulled out) of the
+    /// node this kind built on `port` to `value`, now, for `[[at]] action = "set"`. The
+    /// error says why not, naming the signals the kind knows.
+    fn set_signal(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        name: &str,
+        value: &toml::Value,
+    ) -> Result<(), String> {
+        let _ = (sim, port, value);
+        Err(format!(
+            "a {} device has no signal {name:?} to set",
+            self.name()
+        ))
+    }
+
+    /// Reads the physical quantity `name` (an output, an alarm) of the node this kind built
+    /// on `port`, for `[[expect]] signal = …`.
+    fn read_signal(
+        &self,
+        sim: &Simulation,
+        port: PortId,
+        name: &str,
+    ) -> Result<toml::Value, String> {
+        let _ = (sim, port);
+        Err(format!(
+            "a {} device has no signal {name:?} to read",
+            self.name()
+        ))
+    }
 }
 
 /// The device kinds a scenario may use.

@@ -11,12 +11,17 @@
 //! time_ms = 500
 //! action = "power_off"     # power_on, disconnect, connect, bus_off, babble, babble_stop,
 //! device = "node5"         # bit_rate_mismatch, bit_rate_fix, send, drop, corrupt, clear_faults,
-//!                          # inject (with `fault`), repair
+//!                          # inject (with `fault`), repair, set
 //!
 //! [[expect]]
 //! within_ms = [1000, 1100]
 //! frame = "705#00"         # ID#DATA; `??` matches any byte, a trailing `*` any further bytes
 //! ```
+//!
+//! `action = "set"` with `signal` and `value` changes a physical quantity of a device (an
+//! input, a load, a module pulled out) and `[[expect]] signal = { device, name, equals }`
+//! reads one (an output, an alarm) at `at_ms`: what a device calls its signals is up to its
+//! kind ([`crate::DeviceKind::set_signal`], [`crate::DeviceKind::read_signal`]).
 //!
 //! Frames a script sends come from a port the runner attaches to every bus (it also
 //! acknowledges frames, like a bus analyser would).
@@ -57,6 +62,8 @@ pub(crate) struct RawAt {
     count: Option<u64>,
     bit_rate: Option<String>,
     fault: Option<String>,
+    signal: Option<String>,
+    value: Option<toml::Value>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -72,6 +79,16 @@ pub(crate) struct RawExpect {
     absent: Option<bool>,
     value: Option<RawValue>,
     controller: Option<RawController>,
+    signal: Option<RawSignal>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSignal {
+    device: String,
+    name: String,
+    equals: toml::Value,
+    tolerance: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -203,6 +220,15 @@ pub enum ActionKind {
         /// The defect, in the kind's words.
         fault: Option<String>,
     },
+    /// Set a physical quantity of a device (see [`crate::DeviceKind::set_signal`]).
+    Set {
+        /// The device.
+        device: String,
+        /// The signal's name, as its kind calls it.
+        signal: String,
+        /// The new value.
+        value: toml::Value,
+    },
 }
 
 /// A frame pattern: identifier, and data bytes where `None` matches any byte.
@@ -319,20 +345,38 @@ pub enum Expect {
         /// The state.
         state: ErrorState,
     },
+    /// A physical quantity of a device has a value at an instant (see
+    /// [`crate::DeviceKind::read_signal`]).
+    Signal {
+        /// When.
+        at: Instant,
+        /// The device.
+        device: String,
+        /// The signal's name.
+        name: String,
+        /// The value expected.
+        equals: toml::Value,
+        /// For numbers: how far the value may be from `equals`.
+        tolerance: f64,
+    },
 }
 
 impl Expect {
     fn last_instant(&self) -> Instant {
         match self {
             Expect::Frame { to_time, .. } => *to_time,
-            Expect::Value { at, .. } | Expect::Controller { at, .. } => *at,
+            Expect::Value { at, .. }
+            | Expect::Controller { at, .. }
+            | Expect::Signal { at, .. } => *at,
         }
     }
 
     fn instant(&self) -> Option<Instant> {
         match self {
             Expect::Frame { .. } => None,
-            Expect::Value { at, .. } | Expect::Controller { at, .. } => Some(*at),
+            Expect::Value { at, .. }
+            | Expect::Controller { at, .. }
+            | Expect::Signal { at, .. } => Some(*at),
         }
     }
 }
@@ -612,12 +656,22 @@ impl ScriptParser<'_> {
                 device: dev()?,
                 fault: None,
             },
+            "set" => ActionKind::Set {
+                device: dev()?,
+                signal: a.signal.clone().ok_or_else(|| {
+                    self.err(line, key("signal"), "needs `signal`, the quantity to set")
+                })?,
+                value: a
+                    .value
+                    .clone()
+                    .ok_or_else(|| self.err(line, key("value"), "needs `value`"))?,
+            },
             other => {
                 return Err(self.err(
                     line,
                     key("action"),
                     format!(
-                        "unknown action {other:?} (actions: send, power_off, power_on, disconnect, connect, bus_off, babble, babble_stop, bit_rate_mismatch, bit_rate_fix, drop, corrupt, clear_faults, inject, repair)"
+                        "unknown action {other:?} (actions: send, power_off, power_on, disconnect, connect, bus_off, babble, babble_stop, bit_rate_mismatch, bit_rate_fix, drop, corrupt, clear_faults, inject, repair, set)"
                     ),
                 ));
             }
@@ -632,15 +686,20 @@ impl ScriptParser<'_> {
         e: &RawExpect,
     ) -> Result<Expectation, ScenarioError> {
         let key = |k: &str| format!("expect[{i}].{k}");
-        let kinds = [e.frame.is_some(), e.value.is_some(), e.controller.is_some()]
-            .iter()
-            .filter(|x| **x)
-            .count();
+        let kinds = [
+            e.frame.is_some(),
+            e.value.is_some(),
+            e.controller.is_some(),
+            e.signal.is_some(),
+        ]
+        .iter()
+        .filter(|x| **x)
+        .count();
         if kinds != 1 {
             return Err(self.err(
                 line,
                 key("frame"),
-                "an [[expect]] has exactly one of `frame`, `value`, `controller`",
+                "an [[expect]] has exactly one of `frame`, `value`, `controller`, `signal`",
             ));
         }
         let instant = || -> Result<Instant, ScenarioError> {
@@ -744,6 +803,18 @@ impl ScriptParser<'_> {
                 device: self.device(Some(&c.device), line, &key("controller.device"))?,
                 state,
             }
+        } else if let Some(g) = &e.signal {
+            let tolerance = g.tolerance.unwrap_or(0.0);
+            if !(tolerance.is_finite() && tolerance >= 0.0) {
+                return Err(self.err(line, key("signal.tolerance"), "`tolerance` is a number ≥ 0"));
+            }
+            Expect::Signal {
+                at: instant()?,
+                device: self.device(Some(&g.device), line, &key("signal.device"))?,
+                name: g.name.clone(),
+                equals: g.equals.clone(),
+                tolerance,
+            }
         } else {
             return Err(self.err(line, key("frame"), "nothing to expect"));
         };
@@ -804,6 +875,26 @@ fn describe(what: &Expect) -> String {
                 fmt_ms(*at)
             )
         }
+        Expect::Signal {
+            at,
+            device,
+            name,
+            equals,
+            ..
+        } => format!("{device} {name} = {equals} at {}", fmt_ms(*at)),
+    }
+}
+
+/// Whether a signal's value matches: numbers within `tolerance`, anything else equal.
+fn signal_matches(seen: &toml::Value, want: &toml::Value, tolerance: f64) -> bool {
+    let num = |v: &toml::Value| match v {
+        toml::Value::Integer(i) => Some(*i as f64),
+        toml::Value::Float(f) => Some(*f),
+        _ => None,
+    };
+    match (num(seen), num(want)) {
+        (Some(a), Some(b)) => (a - b).abs() <= tolerance,
+        _ => seen == want,
     }
 }
 
@@ -1281,6 +1372,21 @@ pub fn apply_action(
                 .ok_or_else(|| format!("no kind {kind:?}"))?;
             return k.inject(sim, port, fault.as_deref());
         }
+        ActionKind::Set {
+            device,
+            signal,
+            value,
+        } => {
+            let d = devices
+                .iter()
+                .find(|x| &x.name == device)
+                .ok_or_else(|| format!("no device {device:?}"))?;
+            let (port, kind) = (d.port, d.kind.clone());
+            let k = registry
+                .get(&kind)
+                .ok_or_else(|| format!("no kind {kind:?}"))?;
+            return k.set_signal(sim, port, signal, value);
+        }
     };
     r.map_err(|e| e.to_string())
 }
@@ -1354,6 +1460,27 @@ fn probe(
                     )
                 }
                 _ => (false, "the device's port is gone".into()),
+            }
+        }
+        Expect::Signal {
+            device,
+            name,
+            equals,
+            tolerance,
+            ..
+        } => {
+            let Some(d) = built.device(device) else {
+                return (false, format!("no device {device:?}"));
+            };
+            let Some(kind) = registry.get(&d.kind) else {
+                return (false, format!("no kind {:?}", d.kind));
+            };
+            match kind.read_signal(&built.sim, d.port, name) {
+                Ok(seen) => (
+                    signal_matches(&seen, equals, *tolerance),
+                    format!("{name} = {seen}"),
+                ),
+                Err(e) => (false, e),
             }
         }
         Expect::Frame { .. } => (false, "not a probe".into()),
@@ -1453,6 +1580,47 @@ mod tests {
         assert!(r.passed(), "{r}");
         assert_eq!(r.actions, 2);
         assert_eq!(r.outcomes.len(), 4);
+    }
+
+    #[test]
+    fn set_actions_and_signal_expectations_go_to_the_device_kind() {
+        // A cia301 device has no signals: the kind's answer is the failure's detail.
+        let r = report(
+            "\n[[at]]\ntime_ms = 1\naction = \"set\"\ndevice = \"node5\"\nsignal = \"load\"\nvalue = 1\n\n\
+             [[expect]]\nat_ms = 2\nsignal = { device = \"node5\", name = \"load\", equals = 1 }\n",
+        );
+        assert!(!r.passed());
+        assert_eq!(r.outcomes.len(), 2);
+        assert!(
+            r.outcomes[0].detail.contains("no signal \"load\" to set"),
+            "{r}"
+        );
+        assert!(
+            r.outcomes[1].detail.contains("no signal \"load\" to read"),
+            "{r}"
+        );
+        let e =
+            error_of("\n[[at]]\ntime_ms = 5\naction = \"set\"\ndevice = \"node5\"\nvalue = 1\n");
+        assert!(e.contains("key `at[0].signal`: needs `signal`"), "{e}");
+        let e = error_of(
+            "\n[[expect]]\nat_ms = 1\nsignal = { device = \"node5\", name = \"x\", equals = 1, tolerance = -1 }\n",
+        );
+        assert!(e.contains("`tolerance` is a number"), "{e}");
+    }
+
+    #[test]
+    fn signal_values_match_numbers_within_the_tolerance_and_others_exactly() {
+        use toml::Value::{Boolean, Float, Integer, String as Text};
+        assert!(signal_matches(&Float(50.0), &Integer(50), 0.0));
+        assert!(signal_matches(&Float(49.96), &Float(50.0), 0.05));
+        assert!(!signal_matches(&Float(49.9), &Float(50.0), 0.05));
+        assert!(signal_matches(&Boolean(true), &Boolean(true), 0.0));
+        assert!(!signal_matches(&Boolean(true), &Integer(1), 1.0));
+        assert!(!signal_matches(
+            &Text("on".into()),
+            &Text("off".into()),
+            0.0
+        ));
     }
 
     #[test]

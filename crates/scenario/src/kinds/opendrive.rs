@@ -22,6 +22,23 @@
 //!
 //! The bus must run at the bit rate of C48 (default 1 = 500 kbit/s).
 //!
+//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`):
+//!
+//! | signal | set | read | meaning |
+//! |---|---|---|---|
+//! | `load_torque_pct` | number | number | the load, % of the motor's rated torque |
+//! | `ambient_c` | number | number | the ambient temperature around the drive |
+//! | `reference_hz` | number | — | the terminal frequency reference |
+//! | `input.N` | bool | bool | logic input N (1–8) |
+//! | `reset_alarms` | `true` | — | the keypad's alarm reset |
+//! | `output_hz` | — | number | the output frequency, negative counter-clockwise |
+//! | `motor_hz` | — | number | the motor's frequency (coasting while the drive is off) |
+//! | `current_pct` | — | number | the motor current, % of its rated current |
+//! | `running` | — | bool | whether the output stage is enabled |
+//! | `alarms` | — | array | the active alarms, e.g. `["A3"]` |
+//! | `heatsink_c`, `module_c` | — | number | heatsink and power module temperatures |
+//! | `events_enabled` | — | bool | whether a client enabled message 1 |
+//!
 //! With `--state-dir`, the drive's flash (saved parameters, latched alarms, the DIP S1
 //! position of the last power-up) is kept in `STATE_DIR/<device name>/flash.txt`: read when
 //! the scenario is built (the `params` keys are applied on top), written whenever it
@@ -30,13 +47,14 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
 use cantwin_can::Duration;
 use cantwin_opendrive::params::{self, ParId};
 use cantwin_opendrive::{DriveData, Flash, FlashStorage, MotorData, OpenDrive, bit_rate_of_c48};
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
+use crate::kinds::common::{signal_bool, signal_f64, signal_indices};
 use crate::live::{LiveValue, Role, analog_value, digital_value};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
@@ -75,9 +93,83 @@ fn non_negative(s: &Settings<'_>, key: &str, default: f64) -> Result<f64, Scenar
     }
 }
 
+const SIGNALS: &str = "load_torque_pct, ambient_c, reference_hz, input.N, reset_alarms (set); load_torque_pct, ambient_c, input.N, output_hz, motor_hz, current_pct, running, alarms, heatsink_c, module_c, events_enabled (read)";
+
+fn unknown(name: &str) -> String {
+    format!("an opendrive device has no signal {name:?} (signals: {SIGNALS})")
+}
+
+/// `input.N` as N, 1–8.
+fn input_of(name: &str) -> Option<u8> {
+    match signal_indices(name, "input")?.as_slice() {
+        [n] if (1..=8).contains(n) => u8::try_from(*n).ok(),
+        _ => None,
+    }
+}
+
 impl DeviceKind for OpenDriveKind {
     fn name(&self) -> &'static str {
         "opendrive"
+    }
+
+    fn set_signal(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        name: &str,
+        value: &toml::Value,
+    ) -> Result<(), String> {
+        let node = sim
+            .node_mut::<OpenDrive>(port)
+            .ok_or_else(|| "not an opendrive device".to_string())?;
+        let drive = node.drive_mut();
+        if let Some(n) = input_of(name) {
+            drive.set_input(n, signal_bool(name, value)?);
+            return Ok(());
+        }
+        match name {
+            "load_torque_pct" => drive.set_load_torque_pct(signal_f64(name, value)?),
+            "ambient_c" => drive.set_ambient_c(signal_f64(name, value)?),
+            "reference_hz" => drive.set_analog_reference_hz(signal_f64(name, value)?),
+            "reset_alarms" if signal_bool(name, value)? => drive.reset_alarms(),
+            "reset_alarms" => return Err("signal \"reset_alarms\" takes true".into()),
+            _ => return Err(unknown(name)),
+        }
+        Ok(())
+    }
+
+    fn read_signal(
+        &self,
+        sim: &Simulation,
+        port: PortId,
+        name: &str,
+    ) -> Result<toml::Value, String> {
+        use toml::Value::{Array, Boolean, Float, String as Text};
+        let node = sim
+            .node::<OpenDrive>(port)
+            .ok_or_else(|| "not an opendrive device".to_string())?;
+        let d = node.drive();
+        if let Some(n) = input_of(name) {
+            return Ok(Boolean(d.input(n)));
+        }
+        Ok(match name {
+            "load_torque_pct" => Float(d.load_torque_pct()),
+            "ambient_c" => Float(d.ambient_c()),
+            "output_hz" => Float(d.output_hz()),
+            "motor_hz" => Float(d.motor_hz()),
+            "current_pct" => Float(d.current_pct()),
+            "running" => Boolean(d.is_running()),
+            "alarms" => Array(
+                (0..16u8)
+                    .filter(|n| d.alarms().contains(*n))
+                    .map(|n| Text(format!("A{n}")))
+                    .collect(),
+            ),
+            "heatsink_c" => Float(d.heatsink_c()),
+            "module_c" => Float(d.module_c()),
+            "events_enabled" => Boolean(node.events_enabled()),
+            _ => return Err(unknown(name)),
+        })
     }
 
     fn summary(&self) -> &'static str {

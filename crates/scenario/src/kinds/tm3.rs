@@ -13,15 +13,33 @@
 //! | `digital_inputs` | `[]` | inputs that are on: `[[module, channel], ...]`, channels from 0 |
 //! | `analog_inputs` | `[]` | analog input values: `[[module, channel, value], ...]`, raw 16-bit |
 //!
-//! The object dictionary (and the EDS, `cantwin_tm3::eds`) follows from `modules`.
+//! The object dictionary (and the EDS, `cantwin_tm3::eds`) follows from `modules`;
+//! `[[expect]] value = …` reads it.
+//!
+//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`); modules are
+//! numbered from 1, channels from 0:
+//!
+//! | signal | set | read | meaning |
+//! |---|---|---|---|
+//! | `module.M` | `"pulled"`, `"fitted"`, `"unresponsive"` | — | what is plugged in at position M: pulling a working module is a runtime error at once (EMCY 0x7003); what is fitted is checked again at the next power-up |
+//! | `digital_input.M.C` | bool | — | a physical input |
+//! | `analog_input.M.C` | integer | — | a physical analog input, raw 16-bit |
+//! | `internal_error` | bool | — | an internal communication error on the expansion bus (EMCY 0x1000) |
+//! | `rotary_switch` | integer | — | the node-ID switches (read at power-up) |
+//! | `digital_output.M.C` | — | bool | the physical output, with the failure state applied |
+//! | `analog_output.M.C` | — | integer | likewise, raw 16-bit |
+//! | `failure_state` | — | bool | whether the outputs are at their safe positions |
+//! | `nmt_state` | — | string | `"pre-operational"`, `"operational"`, `"stopped"`, `"initialising"` |
 
-use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
+use cantwin_canopen::nmt::State;
 use cantwin_tm3::catalogue;
 use cantwin_tm3::coupler::{CouplerConfig, Fitted, Tm3Coupler};
 use cantwin_tm3::island::{Island, MAX_MODULES, ModuleSlot};
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
+use crate::kinds::common::{signal_bool, signal_indices, signal_int};
 use crate::live::{LiveValue, Role, analog_value, digital_value};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
@@ -42,9 +60,129 @@ fn positions(s: &Settings<'_>, key: &str, modules: usize) -> Result<Vec<usize>, 
     Ok(v)
 }
 
+const SIGNALS: &str = "module.M, digital_input.M.C, analog_input.M.C, internal_error, rotary_switch (set); digital_output.M.C, analog_output.M.C, failure_state, nmt_state (read)";
+
+/// `prefix.M.C` as (module, channel).
+fn module_channel(name: &str, prefix: &str) -> Option<(usize, u8)> {
+    match signal_indices(name, prefix)?.as_slice() {
+        [m, c] => Some((usize::try_from(*m).ok()?, u8::try_from(*c).ok()?)),
+        _ => None,
+    }
+}
+
+fn unknown(name: &str) -> String {
+    format!("a tm3 device has no signal {name:?} (signals: {SIGNALS})")
+}
+
 impl DeviceKind for Tm3Kind {
     fn name(&self) -> &'static str {
         "tm3"
+    }
+
+    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
+        let c = sim.node::<Tm3Coupler>(port)?;
+        c.device()
+            .od()
+            .get(index, sub)
+            .ok()
+            .map(|v| v.to_le_bytes())
+    }
+
+    fn set_signal(
+        &self,
+        sim: &mut Simulation,
+        port: PortId,
+        name: &str,
+        value: &toml::Value,
+    ) -> Result<(), String> {
+        let bus = sim
+            .bus_mut(port.bus())
+            .ok_or_else(|| "the device's bus is gone".to_string())?;
+        let r = bus.with_node::<Tm3Coupler, _>(port, |c, now, out| -> Result<(), String> {
+            if let Some(m) = signal_indices(name, "module").and_then(|v| match v.as_slice() {
+                [m] => usize::try_from(*m).ok(),
+                _ => None,
+            }) {
+                let configured = m
+                    .checked_sub(1)
+                    .and_then(|i| c.config().island.modules().get(i))
+                    .map(|slot| slot.spec)
+                    .ok_or_else(|| format!("no module {m}"))?;
+                let what = match value.as_str() {
+                    Some("pulled") => Fitted::Empty,
+                    Some("fitted") => Fitted::Module(configured),
+                    Some("unresponsive") => Fitted::Unresponsive,
+                    _ => {
+                        return Err(format!(
+                            "signal {name:?} takes \"pulled\", \"fitted\" or \"unresponsive\", not {value}"
+                        ));
+                    }
+                };
+                return c.fit(m, what, now, out).map_err(|e| e.to_string());
+            }
+            if let Some((m, ch)) = module_channel(name, "digital_input") {
+                return c
+                    .set_digital_input(m, ch, signal_bool(name, value)?)
+                    .map_err(|e| e.to_string());
+            }
+            if let Some((m, ch)) = module_channel(name, "analog_input") {
+                return c
+                    .set_analog_input(m, ch, signal_int(name, value)?)
+                    .map_err(|e| e.to_string());
+            }
+            match name {
+                "internal_error" => {
+                    c.set_internal_error(signal_bool(name, value)?, now, out);
+                    Ok(())
+                }
+                "rotary_switch" => {
+                    let id: u8 = signal_int(name, value)?;
+                    if !(1..=127).contains(&id) {
+                        return Err(format!("signal {name:?} takes 1-127, not {id}"));
+                    }
+                    c.set_rotary_switch(id, now, out);
+                    Ok(())
+                }
+                _ => Err(unknown(name)),
+            }
+        });
+        r.ok_or_else(|| "not a tm3 coupler".to_string())?
+    }
+
+    fn read_signal(
+        &self,
+        sim: &Simulation,
+        port: PortId,
+        name: &str,
+    ) -> Result<toml::Value, String> {
+        let c = sim
+            .node::<Tm3Coupler>(port)
+            .ok_or_else(|| "not a tm3 coupler".to_string())?;
+        if let Some((m, ch)) = module_channel(name, "digital_output") {
+            return c
+                .digital_output(m, ch)
+                .map(toml::Value::Boolean)
+                .map_err(|e| e.to_string());
+        }
+        if let Some((m, ch)) = module_channel(name, "analog_output") {
+            return c
+                .analog_output(m, ch)
+                .map(|v| toml::Value::Integer(i64::from(v)))
+                .map_err(|e| e.to_string());
+        }
+        match name {
+            "failure_state" => Ok(toml::Value::Boolean(c.in_failure_state())),
+            "nmt_state" => Ok(toml::Value::String(
+                match c.state() {
+                    State::Initialising => "initialising",
+                    State::PreOperational => "pre-operational",
+                    State::Operational => "operational",
+                    State::Stopped => "stopped",
+                }
+                .to_string(),
+            )),
+            _ => Err(unknown(name)),
+        }
     }
 
     fn summary(&self) -> &'static str {
