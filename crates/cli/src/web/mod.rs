@@ -963,6 +963,11 @@ fn describe_action(a: &ActionKind) -> String {
             Some(f) => format!("{device}: internal fault {f} injected"),
             None => format!("{device}: internal faults repaired"),
         },
+        ActionKind::Set {
+            device,
+            signal,
+            value,
+        } => format!("{device}: {signal} set to {value}"),
     }
 }
 
