@@ -13,8 +13,12 @@ export PROPTEST_CASES="${PROPTEST_CASES:-64}"
 
 step() { printf '\n==> %s\n' "$*"; }
 
-install_tshark() {
-    if command -v tshark >/dev/null 2>&1; then
+# Installs Debian packages (no recommended packages) unless COMMAND is already there; when
+# that cannot be done here (not root, no sudo, no apt-get) the tests that need it say so.
+install_debian() {
+    local command="$1"
+    shift
+    if command -v "$command" >/dev/null 2>&1; then
         return 0
     fi
     local sudo=""
@@ -22,22 +26,33 @@ install_tshark() {
         if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then
             sudo="sudo -n"
         else
-            echo "tshark is not installed and packages cannot be installed here (not root, no sudo): tests that need it will say so"
+            echo "$command is not installed and packages cannot be installed here (not root, no sudo): tests that need it will say so"
             return 0
         fi
     fi
     if ! command -v apt-get >/dev/null 2>&1; then
-        echo "tshark is not installed and there is no apt-get here: tests that need it will say so"
+        echo "$command is not installed and there is no apt-get here: tests that need it will say so"
         return 0
     fi
-    step "installing tshark (Debian package, no recommended packages)"
-    echo "wireshark-common wireshark-common/install-setuid boolean false" | $sudo debconf-set-selections || true
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get update -qq || true
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends tshark \
-        || echo "tshark could not be installed: tests that need it will say so"
+    step "installing $* (Debian packages, no recommended packages)"
+    if [ -z "${apt_updated:-}" ]; then
+        DEBIAN_FRONTEND=noninteractive $sudo apt-get update -qq || true
+        apt_updated=1
+    fi
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "$@" \
+        || echo "$* could not be installed: tests that need $command will say so"
 }
 
-install_tshark
+# tshark for the interop suite; its setuid question is answered first so the install does
+# not stop to ask.
+if ! command -v tshark >/dev/null 2>&1; then
+    echo "wireshark-common wireshark-common/install-setuid boolean false" \
+        | { [ "$(id -u)" -eq 0 ] && debconf-set-selections || sudo -n debconf-set-selections; } 2>/dev/null || true
+fi
+install_debian tshark tshark
+# Headless Chromium and its WebDriver for the web dashboard's browser test
+# (crates/cli/tests/web.rs), driven from their system paths.
+install_debian chromedriver chromium chromium-driver
 
 step "cargo fmt --check"
 cargo fmt --all -- --check

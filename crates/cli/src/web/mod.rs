@@ -42,7 +42,7 @@ const PERIOD: WallDuration = WallDuration::from_millis(250);
 /// The window the charts show.
 const WINDOW_S: f64 = 60.0;
 /// Frames kept for the frame stream.
-const STREAM_LEN: usize = 80;
+const STREAM_LEN: usize = 200;
 /// How long a power cycle keeps the device off.
 const POWER_CYCLE_OFF: WallDuration = WallDuration::from_millis(500);
 
