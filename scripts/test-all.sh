@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The whole cantwin test suite: formatting, lints, every Rust test, and the interop suite
-# against third-party tools. Installs what it needs by itself (tshark from Debian's packages,
-# a Python virtualenv with pinned python-can/canopen for the interop suite) and exits non-zero
-# on any failure.
+# against third-party tools. Installs what it needs by itself (tshark, chromium and
+# chromium-driver from Debian's packages, a Python virtualenv with pinned python-can/canopen
+# for the interop suite) and exits non-zero on any failure.
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
