@@ -223,6 +223,8 @@ fn master(timeout: f64) -> Result<Master> {
     }
     let mut m = Master::new();
     m.config_mut().sdo.timeout = cantwin_can::Duration::from_secs_f64(timeout);
+    // Progress every KiB feeds the progress bar of large transfers.
+    m.config_mut().sdo.progress_step = Some(1024);
     Ok(m)
 }
 

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::{Duration as WallDuration, Instant as WallInstant};
 
 use anyhow::{Context, Result, bail};
-use cantwin_bus::{PacedConfig, PacedSimulation};
+use cantwin_bus::{PacedConfig, PacedSimulation, PortConfig};
 use cantwin_can::{Frame, Instant, Node, Outbox};
 use cantwin_gateway::paced::PacedBus;
 use cantwin_gateway::socketcand::Remote;
@@ -85,7 +85,10 @@ impl Link {
                     };
                     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
                     let paced = PacedSimulation::start(built.sim, PacedConfig::default());
+                    // A block download puts up to 127 segments on the bus in one go (CiA 301
+                    // §7.2.4.3.13): the transmit queue holds a whole block.
                     let port = PacedBus::new(paced.handle())
+                        .with_port_config(PortConfig::DEFAULT.with_queue_depth(128))
                         .open(&bus, 4096)
                         .with_context(|| format!("opening bus {bus:?} of {}", file.display()))?;
                     (port, Some(paced))

@@ -105,7 +105,7 @@ pub fn bytes(total: Option<u64>, what: &str) -> ProgressBar {
 pub fn steps(total: u64, what: &str) -> ProgressBar {
     let pb = bar(
         Some(total),
-        "{msg} [{bar:40}] {pos}/{len} {per_sec} eta {eta}",
+        "{msg} [{bar:40}] {human_pos}/{human_len} eta {eta}",
     );
     pb.set_message(what.to_string());
     pb

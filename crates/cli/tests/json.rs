@@ -172,6 +172,24 @@ fn progress_bars_stay_off_stdout_and_off_a_non_terminal_stderr() {
         format!("65536 bytes written to {}", file.display())
     );
     assert_eq!(std::fs::read(&file).unwrap().len(), 65536);
+    // And back by block download: a whole block of 127 segments leaves at once.
+    let (ok, out, err) = cantwin(&[
+        "sdo",
+        "--scenario",
+        &scenario,
+        "--mode",
+        "block",
+        "write",
+        "5",
+        "0x2000",
+        "0",
+        "d",
+        "--input",
+        file.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "written 65536 bytes to node 5 0x2000sub0");
+    assert!(err.is_empty(), "{err}");
 }
 
 #[test]
