@@ -507,18 +507,24 @@ pub struct TraceArgs {
 pub use cantwin_report::canopen::{describe, emcy_meaning};
 
 /// The PDOs an EDS declares for `node`, with their default COB-IDs and mappings.
-pub(crate) fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
+fn pdo_decoder(specs: &[String]) -> Result<PdoDecoder> {
     let mut decoder = PdoDecoder::new();
+    add_eds_pdos(&mut decoder, specs)?;
+    Ok(decoder)
+}
+
+/// Adds to `decoder` the PDOs of `--eds NODE=FILE` specs (replacing any on the same COB-IDs).
+pub(crate) fn add_eds_pdos(decoder: &mut PdoDecoder, specs: &[String]) -> Result<()> {
     for spec in specs {
         let (node, file) = spec
             .split_once('=')
             .with_context(|| format!("--eds {spec:?}: expected NODE=FILE"))?;
         let node = node_id(node)?;
         let bytes = std::fs::read(file).with_context(|| format!("reading {file}"))?;
-        cantwin_report::canopen::add_eds_pdos(&mut decoder, node, &bytes)
+        cantwin_report::canopen::add_eds_pdos(decoder, node, &bytes)
             .map_err(|e| anyhow::anyhow!("{file}: {e}"))?;
     }
-    Ok(decoder)
+    Ok(())
 }
 
 pub fn run_trace(args: &TraceArgs) -> Result<()> {

@@ -102,6 +102,14 @@ pub fn declared_nodes(built: &Built) -> Vec<Declared> {
     nodes
 }
 
+/// The dictionary of a generic CANopen twin (`cia301` and `eds` kinds) on `port`.
+fn generic_od(built: &Built, port: cantwin_bus::PortId) -> Option<&ObjectDictionary> {
+    if let Some(n) = built.sim.node::<Cia301Node>(port) {
+        return Some(n.device().od());
+    }
+    built.sim.node::<Device>(port).map(Device::od)
+}
+
 /// The bus a scenario file's command means: `--bus`, else its only bus.
 fn scenario_bus<'a>(
     scenario: &'a Scenario,
@@ -119,25 +127,38 @@ fn scenario_bus<'a>(
     }
 }
 
-/// A view configured for `scenario`'s bus `bus`, with its CANopen nodes declared.
+/// A view configured for `scenario`'s bus `bus`, with its CANopen nodes declared and the
+/// PDOs of its generic twins named from their dictionaries (`--eds` files in `eds` win).
 pub fn view_for_scenario(
     scenario: &Scenario,
     bus: Option<&str>,
     mut config: Config,
     bit_rate: Option<BitRate>,
+    eds: &[String],
 ) -> Result<(NetworkView, Built)> {
     let spec = scenario_bus(scenario, bus)?;
     config.bit_rate = bit_rate.unwrap_or(spec.bit_rate);
     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let bus_id = built.bus(&spec.name);
-    let mut view = NetworkView::new(config);
-    for d in declared_nodes(&built) {
-        let on_bus = built
-            .device(&d.name)
-            .is_some_and(|b| Some(b.port.bus()) == bus_id);
-        if on_bus {
-            view.declare(d.node, Some(d.name), d.kind);
+    let declared: Vec<(Declared, cantwin_bus::PortId)> = declared_nodes(&built)
+        .into_iter()
+        .filter_map(|d| {
+            let port = built.device(&d.name)?.port;
+            (Some(port.bus()) == bus_id).then_some((d, port))
+        })
+        .collect();
+    // Twins of no known kind: their dictionaries at power-up name their PDO values.
+    for (d, port) in &declared {
+        if d.kind.is_none()
+            && let Some(od) = generic_od(&built, *port)
+        {
+            cantwin_report::canopen::add_od_pdos(&mut config.pdos, od);
         }
+    }
+    crate::canopen::add_eds_pdos(&mut config.pdos, eds)?;
+    let mut view = NetworkView::new(config);
+    for (d, _) in declared {
+        view.declare(d.node, Some(d.name), d.kind);
     }
     Ok((view, built))
 }
@@ -158,11 +179,10 @@ pub fn run(args: &Args) -> Result<()> {
             "cantwin monitor draws on a terminal: run it with standard output on one (use `cantwin trace` for a pipe)"
         );
     }
-    let config = Config {
+    let mut config = Config {
         bit_rate: args.bit_rate.unwrap_or(BitRate::R500K),
         window: Duration::from_millis(args.window_ms.max(1)),
         ring: args.keep.max(1),
-        pdos: crate::canopen::pdo_decoder(&args.eds)?,
         ..Config::default()
     };
     let bus = args.target.bus.as_deref();
@@ -170,9 +190,12 @@ pub fn run(args: &Args) -> Result<()> {
     let mut view = match names {
         Some(file) => {
             let scenario = Scenario::load(file)?;
-            view_for_scenario(&scenario, bus, config, args.bit_rate)?.0
+            view_for_scenario(&scenario, bus, config, args.bit_rate, &args.eds)?.0
         }
-        None => NetworkView::new(config),
+        None => {
+            crate::canopen::add_eds_pdos(&mut config.pdos, &args.eds)?;
+            NetworkView::new(config)
+        }
     };
     let source = match (&args.target.socketcand, &args.target.scenario) {
         (Some(addr), _) => format!("socketcand {addr} {}", bus.unwrap_or("can0")),

@@ -186,8 +186,8 @@ pub struct LiveValue {
     pub name: String,
     /// The PDO that carried it.
     pub pdo: PdoKind,
-    /// The raw bits.
-    pub raw: u64,
+    /// The raw bits, for values that are numbers of at most 64 bits.
+    pub raw: Option<u64>,
     /// The value as text (with its unit).
     pub text: String,
 }
@@ -253,7 +253,7 @@ impl DeviceKind {
                     Some(LiveValue {
                         name: f.name.clone(),
                         pdo: kind,
-                        raw,
+                        raw: Some(raw),
                         text: f.show(raw),
                     })
                 })

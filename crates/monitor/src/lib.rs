@@ -123,6 +123,44 @@ pub struct NetworkView {
     sdo: BTreeMap<u8, Tracker>,
 }
 
+/// The values of a PDO that `pdos` maps, named from the dictionary description.
+fn mapped_values(frame: &Frame, pdo: wire::PdoKind, pdos: &PdoDecoder) -> Vec<LiveValue> {
+    let Some(Ok(values)) = pdos.decode(frame) else {
+        return Vec::new();
+    };
+    values
+        .into_iter()
+        .map(|v| {
+            use cantwin_canopen::od::Value as V;
+            let raw = match v.value {
+                V::Boolean(b) => Some(u64::from(b)),
+                V::Unsigned8(n) => Some(u64::from(n)),
+                V::Unsigned16(n) => Some(u64::from(n)),
+                V::Unsigned24(n) | V::Unsigned32(n) => Some(u64::from(n)),
+                V::Unsigned40(n) | V::Unsigned48(n) | V::Unsigned56(n) | V::Unsigned64(n) => {
+                    Some(n)
+                }
+                // Two's complement bits of the type's width, as on the wire.
+                V::Integer8(n) => Some(u64::from(n as u8)),
+                V::Integer16(n) => Some(u64::from(n as u16)),
+                V::Integer24(n) => Some(u64::from(n as u32 & 0xFF_FFFF)),
+                V::Integer32(n) => Some(u64::from(n as u32)),
+                V::Integer40(n) => Some(n as u64 & 0xFF_FFFF_FFFF),
+                V::Integer48(n) => Some(n as u64 & 0xFFFF_FFFF_FFFF),
+                V::Integer56(n) => Some(n as u64 & 0xFF_FFFF_FFFF_FFFF),
+                V::Integer64(n) => Some(n as u64),
+                _ => None,
+            };
+            LiveValue {
+                name: v.name,
+                pdo,
+                raw,
+                text: v.value.to_string(),
+            }
+        })
+        .collect()
+}
+
 /// The little-endian unsigned value of up to 4 bytes of SDO data.
 fn le_u32(data: &[u8]) -> Option<u32> {
     (!data.is_empty() && data.len() <= 4).then(|| {
@@ -259,18 +297,25 @@ impl NetworkView {
                 self.learn(&done);
             }
             Message::Pdo { kind, node, .. } => {
-                if let Some(info) = self.nodes.get_mut(&node)
-                    && let Some(values) = info.kind.as_ref().and_then(|k| k.decode(frame, node))
-                {
-                    let parts: Vec<String> = values
-                        .iter()
-                        .map(|v| format!("{}={}", v.name, v.text))
-                        .collect();
-                    text = Some(format!(
-                        "{} node {node}: {}",
-                        kind::pdo_label(kind),
-                        parts.join(" ")
-                    ));
+                let pdos = &self.config.pdos;
+                if let Some(info) = self.nodes.get_mut(&node) {
+                    let values = match info.kind.as_ref().and_then(|k| k.decode(frame, node)) {
+                        Some(values) => {
+                            let parts: Vec<String> = values
+                                .iter()
+                                .map(|v| format!("{}={}", v.name, v.text))
+                                .collect();
+                            text = Some(format!(
+                                "{} node {node}: {}",
+                                kind::pdo_label(kind),
+                                parts.join(" ")
+                            ));
+                            values
+                        }
+                        // No layout of the kind: the mappings the front end gave (an EDS, a
+                        // twin's dictionary) name the values.
+                        None => mapped_values(frame, kind, pdos),
+                    };
                     for v in values {
                         match info.values.iter_mut().find(|(old, _)| old.name == v.name) {
                             Some(slot) => *slot = (v, at),

@@ -332,3 +332,50 @@ fn a_kind_names_its_own_emcy_codes_in_the_table_and_the_stream() {
         Some("unknown error code")
     );
 }
+
+#[test]
+fn pdo_mappings_name_the_values_of_nodes_without_a_kind() {
+    use cantwin_canopen::master::pdo::PdoParams;
+    use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject};
+    use cantwin_canopen::pdo::MapEntry;
+    let od = OdBuilder::new()
+        .var(
+            0x2000,
+            SubObject::new("Flag", DataType::Boolean, Access::Rw),
+        )
+        .var(
+            0x2001,
+            SubObject::new("Speed", DataType::Integer16, Access::Rw),
+        )
+        .build()
+        .unwrap();
+    let mut pdos = PdoDecoder::new();
+    pdos.add(
+        &PdoParams {
+            cob_id: 0x185,
+            mapping: vec![
+                MapEntry::from_u32(0x2000_0001),
+                MapEntry::from_u32(0x0001_0007),
+                MapEntry::from_u32(0x2001_0010),
+            ],
+            ..PdoParams::default()
+        },
+        std::sync::Arc::new(od),
+    );
+    let mut v = NetworkView::new(Config {
+        pdos,
+        ..Config::default()
+    });
+    v.declare(5, None, None);
+    v.push(ms(0), &f(0x185, &[0x01, 0x18, 0xFC]));
+    let n = v.node(5).unwrap();
+    let flag = n.value("Flag").unwrap();
+    assert_eq!((flag.text.as_str(), flag.raw), ("true", Some(1)));
+    let speed = n.value("Speed").unwrap();
+    assert_eq!((speed.text.as_str(), speed.raw), ("-1000", Some(0xFC18)));
+    assert_eq!(speed.pdo, cantwin_canopen::wire::PdoKind::Transmit(1));
+    assert!(v.frames().last().unwrap().text.contains("Speed=-1000"));
+    // A frame too short for the mapping gives no values and keeps the old ones.
+    v.push(ms(1), &f(0x185, &[0x00]));
+    assert_eq!(v.node(5).unwrap().value("Speed").unwrap().text, "-1000");
+}

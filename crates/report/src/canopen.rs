@@ -68,8 +68,15 @@ pub fn state_name(state: u8) -> &'static str {
 pub fn add_eds_pdos(decoder: &mut PdoDecoder, node: u8, bytes: &[u8]) -> Result<(), EdsError> {
     let eds = cantwin_eds::parse_bytes(bytes)?;
     let desc = Arc::new(cantwin_eds::to_od(&eds)?);
-    let mut od = ObjectDictionary::new(desc.clone(), node);
+    let mut od = ObjectDictionary::new(desc, node);
     cantwin_eds::apply_parameter_values(&eds, &mut od)?;
+    add_od_pdos(decoder, &od);
+    Ok(())
+}
+
+/// Adds to `decoder` the PDOs an object dictionary holds now (a twin's, or one made from an
+/// EDS): COB-IDs from 0x1400.. / 0x1800.. sub 1, mappings from 0x1600.. / 0x1A00...
+pub fn add_od_pdos(decoder: &mut PdoDecoder, od: &ObjectDictionary) {
     let u32_of = |index, sub| match od.get(index, sub) {
         Ok(Value::Unsigned32(v)) => Some(v),
         _ => None,
@@ -97,10 +104,9 @@ pub fn add_eds_pdos(decoder: &mut PdoDecoder, node: u8, bytes: &[u8]) -> Result<
                 event_timer: None,
                 mapping,
             };
-            decoder.add(&params, desc.clone());
+            decoder.add(&params, od.description().clone());
         }
     }
-    Ok(())
 }
 
 /// Bytes as spaced hex, `01 02 0A`.

@@ -30,6 +30,7 @@ fn network(ms: u64) -> NetworkView {
         None,
         Config::default(),
         None,
+        &[],
     )
     .unwrap();
     let bus = built.bus("can0").unwrap();
@@ -277,4 +278,39 @@ fn an_empty_bus_renders_without_nodes() {
     assert!(text.contains("no node heard yet"), "{text}");
     assert!(text.contains("nodes (0)"), "{text}");
     assert!(text.contains("socketcand 127.0.0.1:29536 can0"), "{text}");
+}
+
+#[test]
+fn a_generic_twin_has_its_pdo_values_named_from_its_dictionary() {
+    let view = network(1_700);
+    let mut ui = Ui::new(String::new());
+    ui.on_key(key(KeyCode::Down), &view);
+    assert_eq!(ui.selected, Some(5));
+    let screen = render(&view, &ui);
+    let text = screen.join("\n");
+    let n5 = view.node(5).unwrap();
+    assert!(n5.kind.is_none());
+    // TPDO1 maps 0x2100 sub 1 (UNSIGNED16, "Input 1"): the value is bytes 0-1 of the last
+    // TPDO1, little-endian.
+    let first = &n5.values[0].0;
+    assert_eq!(first.name, "Input 1");
+    let last = view
+        .frames()
+        .rev()
+        .find(|e| e.frame.id().as_raw() == 0x185)
+        .unwrap();
+    let d = last.frame.data_bytes();
+    assert_eq!(
+        first.text,
+        u16::from_le_bytes([d[0], d[1]]).to_string(),
+        "{first:?}"
+    );
+    assert!(
+        shows(&screen, &format!("  {} ", first.name), &first.text),
+        "{text}"
+    );
+    assert!(
+        text.contains(&format!("{}={}", first.name, first.text)),
+        "{text}"
+    );
 }
