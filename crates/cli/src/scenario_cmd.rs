@@ -92,6 +92,10 @@ impl Verdict {
     }
 }
 
+fn count(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
 /// The message of an error without its location prefix.
 fn error_message(e: &ScenarioError) -> String {
     match e {
@@ -113,13 +117,13 @@ pub fn run(args: &Args) -> Result<()> {
         } else {
             match &v.outcome {
                 Ok(s) => println!(
-                    "ok {}: {} ({} buses, {} devices, {} actions, {} expectations)",
+                    "ok {}: {} ({}, {}, {}, {})",
                     v.file.display(),
                     s.name,
-                    s.buses,
-                    s.devices,
-                    s.actions,
-                    s.expectations
+                    count(s.buses, "bus", "buses"),
+                    count(s.devices, "device", "devices"),
+                    count(s.actions, "action", "actions"),
+                    count(s.expectations, "expectation", "expectations")
                 ),
                 // Errors name file, line and key themselves (`FILE:LINE: key `K`: …`).
                 Err(e) => eprintln!("error: {e}"),
