@@ -177,7 +177,11 @@ pub fn run(args: &Args) -> Result<()> {
     if let (Some(spec), Some(d)) = (&args.web, &dashboard) {
         let addr = parse_listen(spec, "--web")?;
         let server = d.serve(addr, args.allow_remote)?;
-        println!("web http://{}/", server.local_addr());
+        let url = format!("http://{}/", server.local_addr());
+        crate::output::result(
+            format_args!("web {url}"),
+            || serde_json::json!({ "web": url }),
+        )?;
         web_server = Some(server);
     }
     use std::io::Write as _;

@@ -322,3 +322,127 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_moves_its_ch
     let took = started.elapsed();
     assert!(took < Duration::from_secs(30), "took {took:?}");
 }
+
+/// `cantwin sim SCENARIO --web 127.0.0.1:0 [EXTRA]`, the child and the dashboard's port.
+fn sim_with_web(extra: &[&str]) -> (Killed, u16) {
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["sim", &common::scenario_file("plant.toml")])
+        .args(["--web", "127.0.0.1:0", "--duration", "30"])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(sim.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let sim = Killed(sim);
+    let addr = if extra.contains(&"--json") {
+        let v: Value = serde_json::from_str(&line).unwrap();
+        v["web"].as_str().unwrap().to_string()
+    } else {
+        line.strip_prefix("web ").unwrap().trim().to_string()
+    };
+    let port = addr
+        .trim_start_matches("http://127.0.0.1:")
+        .trim_end_matches('/')
+        .parse()
+        .unwrap();
+    (sim, port)
+}
+
+#[test]
+fn web_controls_answer_bad_requests_with_4xx_and_a_message() {
+    let (_sim, port) = sim_with_web(&["--json"]);
+    let post = |path: &str, body: &str| {
+        let v: Value = serde_json::from_str(body).unwrap_or(Value::String(body.into()));
+        http(port, "POST", path, Some(&v))
+    };
+    let (status, v) = http(port, "POST", "/api/nmt", None);
+    assert_eq!(status, 400, "{v}");
+    assert!(v["message"].as_str().unwrap().contains("not JSON"), "{v}");
+    let (status, v) = post("/api/nmt", r#"{"device":"nobody","command":"stop"}"#);
+    assert_eq!(status, 400, "{v}");
+    assert!(
+        v["message"]
+            .as_str()
+            .unwrap()
+            .contains("no device \"nobody\""),
+        "{v}"
+    );
+    let (status, v) = post("/api/nmt", r#"{"command":"halt"}"#);
+    assert_eq!((status, v["ok"].clone()), (400, json!(false)), "{v}");
+    let (status, v) = post(
+        "/api/sdo",
+        r#"{"device":"node5","index":"0x10000","sub":0,"type":"u8","value":"1"}"#,
+    );
+    assert_eq!(status, 400, "{v}");
+    assert!(v["message"].as_str().unwrap().contains("`index`"), "{v}");
+    // The OPEN DRIVE speaks CAL: no CANopen node-ID to address an SDO to.
+    let (status, v) = post(
+        "/api/sdo",
+        r#"{"device":"opendrive","index":"0x1000","sub":0,"type":"u32","value":"1"}"#,
+    );
+    assert_eq!(status, 400, "{v}");
+    let (status, v) = post(
+        "/api/input",
+        r#"{"device":"drive","input":"AI1","value":11}"#,
+    );
+    assert_eq!(status, 400, "{v}");
+    assert!(v["message"].as_str().unwrap().contains("-10–10 V"), "{v}");
+    // Faults use the vocabulary and checks of the scenarios' [[at]] tables.
+    let (status, v) = post(
+        "/api/fault",
+        r#"{"action":"drop","bus":"can0","fraction":1.5}"#,
+    );
+    assert_eq!(status, 400, "{v}");
+    assert!(v["message"].as_str().unwrap().contains("fraction"), "{v}");
+    let (status, v) = post("/api/fault", r#"{"action":"melt"}"#);
+    assert_eq!(status, 400, "{v}");
+    assert!(
+        v["message"].as_str().unwrap().contains("clear_faults"),
+        "{v}"
+    );
+    let (status, v) = post("/api/fault", r#"{"action":"disconnect","device":"node5"}"#);
+    assert_eq!((status, v["ok"].clone()), (200, json!(true)), "{v}");
+    let (status, v) = post("/api/power", r#"{"device":"island"}"#);
+    assert_eq!(status, 200, "{v}");
+    let (status, v) = post("/api/power", r#"{"device":"island"}"#);
+    assert_eq!(status, 400, "a second cycle while off: {v}");
+    let (status, _) = http(port, "GET", "/no/such/page", None);
+    assert_eq!(status, 404);
+    // The cut cable shows in the snapshot: node 5 disconnected, the island unpowered.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let (_, s) = http(port, "GET", "/api/snapshot", None);
+        let node = |name: &str| {
+            s["nodes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|n| n["device"] == name)
+                .cloned()
+                .unwrap()
+        };
+        if node("node5")["connected"] == json!(false) && node("island")["powered"] == json!(false) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "{s}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn web_refuses_a_non_loopback_address_without_allow_remote() {
+    let (ok, _, err) = common::cantwin(&[
+        "sim",
+        &common::scenario_file("plant.toml"),
+        "--web",
+        "0.0.0.0:0",
+        "--duration",
+        "1",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("--allow-remote"), "{err}");
+}
