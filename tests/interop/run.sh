@@ -29,11 +29,15 @@ if ! cmp -s "$here/requirements.txt" "$stamp" 2>/dev/null; then
 fi
 
 (cd "$root" && cargo build --quiet --bin cantwin)
+# The TM3 island's EDS comes from the coupler crate's own writer (an example program): built
+# here, so no test waits for a compiler inside its time limit.
+(cd "$root" && cargo build --quiet -p cantwin-tm3 --example tm3_eds)
 # The Python package: an editable install whose native module is built in release mode.
 (cd "$root/python" && VIRTUAL_ENV="$venv" CARGO_TARGET_DIR="$target" \
   "$venv/bin/maturin" develop --release --quiet)
 export CANTWIN_BIN="$target/debug/cantwin"
 export CANTWIN_SCENARIOS="$root/scenarios"
+export CANTWIN_TM3_EDS="$target/debug/examples/tm3_eds"
 
 run_pytest() {
   local dir="$1"

@@ -1,6 +1,7 @@
 """python-canopen against the TM3 coupler of scenarios/tm3-island.toml: it loads the EDS
 generated for the island, remaps a TPDO, sets outputs by RPDO and reads inputs by TPDO."""
 
+import os
 import subprocess
 import tomllib
 
@@ -20,8 +21,11 @@ NODE = ISLAND["node_id"]
 @pytest.fixture(scope="module")
 def eds_file(tmp_path_factory):
     """The island's EDS, generated from its object dictionary."""
+    # run.sh builds the example program; without it, cargo builds and runs it.
+    program = os.environ.get("CANTWIN_TM3_EDS")
+    command = [program] if program else ["cargo", "run", "-q", "-p", "cantwin-tm3", "--example", "tm3_eds", "--"]
     text = subprocess.run(
-        ["cargo", "run", "-q", "-p", "cantwin-tm3", "--example", "tm3_eds", "--", *ISLAND["modules"]],
+        [*command, *ISLAND["modules"]],
         cwd=ROOT,
         check=True,
         capture_output=True,
