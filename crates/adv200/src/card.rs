@@ -351,6 +351,12 @@ impl Adv200 {
             alarm_mode: p.value(par::FIELDBUS_ALARM_MODE) != 0,
         };
         let _ = self.params.force(par::FIELDBUS_STATE, 0);
+        // The process data the master sent lives in the card's memory: a restart starts from
+        // zero, so a control word received before a power loss cannot enable the drive
+        // before the master sends one again.
+        for n in 1..=crate::params::CHANNELS {
+            let _ = self.params.force(par::m2s_mon(n), 0);
+        }
         let personality = match self.latched.ty {
             1 => Personality::CanOpen,
             3 => Personality::Ds402,

@@ -182,3 +182,26 @@ fn manual_1_2_m2s_enable_off_ignores_rpdo_data() {
     assert_eq!(drive.param(par::m2s_mon(1)), Ok(0));
     assert_eq!(drive.param(par::ENABLE_STATE), Ok(0));
 }
+
+#[test]
+fn manual_1_5_a_drive_reset_forgets_the_process_data_and_boots_without_alarm() {
+    let mut drive = example::drive().unwrap();
+    let mut out = Outbox::new();
+    drive.on_power_up(Instant::ZERO, &mut out);
+    let t = Instant::from_nanos(MS);
+    drive.on_frame(&f("000#010C"), t, &mut out);
+    drive.on_frame(&f("20C#0300DC05"), t, &mut out);
+    drive.on_frame(&f("080#"), t, &mut out);
+    assert_eq!(drive.param(par::m2s_mon(1)), Ok(3));
+    assert_eq!(drive.param(par::ENABLE_STATE), Ok(1));
+    // Power cycle: the enable received before it must not enable the drive in
+    // Pre-Operational (that would be bus loss by §1.5) nor send an EMCY before the boot-up.
+    let mut out = Outbox::new();
+    drive.on_power_up(Instant::from_nanos(2 * MS), &mut out);
+    let sent: Vec<String> = out.drain().map(|fr| fr.to_string()).collect();
+    assert_eq!(sent, ["70C#00"]);
+    assert_eq!(drive.param(par::m2s_mon(1)), Ok(0));
+    assert_eq!(drive.param(par::m2s_mon(2)), Ok(0));
+    assert_eq!(drive.param(par::ENABLE_STATE), Ok(0));
+    assert!(drive.opt_bus_faults().is_empty());
+}

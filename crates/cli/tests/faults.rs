@@ -130,3 +130,75 @@ fn a_scenario_without_a_script_is_refused_by_check() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Runs one ADV200 fault scenario: it must pass, with a PASS line for each of `verdicts`
+/// (the expectations that carry the manual's behaviour).
+fn adv200(name: &str, verdicts: &[&str]) {
+    let file = workspace().join("scenarios/faults").join(name);
+    let out = check(&file);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{name}:\n{stdout}");
+    for v in verdicts {
+        assert!(
+            stdout
+                .lines()
+                .any(|l| l.starts_with("PASS") && l.contains(v)),
+            "{name}: no PASS for {v:?}:\n{stdout}"
+        );
+    }
+}
+
+#[test]
+fn adv200_manual_1_5_master_heartbeat_loss_is_opt_bus_fault_8130_per_alarm_mode() {
+    adv200(
+        "adv200-master-vanishes.toml",
+        &[
+            "node 12 (enabled): Opt Bus Fault 8130",
+            "node 13: no Opt Bus Fault",
+            "node 14 (disabled, alarm mode 1): Opt Bus Fault 8130",
+            "node 12 tripped",
+            "node 12 runs again",
+        ],
+    );
+}
+
+#[test]
+fn adv200_manual_1_5_bus_off_is_ffc7_then_8100_and_the_network_recovers() {
+    adv200(
+        "adv200-bus-off.toml",
+        &[
+            "Opt Bus Fault FFC7",
+            "Opt Bus Fault 8100",
+            "node 13 (disabled, alarm mode 0): no Opt Bus Fault",
+            "node 12 answers SYNC again",
+            "node 12 runs again",
+        ],
+    );
+}
+
+#[test]
+fn adv200_manual_3_7_1_polled_io_watchdog_is_bus_loss_and_a_wrong_poll_size_ffc8() {
+    adv200(
+        "adv200-devicenet-master-silent.toml",
+        &[
+            "MAC 12 after the watchdog: Opt Bus fault",
+            "MAC 12 tripped",
+            "MAC 13 does not answer the 2-byte poll",
+            "MAC 13: Opt Bus fault (FFC8",
+        ],
+    );
+}
+
+#[test]
+fn adv200_power_cycle_mid_transfer_and_internal_error_ffb5_at_power_up() {
+    adv200(
+        "adv200-power-cycle.toml",
+        &[
+            "the lost transfer's segment is refused",
+            "the drive restarted disabled",
+            "and reports Opt Bus Fault FFB5",
+            "the alarm reset cannot clear it",
+            "the repaired card boots clean",
+        ],
+    );
+}
