@@ -46,12 +46,16 @@ fn network(ms: u64) -> NetworkView {
 }
 
 fn render(view: &NetworkView, ui: &Ui) -> Vec<String> {
-    let mut terminal = Terminal::new(TestBackend::new(WIDTH, HEIGHT)).unwrap();
+    render_at(view, ui, WIDTH, HEIGHT)
+}
+
+fn render_at(view: &NetworkView, ui: &Ui, width: u16, height: u16) -> Vec<String> {
+    let mut terminal = Terminal::new(TestBackend::new(width, height)).unwrap();
     terminal.draw(|f| draw(f, view, ui)).unwrap();
     let buffer = terminal.backend().buffer();
-    (0..HEIGHT)
+    (0..height)
         .map(|y| {
-            (0..WIDTH)
+            (0..width)
                 .map(|x| buffer[(x, y)].symbol().to_string())
                 .collect::<String>()
         })
@@ -313,4 +317,24 @@ fn a_generic_twin_has_its_pdo_values_named_from_its_dictionary() {
         text.contains(&format!("{}={}", first.name, first.text)),
         "{text}"
     );
+}
+
+#[test]
+fn small_terminals_get_what_fits() {
+    let view = network(700);
+    let mut ui = Ui::new("scenario monitor-network.toml".into());
+    ui.on_key(key(KeyCode::PageUp), &view);
+    for (w, h) in [(1, 1), (20, 5), (80, 24), (100, 12)] {
+        let screen = render_at(&view, &ui, w, h);
+        assert_eq!(screen.len(), usize::from(h));
+    }
+    // A standard 80×24 terminal still shows the title, the nodes and the help line.
+    let screen = render_at(&view, &ui, 80, 24);
+    assert!(screen[0].starts_with("cantwin monitor"), "{}", screen[0]);
+    assert!(
+        node_row(&screen, 12).contains("drive"),
+        "{}",
+        screen.join("\n")
+    );
+    assert!(screen[23].starts_with("q quit"), "{}", screen[23]);
 }
