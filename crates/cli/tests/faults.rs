@@ -26,7 +26,7 @@ fn every_fault_scenario_passes_its_checks() {
         .filter(|p| p.extension().is_some_and(|e| e == "toml"))
         .collect();
     files.sort();
-    assert!(files.len() >= 19, "fault scenarios: {files:?}");
+    assert!(files.len() >= 20, "fault scenarios: {files:?}");
     for file in &files {
         let out = check(file);
         let stdout = String::from_utf8_lossy(&out.stdout);
@@ -58,6 +58,7 @@ fn tm3_and_opendrive_fault_scenarios_react_as_their_manuals_say() {
             "tm3-module-pulled.toml",
             "EMCY 0x7003, register 0x81, 1002H = 0x80000008, module 2",
         ),
+        ("tm3-guarding-loss.toml", "1029H sub 1 = 2: stopped"),
         ("tm3-bus-off.toml", "EMCY 0x8140 bus-off recovered"),
         (
             "tm3-power-cycle-mid-sdo.toml",
