@@ -280,19 +280,27 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_moves_its_ch
     // cannot take is refused with the reason.
     browser.submit(
         "#form-input",
-        &[("device", "island"), ("input", "m1.i3"), ("value", "1")],
+        &[
+            ("device", "island"),
+            ("input", "digital_input.1.3"),
+            ("value", "1"),
+        ],
     );
-    browser.message("the input answer", "ok", "island: m1.i3 = 1");
+    browser.message("the input answer", "ok", "island: digital_input.1.3 = 1");
     browser.wait_for(
-        "input m1.i3 on",
-        "return document.querySelector('.panel[data-device=island] [data-value=\"m1.i3\"]').dataset.on;",
+        "input digital_input.1.3 on",
+        "return document.querySelector('.panel[data-device=island] [data-value=\"digital_input.1.3\"]').dataset.on;",
         |v| v == "1",
     );
     browser.submit(
         "#form-input",
-        &[("device", "island"), ("input", "m1.i3"), ("value", "2")],
+        &[
+            ("device", "island"),
+            ("input", "digital_input.1.3"),
+            ("value", "2"),
+        ],
     );
-    let refused = browser.message("the refusal", "error", "m1.i3");
+    let refused = browser.message("the refusal", "error", "digital_input.1.3");
     assert!(refused.contains("0 or 1"), "{refused}");
 
     // An SDO download the device refuses shows its abort code (0x2002 is limited to 100).
@@ -387,10 +395,10 @@ fn web_controls_answer_bad_requests_with_4xx_and_a_message() {
     assert_eq!(status, 400, "{v}");
     let (status, v) = post(
         "/api/input",
-        r#"{"device":"drive","input":"AI1","value":11}"#,
+        r#"{"device":"drive","input":"analog_input.1","value":11}"#,
     );
     assert_eq!(status, 400, "{v}");
-    assert!(v["message"].as_str().unwrap().contains("-10–10 V"), "{v}");
+    assert!(v["message"].as_str().unwrap().contains("-10–10"), "{v}");
     // Faults use the vocabulary and checks of the scenarios' [[at]] tables.
     let (status, v) = post(
         "/api/fault",

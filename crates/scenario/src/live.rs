@@ -6,10 +6,10 @@
 pub enum Role {
     /// A measurement of the model (speed, current, temperature): plotted.
     Measured,
-    /// A digital input (a wired terminal): 0 or 1, settable with
-    /// [`crate::DeviceKind::set_input`].
+    /// A digital input (a wired terminal): 0 or 1, settable as a signal
+    /// ([`crate::DeviceKind::set_signal`], true or false).
     DigitalInput,
-    /// An analog input, settable within `min..=max`.
+    /// An analog input, settable as a signal within `min..=max`.
     AnalogInput {
         /// The smallest value accepted.
         min: f64,
@@ -40,8 +40,8 @@ impl Role {
 /// One live value of a device.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LiveValue {
-    /// Its name, unique within the device and the name [`crate::DeviceKind::set_input`]
-    /// takes (`"speed"`, `"DI4"`, `"m1.i5"`).
+    /// Its name, unique within the device; inputs and outputs are named as the kind's
+    /// signals (`"speed"`, `"digital_input.4"`, `"analog_input.3.0"`).
     pub name: String,
     /// The value; digital signals are 0 or 1.
     pub value: f64,
@@ -70,25 +70,5 @@ impl LiveValue {
             unit: "",
             role,
         }
-    }
-}
-
-/// Parses the value for a digital input: `0`/`1`, `on`/`off`, `true`/`false`.
-pub fn digital_value(name: &str, value: f64) -> Result<bool, String> {
-    if value == 0.0 {
-        Ok(false)
-    } else if value == 1.0 {
-        Ok(true)
-    } else {
-        Err(format!("{name} is a digital input: 0 or 1, not {value}"))
-    }
-}
-
-/// Checks an analog value against `min..=max`.
-pub fn analog_value(name: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<f64, String> {
-    if value.is_finite() && (min..=max).contains(&value) {
-        Ok(value)
-    } else {
-        Err(format!("{name} is {min}–{max} {unit}, not {value}"))
     }
 }

@@ -58,23 +58,6 @@ pub trait DeviceKind: Send + Sync {
         Vec::new()
     }
 
-    /// Sets input `name` (one of the [`Role::DigitalInput`] or [`Role::AnalogInput`]
-    /// values of [`Self::live_values`]) of the node on `port` to `value`, as a wire on its
-    /// terminal would. The default refuses: the kind has no inputs.
-    ///
-    /// [`Role::DigitalInput`]: crate::Role::DigitalInput
-    /// [`Role::AnalogInput`]: crate::Role::AnalogInput
-    fn set_input(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        name: &str,
-        value: f64,
-    ) -> Result<(), String> {
-        let _ = (sim, port, value);
-        Err(format!("a {} device has no input {name:?}", self.name()))
-    }
-
     /// The CANopen node-ID (CiA 301 §7.3.2.1) of the node this kind built on `port`, for the
     /// duplicate check of a bus and for telling a master's frames from a twin's. `None` (the
     /// default) when the kind is not a CANopen slave.

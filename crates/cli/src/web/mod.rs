@@ -61,7 +61,8 @@ pub enum Command {
     SetInput {
         /// The device.
         device: String,
-        /// The input's name (see [`cantwin_scenario::DeviceKind::set_input`]).
+        /// The input's name: one of the device's live values, set through the kind's signal of
+        /// that name ([`cantwin_scenario::DeviceKind::set_signal`]).
         input: String,
         /// The value.
         value: f64,
@@ -394,6 +395,9 @@ impl Dashboard {
         Ok(format!("NMT {} sent to {}", cs_name(cs), done.join(", ")))
     }
 
+    /// Sets an input among the device's live values through its kind's signal of the same
+    /// name (`[[at]] action = "set"` in scripts): a digital input takes 0 or 1, an analog
+    /// input a number within its range.
     fn set_input(&mut self, handle: &SimHandle, device: &str, input: &str, value: f64) -> Outcome {
         let d = &self.devices[self.device(device)?];
         let kind = self
@@ -402,7 +406,37 @@ impl Dashboard {
             .ok_or_else(|| Refusal::Failed(format!("unknown kind {}", d.info.kind)))?;
         let port = d.info.port;
         handle
-            .with(|sim| kind.set_input(sim, port, input, value))
+            .with(|sim| {
+                let values = kind.live_values(sim, port);
+                let inputs: Vec<&str> = values
+                    .iter()
+                    .filter(|v| v.role.is_input())
+                    .map(|v| v.name.as_str())
+                    .collect();
+                let role = values.iter().find(|v| v.name == input).map(|v| v.role);
+                let signal = match role {
+                    Some(Role::DigitalInput) if value == 0.0 || value == 1.0 => {
+                        toml::Value::Boolean(value == 1.0)
+                    }
+                    Some(Role::DigitalInput) => {
+                        return Err(format!("{input} is a digital input: 0 or 1, not {value}"));
+                    }
+                    Some(Role::AnalogInput { min, max }) if (min..=max).contains(&value) => {
+                        toml::Value::Float(value)
+                    }
+                    Some(Role::AnalogInput { min, max }) => {
+                        return Err(format!("{input} is {min}–{max}, not {value}"));
+                    }
+                    _ if inputs.is_empty() => return Err(format!("{device} has no inputs")),
+                    _ => {
+                        return Err(format!(
+                            "{device} has no input {input:?} (inputs: {})",
+                            inputs.join(", ")
+                        ));
+                    }
+                };
+                kind.set_signal(sim, port, input, &signal)
+            })
             .map_err(|e| Refusal::Failed(e.to_string()))?
             .map_err(Refusal::BadRequest)?;
         Ok(format!("{device}: {input} = {value}"))
@@ -549,7 +583,7 @@ impl Dashboard {
                     let canopen = self.speaks_canopen(sender);
                     let mut text = String::new();
                     if canopen && !dropped {
-                        self.learn(bus, &frame, sender);
+                        self.learn(&frame, sender);
                         if let Some(view) = self.views.get_mut(bus) {
                             view.push(at, &frame);
                             text = view
@@ -622,8 +656,8 @@ impl Dashboard {
 
     /// Learns which node-ID a device has from the COB-IDs of what its port sends (CiA 301
     /// §7.2.8.3.2 boot-up and heartbeat, §7.2.7 EMCY), and names the node in its bus's view.
-    fn learn(&mut self, bus: usize, frame: &Frame, sender: PortId) {
-        let Some(d) = self.devices.iter_mut().find(|d| d.info.port == sender) else {
+    fn learn(&mut self, frame: &Frame, sender: PortId) {
+        let Some(k) = self.devices.iter().position(|d| d.info.port == sender) else {
             return;
         };
         let node = match wire::decode(frame) {
@@ -631,15 +665,23 @@ impl Dashboard {
             Message::Emcy { node, .. } => node,
             _ => return,
         };
-        if d.node_id != Some(node) {
-            d.node_id = Some(node);
-            if let Some(view) = self.views.get_mut(bus) {
-                view.declare(
-                    node,
-                    Some(d.info.name.clone()),
-                    cantwin_monitor::DeviceKind::builtin(&d.info.kind),
-                );
-            }
+        if self.devices[k].node_id != Some(node) {
+            self.name_node(k, node);
+        }
+    }
+
+    /// Records that device `k` is CANopen node `node` and names it in its bus's view.
+    fn name_node(&mut self, k: usize, node: u8) {
+        let Some(d) = self.devices.get_mut(k) else {
+            return;
+        };
+        d.node_id = Some(node);
+        if let Some(view) = self.views.get_mut(d.bus) {
+            view.declare(
+                node,
+                Some(d.info.name.clone()),
+                cantwin_monitor::DeviceKind::builtin(&d.info.kind),
+            );
         }
     }
 
@@ -684,7 +726,8 @@ impl Dashboard {
                     let register = kind
                         .and_then(|k| k.read_object(sim, d.info.port, 0x1001, 0))
                         .and_then(|b| b.first().copied());
-                    (status, values, register)
+                    let node_id = kind.and_then(|k| k.canopen_node_id(sim, d.info.port));
+                    (status, values, register, node_id)
                 })
                 .collect();
             (now, events, buses, live)
@@ -692,6 +735,15 @@ impl Dashboard {
         let Ok((now, events, bus_stats, live)) = grabbed else {
             return;
         };
+        // The node-IDs the kinds know (before any boot-up is seen, and for nodes that send
+        // no heartbeat).
+        for (k, l) in live.iter().enumerate() {
+            if let (Some(node), Some(d)) = (l.3, self.devices.get(k))
+                && d.node_id.is_none()
+            {
+                self.name_node(k, node);
+            }
+        }
         for (i, (seen, missed)) in events.into_iter().enumerate() {
             self.missed += missed;
             self.absorb(i, seen);
@@ -759,7 +811,7 @@ impl Dashboard {
 
         let mut nodes = Vec::new();
         let mut panels = Vec::new();
-        for (k, (d, (status, values, register))) in self.devices.iter().zip(live).enumerate() {
+        for (k, (d, (status, values, register, _))) in self.devices.iter().zip(live).enumerate() {
             let powered = status.as_ref().is_none_or(|s| s.powered);
             let counters = status.as_ref().map(|s| s.counters).unwrap_or_default();
             let info = d

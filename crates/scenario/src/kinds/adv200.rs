@@ -34,7 +34,8 @@ use serde::Deserialize;
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::live::{LiveValue, Role, analog_value, digital_value};
+use crate::kinds::common::{signal_bool, signal_f64, signal_indices};
+use crate::live::{LiveValue, Role};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
@@ -102,13 +103,15 @@ impl DeviceKind for Adv200Kind {
             LiveValue::measured("current", d.current(), "A"),
             LiveValue::measured("thermal", d.thermal() * 100.0, "%"),
         ];
-        v.extend(
-            (1..=8).map(|k| {
-                LiveValue::digital(format!("DI{k}"), d.digital_input(k), Role::DigitalInput)
-            }),
-        );
+        v.extend((1..=8).map(|k| {
+            LiveValue::digital(
+                format!("digital_input.{k}"),
+                d.digital_input(k),
+                Role::DigitalInput,
+            )
+        }));
         v.extend((1..=2).map(|k| LiveValue {
-            name: format!("AI{k}"),
+            name: format!("analog_input.{k}"),
             value: d.analog_input(k),
             unit: "V",
             role: Role::AnalogInput {
@@ -118,7 +121,7 @@ impl DeviceKind for Adv200Kind {
         }));
         v.extend((1..=4).map(|k| {
             LiveValue::digital(
-                format!("DO{k}"),
+                format!("digital_output.{k}"),
                 node.digital_output(k),
                 Role::DigitalOutput,
             )
@@ -126,30 +129,35 @@ impl DeviceKind for Adv200Kind {
         v
     }
 
-    fn set_input(
+    /// `digital_input.K` (K 1–8, true or false) and `analog_input.K` (K 1–2, volts within
+    /// ±10 V): the drive's terminals.
+    fn set_signal(
         &self,
-        sim: &mut cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
+        sim: &mut Simulation,
+        port: PortId,
         name: &str,
-        value: f64,
+        value: &toml::Value,
     ) -> Result<(), String> {
         let node = sim
             .node_mut::<Adv200>(port)
             .ok_or_else(|| "the device is not an ADV200".to_string())?;
-        let number = |prefix: &str, max: u8| {
-            name.strip_prefix(prefix)
-                .and_then(|k| k.parse::<u8>().ok())
-                .filter(|k| (1..=max).contains(k))
+        let terminal = |prefix: &str, max: u32| match signal_indices(name, prefix)?.as_slice() {
+            [k] if (1..=max).contains(k) => u8::try_from(*k).ok(),
+            _ => None,
         };
-        if let Some(k) = number("DI", 8) {
-            node.set_digital_input(k, digital_value(name, value)?);
+        if let Some(k) = terminal("digital_input", 8) {
+            node.set_digital_input(k, signal_bool(name, value)?);
             Ok(())
-        } else if let Some(k) = number("AI", 2) {
-            node.set_analog_input(k, analog_value(name, value, -10.0, 10.0, "V")?);
+        } else if let Some(k) = terminal("analog_input", 2) {
+            let volts = signal_f64(name, value)?;
+            if !(-10.0..=10.0).contains(&volts) {
+                return Err(format!("{name} is -10–10 V, not {volts}"));
+            }
+            node.set_analog_input(k, volts);
             Ok(())
         } else {
             Err(format!(
-                "an adv200 device has no input {name:?} (inputs: DI1–DI8, AI1, AI2)"
+                "an adv200 device has no signal {name:?} (signals: digital_input.1–8, analog_input.1–2)"
             ))
         }
     }
@@ -314,5 +322,58 @@ mod tests {
         assert!(e.contains("analog_inputs"), "{e}");
         let e = error_of("speed = 3\n");
         assert!(e.contains("unknown key `speed`"), "{e}");
+    }
+
+    #[test]
+    fn live_values_show_the_terminals_and_signals_set_them() {
+        use crate::registry::DeviceKind;
+        let mut b = shipped("adv200-example.toml");
+        let port = b.device("drive").unwrap().port;
+        let kind = super::Adv200Kind;
+        let value = |b: &crate::Built, name: &str| {
+            kind.live_values(&b.sim, port)
+                .into_iter()
+                .find(|v| v.name == name)
+                .map(|v| v.value)
+        };
+        // The scenario wires digital input 4 and 2.5 V on analog input 2.
+        assert_eq!(value(&b, "digital_input.4"), Some(1.0));
+        assert_eq!(value(&b, "digital_input.2"), Some(0.0));
+        assert!((value(&b, "analog_input.2").unwrap() - 2.5).abs() < 1e-3);
+        assert!(value(&b, "speed").is_some() && value(&b, "current").is_some());
+        kind.set_signal(
+            &mut b.sim,
+            port,
+            "digital_input.2",
+            &toml::Value::Boolean(true),
+        )
+        .unwrap();
+        assert_eq!(value(&b, "digital_input.2"), Some(1.0));
+        kind.set_signal(
+            &mut b.sim,
+            port,
+            "analog_input.1",
+            &toml::Value::Float(-4.0),
+        )
+        .unwrap();
+        assert!((value(&b, "analog_input.1").unwrap() + 4.0).abs() < 1e-3);
+        let e = kind
+            .set_signal(
+                &mut b.sim,
+                port,
+                "analog_input.1",
+                &toml::Value::Float(12.0),
+            )
+            .unwrap_err();
+        assert!(e.contains("-10–10 V"), "{e}");
+        let e = kind
+            .set_signal(
+                &mut b.sim,
+                port,
+                "digital_input.9",
+                &toml::Value::Boolean(true),
+            )
+            .unwrap_err();
+        assert!(e.contains("digital_input.1–8"), "{e}");
     }
 }

@@ -55,7 +55,7 @@ use cantwin_opendrive::{DriveData, Flash, FlashStorage, MotorData, OpenDrive, bi
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::kinds::common::{signal_bool, signal_f64, signal_indices};
-use crate::live::{LiveValue, Role, analog_value, digital_value};
+use crate::live::{LiveValue, Role};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
@@ -197,10 +197,11 @@ impl DeviceKind for OpenDriveKind {
             LiveValue::measured("motor thermal", d.motor_thermal() * 100.0, "%"),
         ];
         v.extend(
-            (1..=8).map(|n| LiveValue::digital(format!("in{n}"), d.input(n), Role::DigitalInput)),
+            (1..=8)
+                .map(|n| LiveValue::digital(format!("input.{n}"), d.input(n), Role::DigitalInput)),
         );
         v.push(LiveValue {
-            name: "reference".into(),
+            name: "reference_hz".into(),
             value: d.analog_reference_hz(),
             unit: "Hz",
             role: Role::AnalogInput {
@@ -209,40 +210,6 @@ impl DeviceKind for OpenDriveKind {
             },
         });
         v
-    }
-
-    fn set_input(
-        &self,
-        sim: &mut cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-        name: &str,
-        value: f64,
-    ) -> Result<(), String> {
-        let node = sim
-            .node_mut::<OpenDrive>(port)
-            .ok_or_else(|| "the device is not an OPEN DRIVE".to_string())?;
-        let drive = node.drive_mut();
-        if let Some(n) = name.strip_prefix("in").and_then(|n| n.parse::<u8>().ok())
-            && (1..=8).contains(&n)
-        {
-            drive.set_input(n, digital_value(name, value)?);
-            return Ok(());
-        }
-        match name {
-            "reference" => {
-                drive.set_analog_reference_hz(analog_value(
-                    name,
-                    value,
-                    0.0,
-                    REFERENCE_MAX_HZ,
-                    "Hz",
-                )?);
-                Ok(())
-            }
-            _ => Err(format!(
-                "an opendrive device has no input {name:?} (inputs: in1–in8, reference)"
-            )),
-        }
     }
 
     fn build(

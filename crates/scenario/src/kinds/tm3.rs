@@ -40,7 +40,7 @@ use cantwin_tm3::island::{Island, MAX_MODULES, ModuleSlot};
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
 use crate::kinds::common::{signal_bool, signal_indices, signal_int};
-use crate::live::{LiveValue, Role, analog_value, digital_value};
+use crate::live::{LiveValue, Role};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
@@ -189,9 +189,9 @@ impl DeviceKind for Tm3Kind {
         "Schneider TM3 CANopen bus coupler TM3BCCO with up to 14 TM3/TM2 I/O modules (CiA 401)"
     }
 
-    /// Every channel of every configured module, named `mMODULE.KCHANNEL` (module 1-based
-    /// as in the scenario, channel 0-based): `i` digital inputs, `q` digital outputs, `ai`
-    /// analog inputs and `aq` analog outputs in raw 16-bit counts.
+    /// Every channel of every configured module, named as the signals are
+    /// (`digital_input.M.C`, `digital_output.M.C`, `analog_input.M.C`, `analog_output.M.C`:
+    /// module 1-based as in the scenario, channel 0-based), analog values in raw 16-bit counts.
     fn live_values(
         &self,
         sim: &cantwin_bus::Simulation,
@@ -207,7 +207,7 @@ impl DeviceKind for Tm3Kind {
             for ch in 0..spec.digital_inputs {
                 let on = c.digital_input(m, ch).unwrap_or(false);
                 v.push(LiveValue::digital(
-                    format!("m{m}.i{ch}"),
+                    format!("digital_input.{m}.{ch}"),
                     on,
                     Role::DigitalInput,
                 ));
@@ -215,14 +215,14 @@ impl DeviceKind for Tm3Kind {
             for ch in 0..spec.digital_outputs {
                 let on = c.digital_output(m, ch).unwrap_or(false);
                 v.push(LiveValue::digital(
-                    format!("m{m}.q{ch}"),
+                    format!("digital_output.{m}.{ch}"),
                     on,
                     Role::DigitalOutput,
                 ));
             }
             for ch in 0..spec.analog_inputs {
                 v.push(LiveValue {
-                    name: format!("m{m}.ai{ch}"),
+                    name: format!("analog_input.{m}.{ch}"),
                     value: f64::from(c.analog_input(m, ch).unwrap_or(0)),
                     unit: "",
                     role: Role::AnalogInput {
@@ -233,7 +233,7 @@ impl DeviceKind for Tm3Kind {
             }
             for ch in 0..spec.analog_outputs {
                 v.push(LiveValue {
-                    name: format!("m{m}.aq{ch}"),
+                    name: format!("analog_output.{m}.{ch}"),
                     value: f64::from(c.analog_output(m, ch).unwrap_or(0)),
                     unit: "",
                     role: Role::AnalogOutput,
@@ -241,45 +241,6 @@ impl DeviceKind for Tm3Kind {
             }
         }
         v
-    }
-
-    fn set_input(
-        &self,
-        sim: &mut cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-        name: &str,
-        value: f64,
-    ) -> Result<(), String> {
-        let unknown = || {
-            format!(
-                "a tm3 device has no input {name:?} (inputs: mMODULE.iCHANNEL, mMODULE.aiCHANNEL, e.g. m1.i0)"
-            )
-        };
-        let (m, channel) = name
-            .strip_prefix('m')
-            .and_then(|r| r.split_once('.'))
-            .ok_or_else(unknown)?;
-        let m: usize = m.parse().map_err(|_| unknown())?;
-        let c = sim
-            .node_mut::<Tm3Coupler>(port)
-            .ok_or_else(|| "the device is not a TM3 coupler".to_string())?;
-        let r = if let Some(ch) = channel.strip_prefix("ai") {
-            let ch: u8 = ch.parse().map_err(|_| unknown())?;
-            let v = analog_value(
-                name,
-                value,
-                f64::from(i16::MIN),
-                f64::from(i16::MAX),
-                "counts",
-            )?;
-            c.set_analog_input(m, ch, v as i16)
-        } else if let Some(ch) = channel.strip_prefix('i') {
-            let ch: u8 = ch.parse().map_err(|_| unknown())?;
-            c.set_digital_input(m, ch, digital_value(name, value)?)
-        } else {
-            return Err(unknown());
-        };
-        r.map_err(|e| format!("{name}: {e}"))
     }
 
     fn canopen_node_id(
