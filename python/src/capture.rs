@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, PoisonError};
 
 use cantwin_bus::{BusEvent, BusInfo, Tap};
-use cantwin_capture::{CaptureWriter, Event, Format, Record};
+use cantwin_capture::{CaptureWriter, Format};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
@@ -13,7 +13,8 @@ use crate::sim::{Shared, err};
 /// A writer shared by the taps of the buses it records; `None` once closed.
 pub(crate) type SharedWriter = Arc<Mutex<Option<Box<dyn CaptureWriter + Send>>>>;
 
-/// The tap on a bus: every frame that completed, at its end of frame.
+/// The tap on a bus: every frame, error frame and controller event, as
+/// `cantwin sim --capture` records them ([`cantwin_capture::bus_tap`]).
 struct CaptureTap {
     writer: SharedWriter,
     failed: Arc<Mutex<Option<String>>>,
@@ -21,19 +22,12 @@ struct CaptureTap {
 
 impl Tap for CaptureTap {
     fn on_event(&mut self, bus: &BusInfo<'_>, event: &BusEvent) {
-        let BusEvent::Frame(f) = event else { return };
-        if f.dropped {
+        let Some(record) = cantwin_capture::bus_tap::record_of(bus, event) else {
             return;
-        }
-        // Wall time when paced, bus time since the epoch in virtual time (so two runs
-        // write identical files), as `cantwin sim --capture` does.
-        let stamp = match bus.time_map {
-            Some(map) => u64::try_from(map.unix_nanos(f.end)).unwrap_or(u64::MAX),
-            None => f.end.as_nanos(),
         };
         let mut w = self.writer.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some(w) = w.as_mut()
-            && let Err(e) = w.write_record(&Record::new(stamp, bus.name, Event::from(f.frame)))
+            && let Err(e) = w.write_record(&record)
         {
             let mut failed = self.failed.lock().unwrap_or_else(PoisonError::into_inner);
             failed.get_or_insert_with(|| e.to_string());

@@ -563,8 +563,8 @@ impl Simulation {
         Ok(d)
     }
 
-    /// Record the data and remote frames of `bus` (every bus if `None`) into a capture file
-    /// from now on (error frames are not recorded); the format comes
+    /// Record `bus` (every bus if `None`) into a capture file from now on: frames, and error
+    /// frames and controller events as SocketCAN error frames; the format comes
     /// from `format` (``"pcap"``, ``"pcapng"``, ``"candump"``) or the file's extension
     /// (``.pcap``, ``.pcapng``, ``.log``). Frames are stamped at their end of frame, in bus
     /// time since the Unix epoch (virtual time) or wall time (paced). Close the returned

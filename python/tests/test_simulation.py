@@ -138,6 +138,20 @@ def test_capture_records_frames_readable_by_python_can(tmp_path):
     records = list(can.CanutilsLogReader(str(path)))
     assert len(records) == sim.stats("can0")["frames"]
     assert {r.arbitration_id for r in records} == {0x705}
+    # Controller events are recorded as SocketCAN error frames, as `cantwin sim --capture`
+    # records them (linux/can/error.h CAN_ERR_BUSOFF = 0x40).
+    pcap = tmp_path / "bus-off.pcapng"
+    with sim.capture(pcap, bus="can0"):
+        sim.bus_off("node5")
+        sim.advance(0.1)
+    log = tmp_path / "bus-off.log"
+    with sim.capture(log):
+        sim.bus_off("listener")
+        sim.advance(0.1)
+    ids = [line.split()[2].split("#")[0] for line in log.read_text().splitlines()]
+    # CAN_ERR_FLAG | CAN_ERR_BUSOFF.
+    assert ids[0] == "20000040", ids[:5]
+    assert pcap.stat().st_size > 0
     with pytest.raises(ValueError, match="format"):
         sim.capture(tmp_path / "x.bin")
 
@@ -165,17 +179,18 @@ def test_paced_time_follows_the_wall_clock_and_hands_back_to_virtual_time():
     import time
 
     sim = cantwin.Simulation.load(CIA301)
+    start = time.monotonic()
     sim.start_paced()
     with pytest.raises(cantwin.CantwinError, match="already paced"):
         sim.start_paced()
-    start = time.monotonic()
     sim.advance(0.3)
-    wall = time.monotonic() - start
     assert sim.paced
     sim.stop_paced()
+    wall = time.monotonic() - start
     reached = sim.now
-    # Bus time never runs ahead of the wall clock (crates/bus paced module).
-    assert 0.25 <= reached <= wall + 0.05
+    # Bus time never runs ahead of the wall clock; on a loaded host it may fall behind
+    # (the backlog beyond max_lag is given up, crates/bus paced module), never stand still.
+    assert 0.05 < reached <= wall
     with pytest.raises(cantwin.CantwinError, match="not paced"):
         sim.stop_paced()
     sim.advance(5.0)

@@ -10,7 +10,8 @@
 //! * [`candump`]: the `candump -l` text log, `(1700000000.000123) can0 123#DEADBEEF`.
 //!
 //! Writers write to any [`std::io::Write`] and share the [`CaptureWriter`] trait, so a bus tap
-//! or a gateway can record into any format ([`create`] picks it from the file name). Readers
+//! or a gateway can record into any format ([`create`] picks it from the file name);
+//! [`bus_tap::record_of`] turns a bus event into the record a tap writes. Readers
 //! stream from any [`std::io::Read`]; [`CaptureReader`] (and [`open`], [`read_all`]) tells the
 //! format from the first bytes. Bad input is an [`Error`] with a byte offset or line number,
 //! never a panic, and no length field makes a reader allocate more than a fixed bound.
@@ -42,6 +43,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod bus_tap;
 pub mod candump;
 mod dump;
 mod error;
