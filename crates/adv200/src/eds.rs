@@ -2,11 +2,18 @@
 //! personality. The files shipped in `crates/adv200/eds/` are this module's output for the
 //! factory PDC (no channel assigned: no PDO mapped in the CANopen personality) and are
 //! checked against it by the test suite.
+//!
+//! CiA 306 has no key for a unit; the files carry each unit in the vendor key `Unit` of the
+//! entry that holds the value (the parameters' units of the drive's parameter database at
+//! 0x2000 + PAR sub 1; rpm for 0x6042–0x6044, chapter 2 note 1; rpm for the 0x6046 limits,
+//! rpm and s for the 0x6048/0x6049 delta speed and delta time). Tools that do not know the
+//! key keep or ignore it, as CiA 306 says of keys it does not define.
 
 use cantwin_canopen::od::OdBuildError;
 use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 
 use crate::od::{Personality, build};
+use crate::params::catalog;
 use crate::pdc::Pdc;
 
 /// The EDS model of `personality` with the PDO mappings of `pdc` (CANopen).
@@ -35,7 +42,39 @@ pub fn eds_for(personality: Personality, pdc: &Pdc) -> Result<Eds, OdBuildError>
     file_info.description = Some(format!(
         "{product} (generated from the twin's object dictionary)"
     ));
-    Ok(cantwin_eds::from_od(&desc, info, file_info))
+    let mut eds = cantwin_eds::from_od(&desc, info, file_info);
+    let mut units: Vec<(u16, u8, &str)> = catalog()
+        .iter()
+        .filter(|d| !d.unit.is_empty())
+        .map(|d| (d.sdo_index(), 1, d.unit))
+        .collect();
+    if personality == Personality::Ds402 {
+        units.extend([
+            (0x6042, 0, "rpm"),
+            (0x6043, 0, "rpm"),
+            (0x6044, 0, "rpm"),
+            (0x6046, 1, "rpm"),
+            (0x6046, 2, "rpm"),
+            (0x6048, 1, "rpm"),
+            (0x6048, 2, "s"),
+            (0x6049, 1, "rpm"),
+            (0x6049, 2, "s"),
+        ]);
+    }
+    for (index, sub, unit) in units {
+        let Some(o) = eds.objects.get_mut(&index) else {
+            continue;
+        };
+        let entry = if o.subs.is_empty() && sub == 0 {
+            Some(&mut o.entry)
+        } else {
+            o.subs.get_mut(&sub)
+        };
+        if let Some(e) = entry {
+            e.extra.push(("Unit".to_owned(), unit.to_owned()));
+        }
+    }
+    Ok(eds)
 }
 
 /// The EDS text of `personality` with the factory PDC.

@@ -18,6 +18,11 @@
 //!   read from `Fieldbus M->Sn mon`; S2M whose `ipa` is `Dig Fieldbus S->Mn` sends that
 //!   parameter (writing it as `ipa` sets the format to Mdplc, §1.3.3).
 //!
+//! * there is no floating-point format: the `sys` values the manual names (§1.3.1–§1.3.3) are
+//!   Not assigned, Count 16/32, Eu, Fill 16/32 and Mdplc 16/32, and "32-bit data (long or
+//!   float)" of §1.3.1 travels in a 32-bit channel as its bit pattern. Typed float access is
+//!   DeviceNet's Drive Parameter Access (DB_T_FLOAT, §3.4.2), not the PDC.
+//!
 //! Each placed channel is mapped as `0x2000 + mon` sub 1 of its own channel with its width,
 //! so the PDO mappings are ordinary CiA 301 mappings a master can read back.
 

@@ -50,3 +50,30 @@ fn manual_2_ds402_eds_is_generated_from_the_od() {
     // Only what chapter 2 lists: no 0x6502 supported drive modes.
     assert!(!eds.objects.contains_key(&0x6502));
 }
+
+#[test]
+fn manual_1_2_and_2_units_travel_in_the_eds_unit_key() {
+    let unit = |eds: &cantwin_eds::Eds, index: u16, sub: u8| {
+        let o = &eds.objects[&index];
+        let e = if o.subs.is_empty() {
+            &o.entry
+        } else {
+            &o.subs[&sub]
+        };
+        e.extra
+            .iter()
+            .find(|(k, _)| k == "Unit")
+            .map(|(_, v)| v.clone())
+    };
+    let eds = cantwin_eds::parse(&eds_text(Personality::CanOpen).unwrap()).unwrap();
+    // PAR 600 Dig ramp ref 1 and PAR 900 Speed zero threshold in rpm; a control word has none.
+    assert_eq!(unit(&eds, 0x2258, 1).as_deref(), Some("rpm"));
+    assert_eq!(unit(&eds, 0x2384, 1).as_deref(), Some("rpm"));
+    assert_eq!(unit(&eds, 0x2000 + 4452, 1), None);
+    let eds = cantwin_eds::parse(&eds_text(Personality::Ds402).unwrap()).unwrap();
+    // Chapter 2 note (1): 0x6042–0x6044 in rpm.
+    for index in [0x6042u16, 0x6043, 0x6044] {
+        assert_eq!(unit(&eds, index, 0).as_deref(), Some("rpm"), "{index:04X}");
+    }
+    assert_eq!(unit(&eds, 0x6048, 2).as_deref(), Some("s"));
+}
