@@ -15,12 +15,20 @@ a release build for the recorded figures):
 
 Prints median and 99th percentile per round trip and their ratio; `--write` records them in
 BENCHMARKS.md (section `python`).
+
+In the same run a bare socket client (no python-can, no python-canopen) sends the same kind
+of request to the twin through the gateway, and the simulator records the bus in a candump log
+stamped in wall time at each frame's end: the round trip splits into the way in (client send
+to the end of the request frame, which includes the request's own bits), the bus (request end
+to response end: the twin's answer, its arbitration and its bits) and the way out (response
+end to the client holding it).
 """
 
 import datetime
 import os
 import platform
 import re
+import socket
 import statistics
 import sys
 import tempfile
@@ -63,11 +71,76 @@ def percentile(sorted_samples, p):
     return sorted_samples[max(0, int(len(sorted_samples) * p) - 1)]
 
 
+# The bare client's request: upload 0x1018 sub 1, which python-canopen does not read, so its
+# frames are told apart in the capture.
+RAW_REQUEST = "605#4018100100000000"
+RAW_ANSWER = "585#4318100100000000"
+
+
+def raw_round_trips(host, port, n):
+    """`n` round trips of a bare socketcand client: [(send ns, answer ns)], wall clock."""
+    s = socket.create_connection((host, port))
+    s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    buf = b""
+
+    def until(token):
+        nonlocal buf
+        while token not in buf:
+            chunk = s.recv(4096)
+            if not chunk:
+                raise RuntimeError("the gateway closed the connection")
+            buf += chunk
+        buf = buf[buf.index(token) + len(token):]
+
+    until(b"< hi >")
+    s.sendall(b"< open can0 >")
+    until(b"< ok >")
+    s.sendall(b"< rawmode >")
+    until(b"< ok >")
+    request = b"< send 605 8 40 18 10 01 00 00 00 00 >"
+    times = []
+    try:
+        for _ in range(n):
+            t0 = time.time_ns()
+            s.sendall(request)
+            until(b"< frame 585 ")
+            times.append((t0, time.time_ns()))
+            time.sleep(0.0005)
+    finally:
+        s.close()
+    return times
+
+
+def split(times, candump):
+    """Median µs of (total, way in, bus, way out) of the bare client's round trips."""
+    requests, answers = [], []
+    for line in Path(candump).read_text().splitlines():
+        parts = line.split()
+        if len(parts) < 3:
+            continue
+        at = round(float(parts[0].strip("()")) * 1e9)
+        if parts[2] == RAW_REQUEST:
+            requests.append(at)
+        elif parts[2] == RAW_ANSWER:
+            answers.append(at)
+    if not (len(requests) == len(answers) == len(times)):
+        raise RuntimeError(
+            f"capture has {len(requests)} requests and {len(answers)} answers for {len(times)} round trips"
+        )
+    rows = [
+        ((t1 - t0), (req - t0), (ans - req), (t1 - ans))
+        for (t0, t1), req, ans in zip(times, requests, answers)
+    ]
+    return tuple(statistics.median(r[k] for r in rows) / 1e3 for k in range(4))
+
+
 def run(n):
     with tempfile.TemporaryDirectory() as tmp:
         scenario = Path(tmp) / "bench.toml"
         scenario.write_text(SCENARIO)
-        sim = start_sim(scenario)
+        candump = Path(tmp) / "bus.log"
+        sim = start_sim(scenario, extra=("--candump", str(candump)))
+        raw = []
         try:
             host, port = sim.socketcand_addr("can0")
             server = canopen.Network()
@@ -87,12 +160,16 @@ def run(n):
                         t = time.perf_counter()
                         node.sdo.upload(0x1000, 0)
                         samples[name].append(time.perf_counter() - t)
-                return {k: sorted(v) for k, v in samples.items()}
             finally:
                 client.disconnect()
                 server.disconnect()
+            # Alone on the gateway, so python-canopen's receiving threads do not compete.
+            raw = raw_round_trips(host, port, min(n, 2000))
         finally:
             stop_process(sim.process)
+        samples = {k: sorted(v) for k, v in samples.items()}
+        samples["split"] = split(raw, candump)
+        return samples
 
 
 def main():
@@ -106,13 +183,28 @@ def main():
         print(f"{label:28} {n} uploads: median {med * 1e6:7.0f} µs, p99 {p99 * 1e6:7.0f} µs")
     ratio = rows[1][1] / rows[0][1]
     print(f"median ratio LocalNode / twin: {ratio:.2f} (floor 1.3); twin median < 1 ms: {rows[0][1] < 1e-3}")
+    total, way_in, bus, way_out = s["split"]
+    print(
+        f"bare socketcand client to the twin: median {total:.0f} µs = way in {way_in:.0f} µs "
+        f"(of which the request's bits) + bus {bus:.0f} µs + way out {way_out:.0f} µs"
+    )
     if "--write" in sys.argv:
-        write(n, rows, ratio)
+        write(n, rows, ratio, s["split"])
 
 
-def write(n, rows, ratio):
+def write(n, rows, ratio, parts):
+    total, way_in, bus, way_out = parts
     table = "| server | median | p99 |\n|---|---|---|\n" + "\n".join(
         f"| {label} | {med * 1e6:.0f} µs | {p99 * 1e6:.0f} µs |" for label, med, p99 in rows
+    )
+    table += (
+        "\n\nThe twin's round trip from a bare socketcand client (no python-can), split by the "
+        "bus capture's wall-clock stamps at each frame's end (medians):\n\n"
+        "| part | median |\n|---|---|\n"
+        f"| client sends → end of the request frame (gateway read, queueing, the request's bits) | {way_in:.0f} µs |\n"
+        f"| end of the request → end of the response (the twin's answer, arbitration, the response's bits) | {bus:.0f} µs |\n"
+        f"| end of the response → client holds it (simulation thread, gateway writer, TCP) | {way_out:.0f} µs |\n"
+        f"| **whole round trip, bare client** | **{total:.0f} µs** |"
     )
     body = (
         "## python — python-canopen SDO round trips through the socketcand gateway\n\n"
@@ -123,7 +215,8 @@ def write(n, rows, ratio):
         f"{table}\n\n**median ratio LocalNode / twin: {ratio:.2f}**\n\n"
         f"Measured {datetime.date.today()} on {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"python-canopen {canopen.__version__}.\n"
+        f"python-canopen {canopen.__version__}, load average {os.getloadavg()[0]:.1f} "
+        "(other builds were running when it is above the core count).\n"
         "Reproduce: `CANTWIN_BIN=target/release/cantwin target/interop-venv/bin/python "
         "tests/interop/bench_sdo_roundtrip.py 10000 --write`"
     )

@@ -11,6 +11,7 @@ use crate::benchmarks_md;
 
 mod canopen;
 mod process;
+mod twins;
 
 /// The benchmarks `cantwin bench` knows.
 const NAMES: &[(&str, &str)] = &[
@@ -38,7 +39,8 @@ const NAMES: &[(&str, &str)] = &[
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Benchmarks to run (all when none is named): bus, network, fleet, sdo, memory.
+    /// Benchmarks to run (all when none is named): bus, network, fleet, sdo, memory, and one
+    /// per twin: adv200-canopen, adv200-ds402, adv200-devicenet, tm3, opendrive.
     names: Vec<String>,
     /// Record the figures in BENCHMARKS.md.
     #[arg(long)]
@@ -61,22 +63,23 @@ pub struct Args {
 
 pub fn run(args: &Args) -> Result<()> {
     if args.list {
-        for (name, what) in NAMES {
+        for (name, what) in NAMES.iter().chain(twins::TWINS) {
             crate::output::result(
-                format_args!("{name:8} {what}"),
+                format_args!("{name:16} {what}"),
                 || serde_json::json!({"bench": name, "about": what}),
             )?;
         }
         return Ok(());
     }
+    let all = || NAMES.iter().chain(twins::TWINS);
     let names: Vec<&str> = if args.names.is_empty() {
-        NAMES.iter().map(|(n, _)| *n).collect()
+        all().map(|(n, _)| *n).collect()
     } else {
         args.names.iter().map(String::as_str).collect()
     };
     for name in &names {
-        if !NAMES.iter().any(|(n, _)| n == name) {
-            let known: Vec<&str> = NAMES.iter().map(|(n, _)| *n).collect();
+        if !all().any(|(n, _)| n == name) {
+            let known: Vec<&str> = all().map(|(n, _)| *n).collect();
             bail!("unknown benchmark {name:?}; known: {}", known.join(", "));
         }
     }
@@ -100,7 +103,8 @@ pub fn run(args: &Args) -> Result<()> {
             "network" => bench_network(args),
             "fleet" => bench_fleet(args),
             "sdo" => bench_sdo(args),
-            _ => bench_memory(args),
+            "memory" => bench_memory(args),
+            twin => bench_twin(args, twin),
         };
         spinner.finish_and_clear();
         r?;
@@ -502,4 +506,41 @@ fn bench_memory(args: &Args) -> Result<()> {
         intro,
         &table,
     )
+}
+
+fn bench_twin(args: &Args, name: &str) -> Result<()> {
+    let duration = seconds(args, 20.0);
+    let what = twins::TWINS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map_or("", |(_, w)| *w);
+    eprintln!("bench {name}: {duration} of bus time, then the bare CiA 301 device …");
+    let r = twins::run(name, duration)?;
+    let clock = if r.thread_cpu {
+        "thread CPU time"
+    } else {
+        "wall time (no per-thread CPU clock on this system)"
+    };
+    let us = |run: &twins::TwinRun| run.ns_per_sim_second() / 1e3;
+    let table = format!(
+        "| figure | value |\n|---|---|\n\
+         | bus time measured | {bus:.1} s |\n\
+         | frames on the bus per simulated second, twin | {frames:.0} |\n\
+         | **CPU per simulated second, twin** (bus, twin and master) | **{twin:.0} µs** ({rt:.0}× real time) |\n\
+         | CPU per simulated second, bare CiA 301 device (same run) | {base:.0} µs ({base_frames:.0} frames/s) |\n\
+         | **twin / bare device** | **{ratio:.1}** |",
+        bus = duration.as_secs_f64(),
+        frames = r.twin.frames_per_sim_second(),
+        twin = us(&r.twin),
+        rt = 1e9 / r.twin.ns_per_sim_second().max(1.0),
+        base = us(&r.baseline),
+        base_frames = r.baseline.frames_per_sim_second(),
+        ratio = r.twin.ns_per_sim_second() / r.baseline.ns_per_sim_second().max(1.0),
+    );
+    let intro = format!(
+        "{what}. Measured: {clock} of the measured part (after start-up and configuration). \
+         Baseline in the same run: a CiA 301 `Device` with one 8-byte TPDO on every SYNC and \
+         heartbeat 100 ms, at 500 kbit/s, under NMT start and SYNC every 10 ms."
+    );
+    record(args, name, "twin CPU per simulated second", &intro, &table)
 }

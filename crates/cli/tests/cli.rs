@@ -208,6 +208,41 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn bench_twins_short_runs_print_figures_and_record_their_sections() {
+    let dir = std::env::temp_dir().join(format!("cantwin-bench-tw-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("BENCHMARKS.md");
+    let names = [
+        "adv200-canopen",
+        "adv200-ds402",
+        "adv200-devicenet",
+        "tm3",
+        "opendrive",
+    ];
+    let mut args = vec!["bench"];
+    args.extend(names);
+    args.extend([
+        "--seconds",
+        "0.1",
+        "--write",
+        "--file",
+        file.to_str().unwrap(),
+    ]);
+    let (ok, out, err) = cantwin(&args);
+    assert!(ok, "{err}");
+    assert!(out.contains("CPU per simulated second, twin"), "{out}");
+    assert!(out.contains("twin / bare device"), "{out}");
+    let md = std::fs::read_to_string(&file).unwrap();
+    for name in names {
+        assert!(
+            md.contains(&format!("<!-- bench:{name} -->")),
+            "{name}: {md}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 const GENERATORS: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\
     [[device]]\nname = \"a\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x100\nperiod_ms = 20\n\
     [[device]]\nname = \"b\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x200\nperiod_ms = 50\nlen = 0\n";

@@ -130,6 +130,15 @@ impl Node for NetDevice {
     }
 }
 
+/// A `network` device with node-ID `node` that the bus asks for its own acceptance filter
+/// ([`Filtering::Device`]), for other benchmarks' baselines.
+pub fn network_device(desc: &Arc<OdDescription>, node: u8) -> Result<impl Node + Send + 'static> {
+    Ok(NetDevice {
+        device: Device::new(Arc::clone(desc), DeviceConfig::new(node))?,
+        filtering: Filtering::Device,
+    })
+}
+
 /// The network's master: NMT start of all nodes at power-up (CiA 301 §7.2.8.3.1.1), then a
 /// SYNC without counter every [`SYNC_PERIOD`] (§7.2.5).
 struct SyncMaster {

@@ -1,0 +1,340 @@
+//! One benchmark per device twin: CPU time per simulated second of the twin's normal traffic,
+//! on its scenario from `scenarios/`, with a master producing that traffic, against a bare
+//! CiA 301 device under the same master in the same run.
+
+use std::sync::Arc;
+
+use anyhow::{Context, Result, anyhow, bail};
+use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
+use cantwin_cal::{CmsClient, Payload, Request};
+use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
+use cantwin_devicenet::wire::{MacId, choice};
+use cantwin_devicenet::{Scanner, ScannerConfig};
+use cantwin_opendrive::messages::{self, Code, CommandByte, message0_write};
+use cantwin_opendrive::params::Params;
+use cantwin_opendrive::{MESSAGE_0, MESSAGE_1};
+use cantwin_scenario::{BuildEnv, Registry, Scenario};
+
+/// The twins, by benchmark name: (name, what the master does).
+pub const TWINS: &[(&str, &str)] = &[
+    (
+        "adv200-canopen",
+        "ADV200 worked example (scenarios/adv200-example.toml): NMT start, then every 10 ms RPDO1 (enable + start, 1500 rpm) and SYNC; TPDO1 answers",
+    ),
+    (
+        "adv200-ds402",
+        "ADV200 in the DS402 personality (scenarios/adv200-ds402.toml): NMT start, SYNC every 10 ms",
+    ),
+    (
+        "adv200-devicenet",
+        "ADV200 on DeviceNet (scenarios/adv200-devicenet.toml): cantwin's scanner polls 4 bytes out / 6 in every 10 ms",
+    ),
+    (
+        "tm3",
+        "TM3 bus coupler with 7 modules (scenarios/tm3-island.toml): NMT start, SYNC every 10 ms",
+    ),
+    (
+        "opendrive",
+        "OPEN DRIVE (scenarios/opendrive.toml): a CAL master writes message 0 (reference, run) every 20 ms",
+    ),
+];
+
+const ADV200_EXAMPLE: &str = include_str!("../../../../scenarios/adv200-example.toml");
+const ADV200_DS402: &str = include_str!("../../../../scenarios/adv200-ds402.toml");
+const ADV200_DEVICENET: &str = include_str!("../../../../scenarios/adv200-devicenet.toml");
+const TM3_ISLAND: &str = include_str!("../../../../scenarios/tm3-island.toml");
+const OPENDRIVE: &str = include_str!("../../../../scenarios/opendrive.toml");
+
+/// What one run measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwinRun {
+    /// CPU time of the measured part (thread CPU time where the OS gives it, else wall time).
+    pub cpu: std::time::Duration,
+    /// Bus time measured.
+    pub bus_time: Duration,
+    /// Frames on the bus during the measured part.
+    pub frames: u64,
+}
+
+impl TwinRun {
+    /// Nanoseconds of CPU per simulated second.
+    pub fn ns_per_sim_second(&self) -> f64 {
+        self.cpu.as_nanos() as f64 / self.bus_time.as_secs_f64().max(1e-12)
+    }
+
+    /// Frames per simulated second.
+    pub fn frames_per_sim_second(&self) -> f64 {
+        self.frames as f64 / self.bus_time.as_secs_f64().max(1e-12)
+    }
+}
+
+/// A twin's run and the bare CiA 301 device's, in the same process one after the other.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwinReport {
+    /// The twin.
+    pub twin: TwinRun,
+    /// A CiA 301 `Device` with one synchronous TPDO under NMT start and SYNC every 10 ms.
+    pub baseline: TwinRun,
+    /// Whether the figures are thread CPU time (Linux) rather than wall time.
+    pub thread_cpu: bool,
+}
+
+/// CPU time this thread has run, from `/proc/thread-self/schedstat` (first field, ns).
+fn thread_cpu() -> Option<std::time::Duration> {
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = s.split_whitespace().next()?.parse().ok()?;
+    Some(std::time::Duration::from_nanos(ns))
+}
+
+/// A clock for the measured part: thread CPU time if available, else wall time.
+struct Clock {
+    cpu: Option<std::time::Duration>,
+    wall: std::time::Instant,
+}
+
+impl Clock {
+    fn start() -> Self {
+        Clock {
+            cpu: thread_cpu(),
+            wall: std::time::Instant::now(),
+        }
+    }
+
+    fn elapsed(&self) -> (std::time::Duration, bool) {
+        match (self.cpu, thread_cpu()) {
+            (Some(a), Some(b)) => (b.saturating_sub(a), true),
+            _ => (self.wall.elapsed(), false),
+        }
+    }
+}
+
+fn ms(v: u64) -> Instant {
+    Instant::ZERO + Duration::from_millis(v)
+}
+
+/// A node that only acknowledges frames: the master's port where the bench itself puts the
+/// master's frames on the bus.
+struct Ack;
+
+impl Node for Ack {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// Run `sim` from `from` for `duration`, calling `cycle` every `period` (the master's cyclic
+/// traffic), and measure the CPU it takes.
+fn measure(
+    sim: &mut Simulation,
+    bus: BusId,
+    from: Instant,
+    duration: Duration,
+    period: Duration,
+    mut cycle: impl FnMut(&mut Simulation, Instant) -> Result<()>,
+) -> Result<(TwinRun, bool)> {
+    sim.run_until(from);
+    let frames_before = sim.bus(bus).map_or(0, |b| b.stats().frames());
+    let end = from + duration;
+    let clock = Clock::start();
+    let mut t = from;
+    while t < end {
+        sim.run_until(t);
+        cycle(sim, t)?;
+        t += period;
+    }
+    sim.run_until(end);
+    let (cpu, thread) = clock.elapsed();
+    let frames = sim.bus(bus).map_or(0, |b| b.stats().frames()) - frames_before;
+    Ok((
+        TwinRun {
+            cpu,
+            bus_time: duration,
+            frames,
+        },
+        thread,
+    ))
+}
+
+/// The scenario `text` built, with its bus `can0` and a master port on it.
+fn build(text: &str, name: &str) -> Result<(Simulation, BusId, PortId)> {
+    let scenario = Scenario::parse(text, name)?;
+    let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+    let bus = built.bus("can0").context("the scenario's bus can0")?;
+    let mut sim = built.sim;
+    let master = sim.attach(bus, Ack, PortConfig::default())?;
+    Ok((sim, bus, master))
+}
+
+/// NMT start of every node at 1 ms (CiA 301 §7.2.8.3.1.1).
+fn nmt_start(sim: &mut Simulation, master: PortId) -> Result<()> {
+    sim.run_until(ms(1));
+    sim.transmit(master, Frame::std(0x000, &[0x01, 0x00])?)?;
+    Ok(())
+}
+
+fn sync_cycle(master: PortId) -> impl FnMut(&mut Simulation, Instant) -> Result<()> {
+    move |sim, _| {
+        sim.transmit(master, Frame::std(0x080, &[])?)?;
+        Ok(())
+    }
+}
+
+const CYCLE: Duration = Duration::from_millis(10);
+
+/// The bare CiA 301 device: the `network` benchmark's dictionary (TPDO 1 of 8 bytes on every
+/// SYNC, heartbeat 100 ms) at 500 kbit/s under NMT start and SYNC every 10 ms.
+fn baseline(duration: Duration) -> Result<(TwinRun, bool)> {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+    let desc = Arc::new(super::canopen::network_description()?);
+    sim.attach(
+        bus,
+        super::canopen::network_device(&desc, 5)?,
+        PortConfig::default(),
+    )?;
+    let master = sim.attach(bus, Ack, PortConfig::default())?;
+    nmt_start(&mut sim, master)?;
+    measure(&mut sim, bus, ms(10), duration, CYCLE, sync_cycle(master))
+}
+
+fn adv200_canopen(duration: Duration) -> Result<(TwinRun, bool)> {
+    let (mut sim, bus, master) = build(ADV200_EXAMPLE, "scenarios/adv200-example.toml")?;
+    nmt_start(&mut sim, master)?;
+    // Node 12 (§1.6): control word 0x0003 (enable, start), ramp reference 1500 rpm.
+    let rpdo = Frame::std(0x20C, &[0x03, 0x00, 0xDC, 0x05])?;
+    measure(&mut sim, bus, ms(10), duration, CYCLE, move |sim, _| {
+        sim.transmit(master, rpdo)?;
+        sim.transmit(master, Frame::std(0x080, &[])?)?;
+        Ok(())
+    })
+}
+
+fn canopen_sync_only(text: &str, name: &str, duration: Duration) -> Result<(TwinRun, bool)> {
+    let (mut sim, bus, master) = build(text, name)?;
+    nmt_start(&mut sim, master)?;
+    measure(&mut sim, bus, ms(10), duration, CYCLE, sync_cycle(master))
+}
+
+fn adv200_devicenet(duration: Duration) -> Result<(TwinRun, bool)> {
+    let scenario = Scenario::parse(ADV200_DEVICENET, "scenarios/adv200-devicenet.toml")?;
+    let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+    let bus = built.bus("can0").context("the scenario's bus can0")?;
+    let mut sim = built.sim;
+    let mac0 = MacId::new(0).context("MAC ID")?;
+    let drive = MacId::new(12).context("MAC ID")?;
+    let scanner = sim.attach(
+        bus,
+        Scanner::new(ScannerConfig::new(mac0, 1, 2)),
+        PortConfig::default(),
+    )?;
+    // Both ends check for a duplicate MAC ID at power-up (two requests 1 s apart).
+    sim.run_until(ms(2100));
+    {
+        let m = sim.node_mut::<Scanner>(scanner).context("scanner")?;
+        while m.poll_event().is_some() {}
+        m.allocate(drive, choice::EXPLICIT | choice::POLLED)
+            .map_err(|e| anyhow!("{e}"))?;
+        m.set_expected_packet_rate(drive, 2, 100)
+            .map_err(|e| anyhow!("{e}"))?;
+        // The worked example's output (§3.9): control word 0x0103, ramp reference 1500 rpm.
+        m.start_polling(drive, CYCLE, &[0x03, 0x01, 0xDC, 0x05], 6, ms(2110));
+    }
+    let r = measure(&mut sim, bus, ms(2200), duration, CYCLE, move |sim, _| {
+        if let Some(m) = sim.node_mut::<Scanner>(scanner) {
+            while m.poll_event().is_some() {}
+        }
+        Ok(())
+    })?;
+    if r.0.frames == 0 {
+        bail!("the DeviceNet scanner exchanged no frames with the drive");
+    }
+    Ok(r)
+}
+
+fn cal_request(
+    sim: &mut Simulation,
+    port: PortId,
+    object: cantwin_cal::ObjectIndex,
+    req: Request,
+) -> Result<()> {
+    let now = sim.now();
+    let mut out = Outbox::new();
+    let client = sim.node_mut::<CmsClient>(port).context("the CAL master")?;
+    while client.poll_event().is_some() {}
+    client
+        .request(object, req, now, &mut out)
+        .map_err(|e| anyhow!("{e}"))?;
+    for f in out.drain() {
+        sim.transmit(port, f)?;
+    }
+    Ok(())
+}
+
+fn opendrive(duration: Duration) -> Result<(TwinRun, bool)> {
+    let scenario = Scenario::parse(OPENDRIVE, "scenarios/opendrive.toml")?;
+    let mut built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+    let bus = built.bus("can0").context("the scenario's bus can0")?;
+    let params = Params::default();
+    let client = messages::master(|p| params.get(p)).map_err(|e| anyhow!("{e}"))?;
+    let master = built.sim.attach(bus, client, PortConfig::default())?;
+    let mut sim = built.sim;
+    sim.run_until(ms(10));
+    cal_request(&mut sim, master, MESSAGE_1, Request::ControlEvent(true))?;
+    let cmd = CommandByte {
+        reference_remote: Code::Set,
+        command_remote: Code::Set,
+        can_start: Code::Set,
+        can_reverse: Code::NoChange,
+    };
+    // 50.00 Hz reference, run.
+    let payload = Payload::new(&message0_write(cmd, 5000)).context("message 0")?;
+    measure(
+        &mut sim,
+        bus,
+        ms(20),
+        duration,
+        Duration::from_millis(20),
+        move |sim, _| cal_request(sim, master, MESSAGE_0, Request::WriteBasic(payload)),
+    )
+}
+
+/// Run twin `name` and the baseline for `duration` of bus time each.
+pub fn run(name: &str, duration: Duration) -> Result<TwinReport> {
+    let (twin, t1) = match name {
+        "adv200-canopen" => adv200_canopen(duration)?,
+        "adv200-ds402" => canopen_sync_only(ADV200_DS402, "scenarios/adv200-ds402.toml", duration)?,
+        "adv200-devicenet" => adv200_devicenet(duration)?,
+        "tm3" => canopen_sync_only(TM3_ISLAND, "scenarios/tm3-island.toml", duration)?,
+        "opendrive" => opendrive(duration)?,
+        other => bail!("no twin benchmark {other:?}"),
+    };
+    let (baseline, t2) = baseline(duration)?;
+    Ok(TwinReport {
+        twin,
+        baseline,
+        thread_cpu: t1 && t2,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_twin_runs_its_traffic_and_is_measured() {
+        for (name, _) in TWINS {
+            let r = run(name, Duration::from_millis(200)).unwrap();
+            // Every master sends at least one frame per cycle and the twin answers: at least
+            // 100 frames per simulated second.
+            assert!(r.twin.frames >= 20, "{name}: {} frames", r.twin.frames);
+            assert!(
+                r.baseline.frames >= 40,
+                "{name}: baseline {}",
+                r.baseline.frames
+            );
+            assert_eq!(r.twin.bus_time, Duration::from_millis(200));
+        }
+    }
+}
