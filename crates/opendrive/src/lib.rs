@@ -83,6 +83,11 @@
 //!   the drive; it restarts only after the start
 //!   command was removed and given again. Alarms are kept in flash; with C35 = 1 they clear
 //!   at mains return (the node's power-up).
+//! * No communication watchdog: application 003 defines only the three CMS messages (§3),
+//!   no node guarding, no time-out and no alarm for a lost master (message 1 reports
+//!   overcurrent, overtemperature and overvoltage only). A drive whose master vanishes
+//!   holds its last command and reference; a controller bus-off is recovered by the
+//!   controller and changes nothing in the drive (`scenarios/faults/opendrive-*.toml`).
 //! * Mains off/on is the node's power cycle on the bus (`Bus::set_powered`): the motor
 //!   coasts, temperatures cool, working values come back from flash, events are disabled.
 //! * The flash ([`Flash`]) holds the saved parameters, the latched alarms and the DIP S1

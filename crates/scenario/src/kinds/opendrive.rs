@@ -413,6 +413,56 @@ mod tests {
     }
 
     #[test]
+    fn signals_set_the_load_and_reset_read_outputs_and_alarms() {
+        use crate::registry::DeviceKind;
+        use toml::Value;
+        let mut built = built(&(DEVICE.to_string() + "inputs = [4]\nreference_hz = 20.0\n"));
+        let port = built.device("drive").unwrap().port;
+        let kind = super::OpenDriveKind;
+        built.sim.run_until(Instant::from_nanos(2_000_000_000));
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "running"),
+            Ok(Value::Boolean(true))
+        );
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "input.4"),
+            Ok(Value::Boolean(true))
+        );
+        // A jammed load: overcurrent A2 at the next physics step.
+        kind.set_signal(
+            &mut built.sim,
+            port,
+            "load_torque_pct",
+            &Value::Float(500.0),
+        )
+        .unwrap();
+        built.sim.run_until(Instant::from_nanos(2_010_000_000));
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "alarms"),
+            Ok(Value::Array(vec![Value::String("A2".into())]))
+        );
+        kind.set_signal(&mut built.sim, port, "reset_alarms", &Value::Boolean(true))
+            .unwrap();
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "alarms"),
+            Ok(Value::Array(vec![]))
+        );
+        let e = kind
+            .set_signal(
+                &mut built.sim,
+                port,
+                "load_torque_pct",
+                &Value::Boolean(true),
+            )
+            .unwrap_err();
+        assert!(e.contains("takes a number"), "{e}");
+        let e = kind
+            .set_signal(&mut built.sim, port, "input.9", &Value::Boolean(true))
+            .unwrap_err();
+        assert!(e.contains("signals: load_torque_pct"), "{e}");
+    }
+
+    #[test]
     fn bad_settings_are_reported_with_their_key() {
         let e = error_of("params = { P21 = 300.0 }\n", "500k");
         assert!(

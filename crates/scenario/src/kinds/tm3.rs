@@ -375,6 +375,43 @@ mod tests {
     }
 
     #[test]
+    fn signals_pull_a_module_and_read_outputs_and_unknown_ones_are_refused() {
+        let mut built = build("node_id = 5\nmodules = [\"TM3DI8\", \"TM3DQ8R\"]\n").unwrap();
+        let port = built.device("io").unwrap().port;
+        built.sim.run_until(Instant::from_nanos(1_000_000));
+        let kind = Tm3Kind;
+        let v = |s: &str| toml::Value::String(s.into());
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "nmt_state"),
+            Ok(v("pre-operational"))
+        );
+        kind.set_signal(&mut built.sim, port, "module.2", &v("pulled"))
+            .unwrap();
+        built.sim.run_until(Instant::from_nanos(2_000_000));
+        let c = built.sim.node::<Tm3Coupler>(port).unwrap();
+        // Module 2 runtime error (status 2, bits 2-3), bus status 2 (bits 30-31).
+        assert_eq!(c.manufacturer_status(), 0x8000_0008);
+        assert_eq!(
+            kind.read_signal(&built.sim, port, "digital_output.2.0"),
+            Ok(toml::Value::Boolean(false))
+        );
+        let e = kind
+            .set_signal(&mut built.sim, port, "module.2", &v("gone"))
+            .unwrap_err();
+        assert!(e.contains("\"pulled\""), "{e}");
+        let e = kind
+            .set_signal(&mut built.sim, port, "module.9", &v("pulled"))
+            .unwrap_err();
+        assert!(e.contains("no module 9"), "{e}");
+        let e = kind.read_signal(&built.sim, port, "speed").unwrap_err();
+        assert!(e.contains("signals: module.M"), "{e}");
+        let e = kind
+            .read_signal(&built.sim, port, "digital_output.2.9")
+            .unwrap_err();
+        assert!(e.contains("no channel 9"), "{e}");
+    }
+
+    #[test]
     fn a_missing_module_is_a_configuration_error_at_power_up() {
         let mut built =
             build("node_id = 5\nmodules = [\"TM3DI8\", \"TM3DQ8R\"]\nmissing = [2]\n").unwrap();
