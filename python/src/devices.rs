@@ -423,3 +423,101 @@ pub(crate) fn raise_alarm(core: &mut Core, device: &str, alarm: &str) -> PyResul
         k => Err(unsupported(device, k, "alarms")),
     }
 }
+
+/// A Python value as the TOML value a scenario script would give.
+fn to_toml(value: &Bound<'_, PyAny>) -> PyResult<toml::Value> {
+    if let Ok(b) = value.extract::<bool>() {
+        return Ok(toml::Value::Boolean(b));
+    }
+    if let Ok(i) = value.extract::<i64>() {
+        return Ok(toml::Value::Integer(i));
+    }
+    if let Ok(f) = value.extract::<f64>() {
+        return Ok(toml::Value::Float(f));
+    }
+    if let Ok(s) = value.extract::<String>() {
+        return Ok(toml::Value::String(s));
+    }
+    Err(PyTypeError::new_err(
+        "a signal value is a bool, an int, a float or a str",
+    ))
+}
+
+fn to_py<'py>(py: Python<'py>, value: &toml::Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        toml::Value::Boolean(b) => pyo3::types::PyBool::new(py, *b).to_owned().into_any(),
+        toml::Value::Integer(i) => i.into_pyobject(py)?.into_any(),
+        toml::Value::Float(f) => f.into_pyobject(py)?.into_any(),
+        toml::Value::String(s) => s.into_pyobject(py)?.into_any(),
+        toml::Value::Array(a) => {
+            let items = a
+                .iter()
+                .map(|v| to_py(py, v))
+                .collect::<PyResult<Vec<_>>>()?;
+            pyo3::types::PyList::new(py, items)?.into_any()
+        }
+        other => other.to_string().into_pyobject(py)?.into_any(),
+    })
+}
+
+/// Run `f` with the kind of `device`, its port and the simulation.
+fn with_kind<R>(
+    core: &mut Core,
+    device: &str,
+    f: impl FnOnce(&dyn cantwin_scenario::DeviceKind, &mut cantwin_bus::Simulation, PortId) -> R,
+) -> PyResult<R> {
+    let d = core.device(device)?;
+    let Core { mode, registry, .. } = core;
+    let kind = registry
+        .get(&d.kind)
+        .ok_or_else(|| err(format!("{device}: unknown kind {:?}", d.kind)))?;
+    match mode {
+        crate::sim::Mode::Virtual(sim) => Ok(f(kind, sim, d.port)),
+        crate::sim::Mode::Paced(p) => p
+            .handle()
+            .with(|sim| f(kind, sim, d.port))
+            .map_err(|e| err(e.to_string())),
+    }
+}
+
+pub(crate) fn set_signal(
+    core: &mut Core,
+    device: &str,
+    name: &str,
+    value: &Bound<'_, PyAny>,
+) -> PyResult<()> {
+    let value = to_toml(value)?;
+    with_kind(core, device, |k, sim, port| {
+        k.set_signal(sim, port, name, &value)
+    })?
+    .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))
+}
+
+pub(crate) fn read_signal<'py>(
+    py: Python<'py>,
+    core: &mut Core,
+    device: &str,
+    name: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let v = with_kind(core, device, |k, sim, port| k.read_signal(sim, port, name))?
+        .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))?;
+    to_py(py, &v)
+}
+
+pub(crate) fn live_values<'py>(
+    py: Python<'py>,
+    core: &mut Core,
+    device: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let values = with_kind(core, device, |k, sim, port| k.live_values(sim, port))?;
+    let d = PyDict::new(py);
+    for v in values {
+        d.set_item(v.name, v.value)?;
+    }
+    Ok(d)
+}
+
+pub(crate) fn inject(core: &mut Core, device: &str, fault: Option<&str>) -> PyResult<()> {
+    with_kind(core, device, |k, sim, port| k.inject(sim, port, fault))?
+        .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))
+}

@@ -424,6 +424,41 @@ impl Simulation {
         crate::devices::raise_alarm(&mut core, device, alarm)
     }
 
+    /// Set the physical quantity `name` of `device` (an input, a load, a module pulled out)
+    /// to `value` now, as ``[[at]] action = "set"`` in scenario scripts does: the kind's
+    /// signal names (``"digital_input.4"``, ``"analog_input.2"``, …; the error lists them).
+    fn set_signal(&self, device: &str, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let mut core = self.shared.lock();
+        crate::devices::set_signal(&mut core, device, name, value)
+    }
+
+    /// Read the physical quantity `name` of `device` (an output, an alarm), as
+    /// ``[[expect]] signal = …`` in scenario scripts does.
+    fn read_signal<'py>(
+        &self,
+        py: Python<'py>,
+        device: &str,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let mut core = self.shared.lock();
+        crate::devices::read_signal(py, &mut core, device, name)
+    }
+
+    /// The live values of `device`'s model by name (measurements, inputs, outputs; digital
+    /// ones 0 or 1), as the dashboards show them.
+    fn live_values<'py>(&self, py: Python<'py>, device: &str) -> PyResult<Bound<'py, PyDict>> {
+        let mut core = self.shared.lock();
+        crate::devices::live_values(py, &mut core, device)
+    }
+
+    /// Give `device` the internal defect `fault` in its kind's words, or repair it with
+    /// `None` (``action = "inject"``/``"repair"`` in scenario scripts).
+    #[pyo3(signature = (device, fault))]
+    fn inject(&self, device: &str, fault: Option<&str>) -> PyResult<()> {
+        let mut core = self.shared.lock();
+        crate::devices::inject(&mut core, device, fault)
+    }
+
     /// Power `device` on or off (`power_on`/`power_off` in scenario scripts).
     fn power(&self, device: &str, on: bool) -> PyResult<()> {
         self.shared

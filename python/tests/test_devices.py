@@ -58,3 +58,30 @@ def test_opendrive_parameters_by_name():
         sim.param("drive", 48)
     sim.set_digital_input("drive", 1, True)
     assert sim.drive("drive")["inputs"][0] is True
+
+
+def test_signals_and_internal_faults_as_scenario_scripts_set_them():
+    sim = cantwin.Simulation.load(SCENARIOS / "adv200-example.toml")
+    sim.advance(0.5)
+    live = sim.live_values("drive")
+    assert live["digital_input.4"] == 1.0 and live["digital_input.5"] == 0.0
+    assert live["analog_input.2"] == pytest.approx(2.5, abs=1e-3)
+    sim.set_signal("drive", "digital_input.5", True)
+    sim.set_signal("drive", "analog_input.1", -3.0)
+    sim.advance(0.01)
+    live = sim.live_values("drive")
+    assert live["digital_input.5"] == 1.0 and live["analog_input.1"] == pytest.approx(-3.0, abs=1e-3)  # 16-bit converter
+    with pytest.raises(ValueError, match="digital_input.1"):
+        sim.set_signal("drive", "digital_input.9", True)
+    with pytest.raises(ValueError, match="-10"):
+        sim.set_signal("drive", "analog_input.1", 12.0)
+    # FF04: the card's CAN interface fails (an internal card fault of the EXP-CAN manual),
+    # found at the next drive reset: a power cycle.
+    sim.inject("drive", "FF04")
+    sim.power("drive", False)
+    sim.power("drive", True)
+    sim.advance(0.5)
+    assert 0xFF04 in sim.drive("drive")["opt_bus_faults"]
+    sim.inject("drive", None)
+    with pytest.raises(ValueError, match="no internal faults"):
+        sim.inject("master", "FF04")
