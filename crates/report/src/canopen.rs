@@ -24,8 +24,6 @@ pub enum EdsError {
 /// Meaning of an EMCY error code (CiA 301 §7.2.7.1, table 21), most specific first.
 pub fn emcy_meaning(code: u16) -> &'static str {
     match code {
-        0x0000 => "error reset or no error",
-        0x1000 => "generic error",
         0x8110 => "CAN overrun (objects lost)",
         0x8120 => "CAN in error passive mode",
         0x8130 => "life guard error or heartbeat error",
@@ -36,6 +34,9 @@ pub fn emcy_meaning(code: u16) -> &'static str {
         0x8230 => "DAM MPDO not processed, destination object not available",
         0x8240 => "unexpected SYNC data length",
         0x8250 => "RPDO timeout",
+        // CiA 301 table 21: the whole 00xx range is "error reset or no error", 10xx generic.
+        _ if code >> 8 == 0x00 => "error reset or no error",
+        _ if code >> 8 == 0x10 => "generic error",
         _ => match code >> 12 {
             0x2 => "current",
             0x3 => "voltage",
@@ -161,7 +162,7 @@ pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
         Message::Time(t) => format!("TIME {}", t.0),
         Message::Pdo { kind, node, .. } => format!("PDO {kind:?} node {node}"),
         Message::SdoRequest { node, .. } => match msg.sdo_request() {
-            Some(Ok(r)) => format!("SDO request to node {node}: {r:?}"),
+            Some(Ok(r)) => format!("SDO request to node {node}: {r}"),
             _ => format!("SDO request to node {node} (segment or malformed)"),
         },
         Message::SdoResponse { node, .. } => match msg.sdo_response() {
@@ -169,7 +170,7 @@ pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
                 "SDO abort from node {node} {:#06X}sub{}: {code}",
                 mux.index, mux.sub
             ),
-            Some(Ok(r)) => format!("SDO response from node {node}: {r:?}"),
+            Some(Ok(r)) => format!("SDO response from node {node}: {r}"),
             _ => format!("SDO response from node {node} (segment or malformed)"),
         },
         Message::ErrorControl(ec) => match ec {
@@ -202,6 +203,33 @@ mod tests {
         assert_eq!(emcy_meaning(0xFF01), "device specific");
         assert_eq!(emcy_meaning(0xF001), "additional functions");
         assert_eq!(emcy_meaning(0x0000), "error reset or no error");
+        assert_eq!(emcy_meaning(0x0080), "error reset or no error");
+        assert_eq!(emcy_meaning(0x1000), "generic error");
+        assert_eq!(emcy_meaning(0x10FF), "generic error");
+        assert_eq!(emcy_meaning(0x1100), "unknown error code");
+    }
+
+    #[test]
+    fn sdo_frames_are_described_in_protocol_terms() {
+        let none = PdoDecoder::new();
+        let upload = Frame::data(
+            Id::standard(0x605).unwrap(),
+            &[0x40, 0x18, 0x10, 1, 0, 0, 0, 0],
+        )
+        .unwrap();
+        assert_eq!(
+            describe(&upload, &none),
+            "SDO request to node 5: upload 0x1018sub1"
+        );
+        let answer = Frame::data(
+            Id::standard(0x585).unwrap(),
+            &[0x43, 0x18, 0x10, 1, 0x78, 0x56, 0x34, 0x12],
+        )
+        .unwrap();
+        assert_eq!(
+            describe(&answer, &none),
+            "SDO response from node 5: upload 0x1018sub1: expedited [78 56 34 12]"
+        );
     }
 
     #[test]
