@@ -399,6 +399,17 @@ fn web_controls_answer_bad_requests_with_4xx_and_a_message() {
     );
     assert_eq!(status, 400, "{v}");
     assert!(v["message"].as_str().unwrap().contains("-10–10"), "{v}");
+    // Raw counts of a TM3 analog input, volts of an ADV200 one.
+    let (status, v) = post(
+        "/api/input",
+        r#"{"device":"island","input":"analog_input.3.0","value":5000}"#,
+    );
+    assert_eq!(status, 200, "{v}");
+    let (status, v) = post(
+        "/api/input",
+        r#"{"device":"drive","input":"analog_input.2","value":-2.5}"#,
+    );
+    assert_eq!(status, 200, "{v}");
     // Faults use the vocabulary and checks of the scenarios' [[at]] tables.
     let (status, v) = post(
         "/api/fault",

@@ -421,6 +421,13 @@ impl Dashboard {
                     Some(Role::DigitalInput) => {
                         return Err(format!("{input} is a digital input: 0 or 1, not {value}"));
                     }
+                    // Whole numbers go as integers: raw counts (TM3) take nothing else, and
+                    // the kinds that take volts or hertz read integers as numbers too.
+                    Some(Role::AnalogInput { min, max })
+                        if (min..=max).contains(&value) && value.fract() == 0.0 =>
+                    {
+                        toml::Value::Integer(value as i64)
+                    }
                     Some(Role::AnalogInput { min, max }) if (min..=max).contains(&value) => {
                         toml::Value::Float(value)
                     }
