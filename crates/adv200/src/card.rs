@@ -528,11 +528,18 @@ impl Adv200 {
         self.dirty = false;
     }
 
-    /// The DeviceNet (OP green, AL red) LEDs (manual "LEDs" table), if the card runs
-    /// DeviceNet.
+    /// The DeviceNet (OP green, AL red) LEDs (manual "LEDs" table), if the card is set to
+    /// DeviceNet. A card that could not start for a configuration fault (FFC5, FFC6) or an
+    /// internal error (FF04) shows OP off, AL on: "Fault grave (errore di configurazione,
+    /// errore interno)".
     pub fn devicenet_leds(&self) -> Option<(Led, Led)> {
-        let slave = self.dnet.as_ref()?;
-        Some(slave.network_status().leds())
+        match &self.dnet {
+            Some(slave) => Some(slave.network_status().leds()),
+            None if self.powered && self.latched.ty == 2 && self.sticky.is_some() => {
+                Some((Led::Off, Led::On))
+            }
+            None => None,
+        }
     }
 
     /// The DeviceNet slave, if the card runs DeviceNet.

@@ -140,6 +140,13 @@ fn manual_3_7_1_configuration_faults() {
     assert_eq!(cfg("1M", 12), (vec![0xFFC5], 0));
     assert_eq!(cfg("500k", 64), (vec![0xFFC6], 0));
     assert_eq!(cfg("500k", 0), (vec![0xFFC6], 0));
+    // LED table: OP off, AL on, "Fault grave (errore di configurazione …)".
+    let h = common::H::new(Adv200Config::default(), |d| {
+        d.set_param_str(par::FIELDBUS_TYPE, "DeviceNet").unwrap();
+        d.set_param_str(par::FIELDBUS_BAUDRATE, "1M").unwrap();
+        d.set_param(par::FIELDBUS_ADDRESS, 12).unwrap();
+    });
+    assert_eq!(h.d.devicenet_leds(), Some((Led::Off, Led::On)));
     // Configured: the duplicate MAC ID check request goes out at power-up.
     let (faults, frames) = cfg("125k", 63);
     assert!(faults.is_empty());
@@ -328,6 +335,14 @@ fn manual_3_7_1_internal_errors_ff04_and_ffb4_in_devicenet() {
     };
     // FF04: the CAN interface does not start, nothing on the bus.
     assert_eq!(cfg(CardFault::CanInit), (vec![0xFF04], 0, false));
+    // LED table: OP off, AL on, "Fault grave (… errore interno)".
+    let h = common::H::new(Adv200Config::default(), |d| {
+        d.set_param_str(par::FIELDBUS_TYPE, "DeviceNet").unwrap();
+        d.set_param_str(par::FIELDBUS_BAUDRATE, "500k").unwrap();
+        d.set_param(par::FIELDBUS_ADDRESS, 12).unwrap();
+        d.inject_card_fault(CardFault::CanInit);
+    });
+    assert_eq!(h.d.devicenet_leds(), Some((Led::Off, Led::On)));
     // FFB4+n−1: the card runs (its duplicate MAC ID check goes out) in Opt Bus Fault.
     assert_eq!(cfg(CardFault::Database(2)), (vec![0xFFB5], 1, true));
 }
