@@ -1014,8 +1014,8 @@ enum Step<'a> {
 
 /// Build `scenario` without running it and check what its script refers to against the
 /// built devices: a `value` expectation must name an object the device's kind can read
-/// (it has an object dictionary holding that index and sub-index). Returns the built
-/// scenario, at time zero.
+/// (it has an object dictionary holding that index and sub-index), a `signal` expectation
+/// a signal its kind reads. Returns the built scenario, at time zero.
 pub fn validate(
     scenario: &Scenario,
     registry: &Registry,
@@ -1023,6 +1023,25 @@ pub fn validate(
 ) -> Result<Built, ScenarioError> {
     let built = scenario.build(registry, env)?;
     for (i, e) in scenario.script.expectations.iter().enumerate() {
+        if let Expect::Signal { device, name, .. } = &e.what {
+            let problem = match built.device(device) {
+                None => Some(format!("no device named {device:?}")),
+                Some(d) => registry
+                    .get(&d.kind)
+                    .map(|k| k.read_signal(&built.sim, d.port, name))
+                    .and_then(Result::err),
+            };
+            if let Some(message) = problem {
+                return Err(ScenarioError::Invalid {
+                    at: Located {
+                        file: scenario.file.clone(),
+                        line: Some(e.line),
+                        key: Some(format!("expect[{i}].signal")),
+                    },
+                    message,
+                });
+            }
+        }
         if let Expect::Value {
             device, index, sub, ..
         } = &e.what
@@ -1606,6 +1625,27 @@ mod tests {
             "\n[[expect]]\nat_ms = 1\nsignal = { device = \"node5\", name = \"x\", equals = 1, tolerance = -1 }\n",
         );
         assert!(e.contains("`tolerance` is a number"), "{e}");
+    }
+
+    #[test]
+    fn validate_refuses_a_signal_the_kind_cannot_read() {
+        let s = Scenario::parse(
+            &format!(
+                "{HEAD}\n[[expect]]\nat_ms = 1\nsignal = {{ device = \"node5\", name = \"speed\", equals = 1 }}\n"
+            ),
+            "s.toml",
+        )
+        .unwrap();
+        let e = validate(&s, &Registry::builtin(), &BuildEnv::default())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains(
+                "s.toml:12: key `expect[0].signal`: a cia301 device has no signal \"speed\" to read"
+            ),
+            "{e}"
+        );
     }
 
     #[test]
