@@ -17,6 +17,7 @@ release ``cantwin`` binary for the gateway:
 """
 
 import datetime
+import os
 import platform
 import re
 import statistics
@@ -160,7 +161,7 @@ under 1 s.
 |---|---|---|
 {rows}
 
-Measured {datetime.date.today().isoformat()} on {platform.machine()}, Python {platform.python_version()}, python-canopen {canopen.__version__}.
+Measured {datetime.date.today().isoformat()} on {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, python-canopen {canopen.__version__}.
 Reproduce: `CANTWIN_BIN=target/release/cantwin target/interop-venv/bin/python python/bench/bench_inprocess.py {n} --write`
 <!-- /bench:python-inprocess -->"""
 
