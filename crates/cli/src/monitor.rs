@@ -8,12 +8,13 @@ use std::time::{Duration as WallDuration, Instant as WallInstant};
 
 use anyhow::{Context, Result, bail};
 use cantwin_adv200::Adv200;
+use cantwin_bus::Simulation;
 use cantwin_can::{BitRate, Duration};
 use cantwin_canopen::device::Device;
 use cantwin_canopen::od::{ObjectDictionary, Value};
 use cantwin_monitor::{Config, DeviceKind, NetworkView};
 use cantwin_scenario::kinds::cia301::Cia301Node;
-use cantwin_scenario::{BuildEnv, Built, Registry, Scenario};
+use cantwin_scenario::{BuildEnv, Built, BuiltDevice, Registry, Scenario};
 use cantwin_tm3::Tm3Coupler;
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 
@@ -68,38 +69,44 @@ fn od_identity(od: &ObjectDictionary) -> Option<DeviceKind> {
 /// The CANopen nodes of a built scenario, in file order: the twins' node-IDs and kinds as
 /// they are at power-up (DeviceNet and CAL devices, generators and masters have none).
 pub fn declared_nodes(built: &Built) -> Vec<Declared> {
-    let mut nodes = Vec::new();
-    for d in &built.devices {
-        let sim = &built.sim;
-        let found = if let Some(n) = sim.node::<Cia301Node>(d.port) {
-            Some((n.device().node_id(), od_identity(n.device().od())))
-        } else if let Some(n) = sim.node::<Device>(d.port) {
-            Some((n.node_id(), od_identity(n.od())))
-        } else if let Some(n) = sim.node::<Tm3Coupler>(d.port) {
-            Some((n.device().node_id(), Some(DeviceKind::tm3())))
-        } else if let Some(n) = sim.node::<Adv200>(d.port) {
-            // The CiA 402 personality has a power drive state; the CANopen one the PDC
-            // words of the worked example.
-            n.device().map(|dev| {
-                let kind = if n.power_state().is_some() {
-                    DeviceKind::adv200_ds402()
-                } else {
-                    DeviceKind::adv200_example()
-                };
-                (dev.node_id(), Some(kind))
-            })
-        } else {
-            None
-        };
-        if let Some((node, kind)) = found {
-            nodes.push(Declared {
+    built
+        .devices
+        .iter()
+        .filter_map(|d| {
+            let (node, kind) = declared_kind(&built.sim, d)?;
+            Some(Declared {
                 node,
                 name: d.name.clone(),
                 kind,
-            });
-        }
+            })
+        })
+        .collect()
+}
+
+/// The node-ID of a CANopen twin and the monitor kind its PDOs read as, from the twin
+/// itself (so an ADV200 reads as its active personality), or `None` for a device that is
+/// not a CANopen node.
+pub fn declared_kind(sim: &Simulation, d: &BuiltDevice) -> Option<(u8, Option<DeviceKind>)> {
+    if let Some(n) = sim.node::<Cia301Node>(d.port) {
+        Some((n.device().node_id(), od_identity(n.device().od())))
+    } else if let Some(n) = sim.node::<Device>(d.port) {
+        Some((n.node_id(), od_identity(n.od())))
+    } else if let Some(n) = sim.node::<Tm3Coupler>(d.port) {
+        Some((n.device().node_id(), Some(DeviceKind::tm3())))
+    } else if let Some(n) = sim.node::<Adv200>(d.port) {
+        // The CiA 402 personality has a power drive state; the CANopen one the PDC
+        // words of the worked example.
+        n.device().map(|dev| {
+            let kind = if n.power_state().is_some() {
+                DeviceKind::adv200_ds402()
+            } else {
+                DeviceKind::adv200_example()
+            };
+            (dev.node_id(), Some(kind))
+        })
+    } else {
+        None
     }
-    nodes
 }
 
 /// The dictionary of a generic CANopen twin (`cia301` and `eds` kinds) on `port`.

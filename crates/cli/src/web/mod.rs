@@ -117,6 +117,9 @@ struct DeviceState {
     bus_name: String,
     /// Learned from the COB-IDs of the boot-up, heartbeat and EMCY messages its port sends.
     node_id: Option<u8>,
+    /// How the monitor reads its PDOs, from the twin itself (an ADV200 in its active
+    /// personality), when it is a CANopen node.
+    monitor_kind: Option<cantwin_monitor::DeviceKind>,
 }
 
 #[derive(Debug, Clone)]
@@ -225,6 +228,7 @@ impl Dashboard {
                     bus,
                     bus_name: buses.get(bus).map(|b| b.0.clone()).unwrap_or_default(),
                     node_id: None,
+                    monitor_kind: crate::monitor::declared_kind(sim, d).and_then(|(_, k)| k),
                 }
             })
             .collect();
@@ -687,7 +691,9 @@ impl Dashboard {
             view.declare(
                 node,
                 Some(d.info.name.clone()),
-                cantwin_monitor::DeviceKind::builtin(&d.info.kind),
+                d.monitor_kind
+                    .clone()
+                    .or_else(|| cantwin_monitor::DeviceKind::builtin(&d.info.kind)),
             );
         }
     }
