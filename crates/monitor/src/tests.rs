@@ -317,7 +317,7 @@ fn a_kind_names_its_own_emcy_codes_in_the_table_and_the_stream() {
     assert_eq!(n3.emcy_meaning(), Some("analog input interrupts disabled"));
     assert_eq!(
         n3.last_emcy.as_ref().unwrap().meaning(),
-        "unknown error code"
+        "error reset or no error"
     );
     let texts: Vec<&str> = v.frames().map(|e| e.text.as_str()).collect();
     assert!(
@@ -325,11 +325,15 @@ fn a_kind_names_its_own_emcy_codes_in_the_table_and_the_stream() {
         "{}",
         texts[0]
     );
-    // A node of no known kind keeps the generic meaning.
-    assert!(texts[1].contains("(unknown error code)"), "{}", texts[1]);
+    // A node of no known kind keeps the generic meaning (CiA 301 table 21: 00xx).
+    assert!(
+        texts[1].contains("(error reset or no error)"),
+        "{}",
+        texts[1]
+    );
     assert_eq!(
         v.node(4).unwrap().emcy_meaning(),
-        Some("unknown error code")
+        Some("error reset or no error")
     );
 }
 
