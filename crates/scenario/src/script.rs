@@ -35,10 +35,10 @@ use cantwin_can::{BitRate, ErrorState, Frame, Id, Instant, Node, Outbox};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::build::{BuildEnv, Built};
+use crate::build::{BuildEnv, Built, BuiltDevice};
 use crate::error::{Located, ScenarioError, line_of};
 use crate::model::{BusSpec, DeviceSpec, Scenario};
-use crate::registry::Registry;
+use crate::registry::{DeviceKind, Registry};
 
 /// How long the runner goes on after the last action or expectation window, so that a
 /// frame ending exactly at a window's end is recorded.
@@ -1425,11 +1425,9 @@ fn probe(
             prefix,
             ..
         } => {
-            let Some(d) = built.device(device) else {
-                return (false, format!("no device {device:?}"));
-            };
-            let Some(kind) = registry.get(&d.kind) else {
-                return (false, format!("no kind {:?}", d.kind));
+            let (d, kind) = match device_and_kind(built, registry, device) {
+                Ok(found) => found,
+                Err(e) => return (false, e),
             };
             match kind.read_object(&built.sim, d.port, *index, *sub) {
                 None => (
@@ -1488,11 +1486,9 @@ fn probe(
             tolerance,
             ..
         } => {
-            let Some(d) = built.device(device) else {
-                return (false, format!("no device {device:?}"));
-            };
-            let Some(kind) = registry.get(&d.kind) else {
-                return (false, format!("no kind {:?}", d.kind));
+            let (d, kind) = match device_and_kind(built, registry, device) {
+                Ok(found) => found,
+                Err(e) => return (false, e),
             };
             match kind.read_signal(&built.sim, d.port, name) {
                 Ok(seen) => (
@@ -1504,6 +1500,21 @@ fn probe(
         }
         Expect::Frame { .. } => (false, "not a probe".into()),
     }
+}
+
+/// The device a probe names and its kind; the error says which of the two is missing.
+fn device_and_kind<'a>(
+    built: &'a Built,
+    registry: &'a Registry,
+    device: &str,
+) -> Result<(&'a BuiltDevice, &'a dyn DeviceKind), String> {
+    let d = built
+        .device(device)
+        .ok_or_else(|| format!("no device {device:?}"))?;
+    let kind = registry
+        .get(&d.kind)
+        .ok_or_else(|| format!("no kind {:?}", d.kind))?;
+    Ok((d, kind))
 }
 
 #[cfg(test)]
