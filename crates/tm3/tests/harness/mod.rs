@@ -58,19 +58,7 @@ pub fn start(c: &mut Tm3Coupler, t: Instant) -> Vec<String> {
 /// Expedited upload: the value's bytes, or the abort code.
 pub fn read(c: &mut Tm3Coupler, t: Instant, index: u16, sub: u8) -> Result<Vec<u8>, u32> {
     let [lo, hi] = index.to_le_bytes();
-    let mut out = Outbox::new();
-    c.on_frame(
-        &Frame::std(0x603, &[0x40, lo, hi, sub, 0, 0, 0, 0]).unwrap(),
-        t,
-        &mut out,
-    );
-    let f = out
-        .frames()
-        .iter()
-        .find(|f| f.to_string().starts_with("583#"))
-        .cloned()
-        .unwrap();
-    let d = f.data_bytes();
+    let d = sdo(c, t, [0x40, lo, hi, sub, 0, 0, 0, 0]);
     match d[0] {
         0x80 => Err(u32::from_le_bytes([d[4], d[5], d[6], d[7]])),
         b if b & 0x02 != 0 => {
@@ -86,19 +74,7 @@ pub fn read(c: &mut Tm3Coupler, t: Instant, index: u16, sub: u8) -> Result<Vec<u
             let mut data = Vec::new();
             let mut toggle = 0u8;
             loop {
-                let mut out = Outbox::new();
-                c.on_frame(
-                    &Frame::std(0x603, &[0x60 | toggle, 0, 0, 0, 0, 0, 0, 0]).unwrap(),
-                    t,
-                    &mut out,
-                );
-                let f = out
-                    .frames()
-                    .iter()
-                    .find(|f| f.to_string().starts_with("583#"))
-                    .cloned()
-                    .unwrap();
-                let d = f.data_bytes();
+                let d = sdo(c, t, [0x60 | toggle, 0, 0, 0, 0, 0, 0, 0]);
                 let n = 7 - usize::from(d[0] >> 1 & 7);
                 data.extend_from_slice(&d[1..1 + n]);
                 if d[0] & 1 != 0 {
@@ -128,27 +104,23 @@ pub fn write(c: &mut Tm3Coupler, t: Instant, index: u16, sub: u8, data: &[u8]) -
     f[2] = hi;
     f[3] = sub;
     f[4..4 + data.len()].copy_from_slice(data);
-    let mut out = Outbox::new();
-    c.on_frame(&Frame::std(0x603, &f).unwrap(), t, &mut out);
-    let f = out
-        .frames()
-        .iter()
-        .find(|f| f.to_string().starts_with("583#"))
-        .cloned()
-        .unwrap();
-    let d = f.data_bytes();
-    if d[0] == 0x80 {
-        Err(u32::from_le_bytes([d[4], d[5], d[6], d[7]]))
-    } else {
-        assert_eq!(d[0], 0x60);
-        Ok(())
+    let d = sdo(c, t, f);
+    if let Some(code) = abort_of(d) {
+        return Err(code);
     }
+    assert_eq!(d[0], 0x60);
+    Ok(())
 }
 
 /// Feeds one SDO request at `t` and returns the server's answer (0x583).
 fn sdo(c: &mut Tm3Coupler, t: Instant, req: [u8; 8]) -> [u8; 8] {
     let mut out = Outbox::new();
     c.on_frame(&Frame::std(0x603, &req).unwrap(), t, &mut out);
+    answer(&out)
+}
+
+/// The server's SDO answer (0x583, always 8 bytes: CiA 301 §7.2.4.3) among `out`'s frames.
+fn answer(out: &Outbox) -> [u8; 8] {
     let f = out
         .frames()
         .iter()
@@ -156,6 +128,22 @@ fn sdo(c: &mut Tm3Coupler, t: Instant, req: [u8; 8]) -> [u8; 8] {
         .cloned()
         .unwrap();
     f.data_bytes().try_into().unwrap()
+}
+
+/// Initiates a download with size indicated (CiA 301 §7.2.4.3.3, §7.2.4.3.9): the server's
+/// answer, or its abort code.
+fn initiate_download(
+    c: &mut Tm3Coupler,
+    t: Instant,
+    first: u8,
+    index: u16,
+    sub: u8,
+    size: usize,
+) -> Result<[u8; 8], u32> {
+    let [lo, hi] = index.to_le_bytes();
+    let [s0, s1, s2, s3] = (size as u32).to_le_bytes();
+    let d = sdo(c, t, [first, lo, hi, sub, s0, s1, s2, s3]);
+    abort_of(d).map_or(Ok(d), Err)
 }
 
 fn abort_of(d: [u8; 8]) -> Option<u32> {
@@ -171,12 +159,7 @@ pub fn write_segmented(
     sub: u8,
     data: &[u8],
 ) -> Result<(), u32> {
-    let [lo, hi] = index.to_le_bytes();
-    let [s0, s1, s2, s3] = (data.len() as u32).to_le_bytes();
-    let d = sdo(c, t, [0x21, lo, hi, sub, s0, s1, s2, s3]);
-    if let Some(code) = abort_of(d) {
-        return Err(code);
-    }
+    let d = initiate_download(c, t, 0x21, index, sub, data.len())?;
     assert_eq!(d[0], 0x60);
     let mut toggle = 0u8;
     let chunks: Vec<&[u8]> = data.chunks(7).collect();
@@ -204,12 +187,7 @@ pub fn write_block(
     sub: u8,
     data: &[u8],
 ) -> Result<(), u32> {
-    let [lo, hi] = index.to_le_bytes();
-    let [s0, s1, s2, s3] = (data.len() as u32).to_le_bytes();
-    let d = sdo(c, t, [0xC2, lo, hi, sub, s0, s1, s2, s3]);
-    if let Some(code) = abort_of(d) {
-        return Err(code);
-    }
+    let d = initiate_download(c, t, 0xC2, index, sub, data.len())?;
     assert_eq!(d[0] & 0xFB, 0xA0);
     let chunks: Vec<&[u8]> = data.chunks(7).collect();
     let mut out = Outbox::new();
@@ -220,15 +198,9 @@ pub fn write_block(
         req[1..1 + chunk.len()].copy_from_slice(chunk);
         c.on_frame(&Frame::std(0x603, &req).unwrap(), t, &mut out);
     }
-    let ack = out
-        .frames()
-        .iter()
-        .find(|f| f.to_string().starts_with("583#"))
-        .cloned()
-        .unwrap();
-    let ack = ack.data_bytes();
-    if ack[0] == 0x80 {
-        return Err(u32::from_le_bytes([ack[4], ack[5], ack[6], ack[7]]));
+    let ack = answer(&out);
+    if let Some(code) = abort_of(ack) {
+        return Err(code);
     }
     assert_eq!((ack[0], usize::from(ack[1])), (0xA2, chunks.len()));
     let unused = (7 * chunks.len() - data.len()) as u8;
