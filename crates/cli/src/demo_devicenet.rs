@@ -3,7 +3,7 @@
 //! virtual time.
 
 use anyhow::{Context, Result};
-use cantwin_bus::{BusEvent, PortConfig, Recorder};
+use cantwin_bus::{BusEvent, BusId, PortConfig, PortId, Recorder, Simulation};
 use cantwin_can::{Duration, Instant};
 use cantwin_devicenet::wire::{MacId, choice};
 use cantwin_devicenet::{Scanner, ScannerConfig, ScannerEvent};
@@ -26,6 +26,40 @@ params = { 4000 = "DeviceNet" }
 analog_inputs = [0.0, 2.5]
 "#;
 
+/// Attaches cantwin's scanner (MAC ID 0) to `bus`, beside the ADV200 at MAC ID 12 as in the
+/// manual's worked example (§3.9): the scanner's port and the drive's MAC ID.
+pub(crate) fn attach_scanner(sim: &mut Simulation, bus: BusId) -> Result<(PortId, MacId)> {
+    let mac0 = MacId::new(0).context("MAC ID")?;
+    let drive = MacId::new(12).context("MAC ID")?;
+    let scanner = sim.attach(
+        bus,
+        Scanner::new(ScannerConfig::new(mac0, 1, 2)),
+        PortConfig::default(),
+    )?;
+    Ok((scanner, drive))
+}
+
+/// Has the scanner on `scanner` allocate the explicit and polled I/O connections of `drive`,
+/// set their expected packet rate, and poll it every `cycle` from `first` with the worked
+/// example's output (§3.9): control word 0x0103 (enable, start, digital output 3), Ramp
+/// ref 1 = 1500 rpm, 6 bytes expected back. Events queued so far are dropped.
+pub(crate) fn start_polling(
+    sim: &mut Simulation,
+    scanner: PortId,
+    drive: MacId,
+    cycle: Duration,
+    first: Instant,
+) -> Result<()> {
+    let m = sim.node_mut::<Scanner>(scanner).context("scanner")?;
+    while m.poll_event().is_some() {}
+    m.allocate(drive, choice::EXPLICIT | choice::POLLED)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    m.set_expected_packet_rate(drive, 2, 100)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    m.start_polling(drive, cycle, &[0x03, 0x01, 0xDC, 0x05], 6, first);
+    Ok(())
+}
+
 fn hex(data: &[u8]) -> String {
     data.iter()
         .map(|b| format!("{b:02X}"))
@@ -38,13 +72,7 @@ pub fn run() -> Result<()> {
     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let bus = built.bus("dnet").context("bus")?;
     let mut sim = built.sim;
-    let mac0 = MacId::new(0).context("MAC ID")?;
-    let drive = MacId::new(12).context("MAC ID")?;
-    let scanner = sim.attach(
-        bus,
-        Scanner::new(ScannerConfig::new(mac0, 1, 2)),
-        PortConfig::default(),
-    )?;
+    let (scanner, drive) = attach_scanner(&mut sim, bus)?;
     let tap = sim.bus_mut(bus).context("bus")?.add_tap(Recorder::new());
     let at = |ms: u64| Instant::ZERO + Duration::from_millis(ms);
 
@@ -80,21 +108,13 @@ pub fn run() -> Result<()> {
     );
     println!("rate, and polls every 10 ms with the worked example's output: control word 0x0103");
     println!("(enable, start, digital output 3) and Ramp ref 1 = 1500 rpm:");
-    {
-        let m = sim.node_mut::<Scanner>(scanner).context("scanner")?;
-        while m.poll_event().is_some() {}
-        m.allocate(drive, choice::EXPLICIT | choice::POLLED)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        m.set_expected_packet_rate(drive, 2, 100)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        m.start_polling(
-            drive,
-            Duration::from_millis(10),
-            &[0x03, 0x01, 0xDC, 0x05],
-            6,
-            at(2110),
-        );
-    }
+    start_polling(
+        &mut sim,
+        scanner,
+        drive,
+        Duration::from_millis(10),
+        at(2110),
+    )?;
     sim.run_until(at(2140));
     {
         let rec = sim

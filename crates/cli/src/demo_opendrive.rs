@@ -26,7 +26,8 @@ params = { P21 = 2.0, P22 = 2.0, C48 = 1, C52 = 1 }
 load_torque_pct = 20.0
 "#;
 
-fn request(
+/// Sends `req` on `object` from the CAL master on `port` now (CMS, CiA DS 202).
+pub(crate) fn request(
     sim: &mut Simulation,
     port: PortId,
     object: cantwin_cal::ObjectIndex,

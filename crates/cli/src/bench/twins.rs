@@ -8,12 +8,13 @@ use anyhow::{Context, Result, anyhow, bail};
 use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
 use cantwin_cal::{CmsClient, Payload, Request};
 use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
-use cantwin_devicenet::wire::{MacId, choice};
-use cantwin_devicenet::{Scanner, ScannerConfig};
+use cantwin_devicenet::Scanner;
 use cantwin_opendrive::messages::{self, Code, CommandByte, message0_write};
 use cantwin_opendrive::params::Params;
 use cantwin_opendrive::{MESSAGE_0, MESSAGE_1};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
+
+use crate::{demo_devicenet, demo_opendrive};
 
 /// The twins, by benchmark name: (name, what the master does).
 pub const TWINS: &[(&str, &str)] = &[
@@ -202,25 +203,10 @@ fn adv200_devicenet(duration: Duration) -> Result<TwinRun> {
     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let bus = built.bus("can0").context("the scenario's bus can0")?;
     let mut sim = built.sim;
-    let mac0 = MacId::new(0).context("MAC ID")?;
-    let drive = MacId::new(12).context("MAC ID")?;
-    let scanner = sim.attach(
-        bus,
-        Scanner::new(ScannerConfig::new(mac0, 1, 2)),
-        PortConfig::default(),
-    )?;
+    let (scanner, drive) = demo_devicenet::attach_scanner(&mut sim, bus)?;
     // Both ends check for a duplicate MAC ID at power-up (two requests 1 s apart).
     sim.run_until(ms(2100));
-    {
-        let m = sim.node_mut::<Scanner>(scanner).context("scanner")?;
-        while m.poll_event().is_some() {}
-        m.allocate(drive, choice::EXPLICIT | choice::POLLED)
-            .map_err(|e| anyhow!("{e}"))?;
-        m.set_expected_packet_rate(drive, 2, 100)
-            .map_err(|e| anyhow!("{e}"))?;
-        // The worked example's output (§3.9): control word 0x0103, ramp reference 1500 rpm.
-        m.start_polling(drive, CYCLE, &[0x03, 0x01, 0xDC, 0x05], 6, ms(2110));
-    }
+    demo_devicenet::start_polling(&mut sim, scanner, drive, CYCLE, ms(2110))?;
     let r = measure(&mut sim, bus, ms(2200), duration, CYCLE, move |sim, _| {
         if let Some(m) = sim.node_mut::<Scanner>(scanner) {
             while m.poll_event().is_some() {}
@@ -233,23 +219,16 @@ fn adv200_devicenet(duration: Duration) -> Result<TwinRun> {
     Ok(r)
 }
 
+/// The CAL master's request, its earlier answers dropped: the bench reads none of them.
 fn cal_request(
     sim: &mut Simulation,
     port: PortId,
     object: cantwin_cal::ObjectIndex,
     req: Request,
 ) -> Result<()> {
-    let now = sim.now();
-    let mut out = Outbox::new();
     let client = sim.node_mut::<CmsClient>(port).context("the CAL master")?;
     while client.poll_event().is_some() {}
-    client
-        .request(object, req, now, &mut out)
-        .map_err(|e| anyhow!("{e}"))?;
-    for f in out.drain() {
-        sim.transmit(port, f)?;
-    }
-    Ok(())
+    demo_opendrive::request(sim, port, object, req)
 }
 
 fn opendrive(duration: Duration) -> Result<TwinRun> {
