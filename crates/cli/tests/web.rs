@@ -187,20 +187,7 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_moves_its_ch
         return;
     }
     let started = Instant::now();
-    let mut sim = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(["sim", &common::scenario_file("plant.toml")])
-        .args(["--web", "127.0.0.1:0", "--duration", "60"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(sim.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let _sim = Killed(sim);
-    let url = line.strip_prefix("web ").unwrap().trim().to_string();
-    assert!(url.starts_with("http://127.0.0.1:"), "{line}");
+    let (_sim, url) = spawn_sim_with_web("60", &[]);
 
     let port = free_port();
     let driver = Command::new(CHROMEDRIVER)
@@ -331,11 +318,12 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_moves_its_ch
     assert!(took < Duration::from_secs(30), "took {took:?}");
 }
 
-/// `cantwin sim SCENARIO --web 127.0.0.1:0 [EXTRA]`, the child and the dashboard's port.
-fn sim_with_web(extra: &[&str]) -> (Killed, u16) {
+/// `cantwin sim plant.toml --web 127.0.0.1:0 --duration SECONDS [EXTRA]`, the child and the
+/// dashboard's URL as its first line gives it (plain, or JSON with `--json`).
+fn spawn_sim_with_web(seconds: &str, extra: &[&str]) -> (Killed, String) {
     let mut sim = Command::new(env!("CARGO_BIN_EXE_cantwin"))
         .args(["sim", &common::scenario_file("plant.toml")])
-        .args(["--web", "127.0.0.1:0", "--duration", "30"])
+        .args(["--web", "127.0.0.1:0", "--duration", seconds])
         .args(extra)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -352,6 +340,14 @@ fn sim_with_web(extra: &[&str]) -> (Killed, u16) {
     } else {
         line.strip_prefix("web ").unwrap().trim().to_string()
     };
+    assert!(addr.starts_with("http://127.0.0.1:"), "{line}");
+    (sim, addr)
+}
+
+/// `cantwin sim plant.toml --web 127.0.0.1:0 --duration 30 [EXTRA]`, the child and the
+/// dashboard's port.
+fn sim_with_web(extra: &[&str]) -> (Killed, u16) {
+    let (sim, addr) = spawn_sim_with_web("30", extra);
     let port = addr
         .trim_start_matches("http://127.0.0.1:")
         .trim_end_matches('/')
