@@ -355,6 +355,22 @@ impl Tm3Coupler {
         Ok((i, m.spec))
     }
 
+    /// The position of module `module` (1-based) and the sub-index of its analog input
+    /// `channel` (0-based) in 0x6401 (CiA 401 read analog input 16-bit), the island's
+    /// analog inputs numbered in module order.
+    fn analog_input_sub(&self, module: usize, channel: u8) -> Result<(usize, u8), IoError> {
+        let (i, spec) = self.slot(module)?;
+        if channel >= spec.analog_inputs {
+            return Err(IoError::NoChannel { module, channel });
+        }
+        let sub = self
+            .config
+            .island
+            .offsets(i)
+            .map_or(1, |o| o.analog_input + channel + 1);
+        Ok((i, sub))
+    }
+
     fn working(&self, i: usize) -> bool {
         matches!(self.fitted.get(i), Some(Fitted::Module(_)))
             && self.status.get(i) == Some(&Status::Ok)
@@ -435,15 +451,7 @@ impl Tm3Coupler {
         channel: u8,
         value: i16,
     ) -> Result<(), IoError> {
-        let (i, spec) = self.slot(module)?;
-        if channel >= spec.analog_inputs {
-            return Err(IoError::NoChannel { module, channel });
-        }
-        let sub = self
-            .config
-            .island
-            .offsets(i)
-            .map_or(1, |o| o.analog_input + channel + 1);
+        let (i, sub) = self.analog_input_sub(module, channel)?;
         if let Some(v) = self.ai.get_mut(usize::from(sub) - 1) {
             *v = value;
         }
@@ -471,15 +479,7 @@ impl Tm3Coupler {
     /// The physical value of analog input `channel` (0-based) of module `module` (raw
     /// 16-bit, whether or not the module works).
     pub fn analog_input(&self, module: usize, channel: u8) -> Result<i16, IoError> {
-        let (i, spec) = self.slot(module)?;
-        if channel >= spec.analog_inputs {
-            return Err(IoError::NoChannel { module, channel });
-        }
-        let sub = self
-            .config
-            .island
-            .offsets(i)
-            .map_or(1, |o| o.analog_input + channel + 1);
+        let (_, sub) = self.analog_input_sub(module, channel)?;
         Ok(self.ai.get(usize::from(sub) - 1).copied().unwrap_or(0))
     }
 
