@@ -11,6 +11,7 @@ use crate::benchmarks_md;
 
 mod canopen;
 mod process;
+mod python;
 mod twins;
 
 /// The benchmarks `cantwin bench` knows.
@@ -35,12 +36,18 @@ const NAMES: &[(&str, &str)] = &[
         "memory",
         "bytes per CiA 301 device; RSS and start-up time of `cantwin sim` with 127 devices",
     ),
+    (
+        "python",
+        "python-canopen round trips and 64 KiB transfers: the twin vs python-canopen's LocalNode",
+    ),
 ];
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Benchmarks to run (all when none is named): bus, network, fleet, sdo, memory, and one
-    /// per twin: adv200-canopen, adv200-ds402, adv200-devicenet, tm3, opendrive.
+    /// Benchmarks to run (all when none is named): bus, network, fleet, sdo, memory, python,
+    /// and one per twin: adv200-canopen, adv200-ds402, adv200-devicenet, tm3, opendrive.
+    /// `python` needs python-can and python-canopen (the interop suite's virtualenv, or
+    /// CANTWIN_PYTHON); when it is not named it is skipped without them.
     names: Vec<String>,
     /// Record the figures in BENCHMARKS.md.
     #[arg(long)]
@@ -56,6 +63,12 @@ pub struct Args {
     /// count.
     #[arg(long)]
     buses: Option<usize>,
+    /// python: expedited SDO uploads per server.
+    #[arg(long, default_value_t = 10_000, value_parser = clap::value_parser!(u64).range(1..))]
+    requests: u64,
+    /// python: 64 KiB segmented uploads and downloads per server.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    transfers: u64,
     /// List the benchmarks and exit.
     #[arg(long)]
     list: bool,
@@ -94,7 +107,26 @@ pub fn run(args: &Args) -> Result<()> {
     if cfg!(debug_assertions) {
         eprintln!("note: this is a debug build; figures are only meaningful with --release");
     }
+    let root = args.file.parent().unwrap_or(std::path::Path::new(""));
     for name in names {
+        if name == "python"
+            && args.names.is_empty()
+            && let Some(why) = python::missing(root)
+        {
+            eprintln!("bench python: skipped: {why}");
+            continue;
+        }
+        if name == "python" {
+            // python-canopen prints its own progress; a spinner would tear its lines.
+            python::run(
+                root,
+                &args.file,
+                usize::try_from(args.requests).unwrap_or(usize::MAX),
+                usize::try_from(args.transfers).unwrap_or(usize::MAX),
+                args.write,
+            )?;
+            continue;
+        }
         // The benchmarks run inside the simulator's loops: a spinner with the elapsed time
         // shows the run is alive.
         let spinner = crate::output::spinner(&format!("bench {name}"));
