@@ -9,7 +9,8 @@
 //!   power cycles, babbling and bit-rate-mismatched nodes.
 //! * Statistics ([`BusStats`]) and observers ([`Tap`]) for captures and traces.
 //! * A [`Simulation`] of one or more buses in virtual time, or a [`PacedSimulation`] paced to
-//!   the wall clock with [`ExternalPort`]s for other threads.
+//!   the wall clock with [`ExternalPort`]s for other threads, which receive through an
+//!   [`RxQueue`].
 //!
 //! The exact timing model is described in the [`bus`] module.
 //!
@@ -60,6 +61,7 @@ pub mod paced;
 mod port;
 mod queue;
 mod rng;
+mod rx_queue;
 mod sim;
 mod stats;
 mod tap;
@@ -74,6 +76,7 @@ pub use paced::{
 pub use port::{AnyNode, PortConfig, PortStatus};
 pub use queue::TxOrder;
 pub use rng::SplitMix64;
+pub use rx_queue::{RxClosed, RxQueue};
 pub use sim::Simulation;
 pub use stats::{BusStats, IdStats, PortStats};
 pub use tap::{

@@ -40,7 +40,6 @@
 //! # }
 //! ```
 
-use std::collections::VecDeque;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread::JoinHandle;
 use std::time::SystemTime;
@@ -50,6 +49,7 @@ use cantwin_can::{Duration, Frame, Instant, Node, Outbox};
 use crate::error::BusError;
 use crate::ids::{BusId, PortId};
 use crate::port::PortConfig;
+use crate::rx_queue::{RxClosed, RxQueue};
 use crate::sim::Simulation;
 
 /// The mapping between bus time and wall time in a paced simulation.
@@ -116,7 +116,7 @@ struct State {
     bus_origin: Instant,
     slipped: Duration,
     slips: u64,
-    externals: Vec<Arc<RxShared>>,
+    externals: Vec<Arc<RxQueue>>,
 }
 
 impl State {
@@ -353,15 +353,7 @@ impl SimHandle {
         bus: BusId,
         config: ExternalConfig,
     ) -> Result<ExternalPort, BusError> {
-        let rx = Arc::new(RxShared {
-            state: Mutex::new(RxState {
-                frames: VecDeque::with_capacity(config.rx_capacity.min(4096)),
-                capacity: config.rx_capacity.max(1),
-                overruns: 0,
-                closed: false,
-            }),
-            ready: Condvar::new(),
-        });
+        let rx = Arc::new(RxQueue::new(config.rx_capacity));
         let node = ExternalNode {
             rx: Arc::clone(&rx),
         };
@@ -412,47 +404,18 @@ pub struct Received {
     pub at: Instant,
 }
 
-struct RxState {
-    frames: VecDeque<Received>,
-    capacity: usize,
-    overruns: u64,
-    closed: bool,
-}
-
-struct RxShared {
-    state: Mutex<RxState>,
-    ready: Condvar,
-}
-
-impl RxShared {
-    fn lock(&self) -> MutexGuard<'_, RxState> {
-        self.state.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
-    fn close(&self) {
-        self.lock().closed = true;
-        self.ready.notify_all();
-    }
-}
-
 /// The node behind an external port: it hands every frame to the receive buffer.
 struct ExternalNode {
-    rx: Arc<RxShared>,
+    rx: Arc<RxQueue>,
 }
 
 impl Node for ExternalNode {
     fn on_frame(&mut self, frame: &Frame, now: Instant, _out: &mut Outbox) {
-        let mut s = self.rx.lock();
-        if s.frames.len() >= s.capacity {
-            s.overruns += 1;
-            return;
-        }
-        s.frames.push_back(Received {
+        // A full buffer loses the frame and counts it (`RxQueue`'s overflow policy).
+        self.rx.push(Received {
             frame: *frame,
             at: now,
         });
-        drop(s);
-        self.rx.ready.notify_one();
     }
 
     fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
@@ -467,7 +430,7 @@ impl Node for ExternalNode {
 /// it detaches it.
 pub struct ExternalPort {
     port: PortId,
-    rx: Arc<RxShared>,
+    rx: Arc<RxQueue>,
     handle: SimHandle,
 }
 
@@ -494,36 +457,14 @@ impl ExternalPort {
     /// [`BusError::Stopped`] once the simulation stopped or the port was detached and every
     /// buffered frame was taken.
     pub fn recv_timeout(&self, timeout: std::time::Duration) -> Result<Option<Received>, BusError> {
-        let deadline = std::time::Instant::now() + timeout;
-        let mut s = self.rx.lock();
-        loop {
-            if let Some(r) = s.frames.pop_front() {
-                return Ok(Some(r));
-            }
-            if s.closed {
-                return Err(BusError::Stopped);
-            }
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            if left.is_zero() {
-                return Ok(None);
-            }
-            s = self
-                .rx
-                .ready
-                .wait_timeout(s, left)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
-        }
+        self.rx
+            .recv_timeout(timeout)
+            .map_err(|RxClosed| BusError::Stopped)
     }
 
     /// The next received frame if one is buffered.
     pub fn try_recv(&self) -> Result<Option<Received>, BusError> {
-        let mut s = self.rx.lock();
-        match s.frames.pop_front() {
-            Some(r) => Ok(Some(r)),
-            None if s.closed => Err(BusError::Stopped),
-            None => Ok(None),
-        }
+        self.rx.try_recv().map_err(|RxClosed| BusError::Stopped)
     }
 
     /// The port's controller state and counters (error counters, queue, statistics).
@@ -537,7 +478,7 @@ impl ExternalPort {
 
     /// Frames lost because the receive buffer was full.
     pub fn overruns(&self) -> u64 {
-        self.rx.lock().overruns
+        self.rx.overruns()
     }
 
     /// Detach the port from the bus.
@@ -546,10 +487,9 @@ impl ExternalPort {
     }
 
     fn detach_inner(&self) -> Result<(), BusError> {
-        if self.rx.lock().closed {
+        if !self.rx.close() {
             return Ok(());
         }
-        self.rx.close();
         let port = self.port;
         let r = self.handle.with(|sim| match sim.bus_mut(port.bus) {
             Some(bus) => bus.detach(port).map(drop),
