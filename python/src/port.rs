@@ -13,11 +13,10 @@
 //! [`REACTION_GAP`] past it until Python sent something or the simulation's reaction time
 //! (wall clock) passed: the answer goes out at the bus time a fast host would have sent it.
 
-use std::collections::VecDeque;
 use std::sync::atomic::Ordering;
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, PoisonError};
 
-use cantwin_bus::{PortConfig, PortId, TxOrder};
+use cantwin_bus::{PortConfig, PortId, Received, RxClosed, RxQueue, TxOrder};
 use cantwin_can::{Duration, ExtendedId, Frame, Id, Instant, Node, Outbox, StandardId};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -37,55 +36,22 @@ const QUEUE_DEPTH: usize = 32;
 /// How long `send` waits for room in the queue when python-can gives no timeout.
 const SEND_TIMEOUT: Duration = Duration::from_secs(1);
 
-/// A received frame.
-#[derive(Clone, Copy)]
-struct Rx {
-    frame: Frame,
-    at: Instant,
-}
-
-struct RxState {
-    frames: VecDeque<Rx>,
-    capacity: usize,
-    overruns: u64,
-    closed: bool,
-}
-
-struct RxShared {
-    state: Mutex<RxState>,
-    ready: Condvar,
-}
-
-impl RxShared {
-    fn lock(&self) -> MutexGuard<'_, RxState> {
-        self.state.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-}
-
 /// The node on the bus: it buffers every frame for Python and notes the delivery.
 struct PyNode {
-    rx: Arc<RxShared>,
+    rx: Arc<RxQueue>,
     delivery: Arc<Delivery>,
 }
 
 impl Node for PyNode {
     fn on_frame(&mut self, frame: &Frame, now: Instant, _out: &mut Outbox) {
-        let mut s = self.rx.lock();
-        if s.closed {
-            return;
-        }
-        if s.frames.len() >= s.capacity {
-            s.overruns += 1;
-            return;
-        }
-        s.frames.push_back(Rx {
+        // Only a frame Python will see calls for its reaction (module documentation).
+        if self.rx.push(Received {
             frame: *frame,
             at: now,
-        });
-        drop(s);
-        self.delivery.at.store(now.as_nanos(), Ordering::Relaxed);
-        self.delivery.pending.store(true, Ordering::Release);
-        self.rx.ready.notify_all();
+        }) {
+            self.delivery.at.store(now.as_nanos(), Ordering::Relaxed);
+            self.delivery.pending.store(true, Ordering::Release);
+        }
     }
 
     fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
@@ -102,7 +68,7 @@ impl Node for PyNode {
 #[pyclass(module = "cantwin._native", frozen)]
 pub struct Port {
     shared: Arc<Shared>,
-    rx: Arc<RxShared>,
+    rx: Arc<RxQueue>,
     port: PortId,
     bus: String,
 }
@@ -111,15 +77,7 @@ pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyR
     if rx_capacity == 0 {
         return Err(PyValueError::new_err("rx_capacity must be at least 1"));
     }
-    let rx = Arc::new(RxShared {
-        state: Mutex::new(RxState {
-            frames: VecDeque::new(),
-            capacity: rx_capacity,
-            overruns: 0,
-            closed: false,
-        }),
-        ready: Condvar::new(),
-    });
+    let rx = Arc::new(RxQueue::new(rx_capacity));
     let node = PyNode {
         rx: Arc::clone(&rx),
         delivery: Arc::clone(&shared.delivery),
@@ -146,9 +104,9 @@ pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyR
 }
 
 /// What `recv` hands to Python: identifier, extended, remote, DLC, data, bus time (s).
-type Received = (u32, bool, bool, u8, Vec<u8>, f64);
+type PyFrame = (u32, bool, bool, u8, Vec<u8>, f64);
 
-fn to_py(r: Rx) -> Received {
+fn to_py(r: Received) -> PyFrame {
     let (raw, extended) = match r.frame.id() {
         Id::Standard(s) => (u32::from(s.as_raw()), false),
         Id::Extended(e) => (e.as_raw(), true),
@@ -163,10 +121,9 @@ fn to_py(r: Rx) -> Received {
     )
 }
 
-enum Next {
-    Got(Rx),
-    Closed,
-    Empty,
+/// The error of every call on a closed port.
+fn closed() -> PyErr {
+    err("the port is closed")
 }
 
 impl Port {
@@ -183,7 +140,7 @@ impl Port {
                     .map(|s| s.queued)
             })?;
             let Some(queued) = queued else {
-                return Err(err("the port is closed"));
+                return Err(closed());
             };
             if queued < QUEUE_DEPTH {
                 let r = core
@@ -216,25 +173,23 @@ impl Port {
         }
     }
 
-    fn take(&self) -> Next {
-        let mut s = self.rx.lock();
-        match s.frames.pop_front() {
-            Some(r) => Next::Got(r),
-            None if s.closed => Next::Closed,
-            None => Next::Empty,
-        }
+    /// The next buffered frame, if any.
+    fn take(&self) -> PyResult<Option<Received>> {
+        self.rx.try_recv().map_err(|RxClosed| closed())
     }
 
     /// Receive in either mode; `timeout` in seconds, `None` waits until a frame arrives.
-    fn receive(&self, timeout: Option<Duration>, wait_for_answers: bool) -> PyResult<Option<Rx>> {
+    fn receive(
+        &self,
+        timeout: Option<Duration>,
+        wait_for_answers: bool,
+    ) -> PyResult<Option<Received>> {
         let wall_deadline = timeout.map(|t| std::time::Instant::now() + t.into());
         let mut core = self.shared.lock();
         let mut bus_deadline: Option<Option<Instant>> = None;
         loop {
-            match self.take() {
-                Next::Got(r) => return Ok(Some(r)),
-                Next::Closed => return Err(err("the port is closed")),
-                Next::Empty => {}
+            if let Some(r) = self.take()? {
+                return Ok(Some(r));
             }
             let sim = match &mut core.mode {
                 Mode::Virtual(sim) => sim,
@@ -249,14 +204,12 @@ impl Port {
                     if left.is_zero() {
                         return Ok(None);
                     }
-                    let s = self.rx.lock();
-                    if s.frames.is_empty() && !s.closed {
-                        drop(
-                            self.rx
-                                .ready
-                                .wait_timeout(s, left.min(std::time::Duration::from_millis(100)))
-                                .unwrap_or_else(PoisonError::into_inner),
-                        );
+                    let waited = self
+                        .rx
+                        .recv_timeout(left.min(std::time::Duration::from_millis(100)))
+                        .map_err(|RxClosed| closed())?;
+                    if let Some(r) = waited {
+                        return Ok(Some(r));
                     }
                     core = self.shared.lock();
                     continue;
@@ -295,11 +248,7 @@ impl Port {
                 (Some(n), _) => sim.run_until(n),
                 (None, Some(d)) => {
                     sim.run_until(d);
-                    return match self.take() {
-                        Next::Got(r) => Ok(Some(r)),
-                        Next::Closed => Err(err("the port is closed")),
-                        Next::Empty => Ok(None),
-                    };
+                    return self.take();
                 }
                 (None, None) => {
                     // Nothing will ever happen unless another thread sends: wait for that.
@@ -379,7 +328,7 @@ impl Port {
         py: Python<'_>,
         timeout: Option<f64>,
         wait_for_answers: bool,
-    ) -> PyResult<Option<Received>> {
+    ) -> PyResult<Option<PyFrame>> {
         let timeout = timeout.map(secs).transpose()?;
         py.detach(|| self.receive(timeout, wait_for_answers))
             .map(|r| r.map(to_py))
@@ -388,7 +337,7 @@ impl Port {
     /// Frames lost because the receive buffer was full.
     #[getter]
     fn overruns(&self) -> u64 {
-        self.rx.lock().overruns
+        self.rx.overruns()
     }
 
     /// Frames this port sent successfully.
@@ -404,15 +353,11 @@ impl Port {
 
     /// Detach the port from its bus; further calls fail, buffered frames are dropped.
     fn close(&self, py: Python<'_>) -> PyResult<()> {
-        {
-            let mut s = self.rx.lock();
-            if s.closed {
-                return Ok(());
-            }
-            s.closed = true;
-            s.frames.clear();
+        if !self.rx.close() {
+            return Ok(());
         }
-        self.rx.ready.notify_all();
+        // The queue refuses frames once closed, so nothing arrives after this.
+        self.rx.clear();
         let shared = Arc::clone(&self.shared);
         let port = self.port;
         py.detach(move || {
@@ -430,11 +375,7 @@ impl Port {
 
 impl Drop for Port {
     fn drop(&mut self) {
-        let closed = {
-            let mut s = self.rx.lock();
-            std::mem::replace(&mut s.closed, true)
-        };
-        if !closed {
+        if self.rx.close() {
             let port = self.port;
             let mut core = self.shared.lock();
             let _ = core.with_sim(|sim| sim.bus_mut(port.bus()).map(|b| b.detach(port)));
