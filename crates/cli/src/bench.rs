@@ -12,6 +12,7 @@ use crate::benchmarks_md;
 mod canopen;
 mod process;
 mod python;
+mod table_json;
 mod twins;
 
 /// The benchmarks `cantwin bench` knows.
@@ -144,24 +145,10 @@ pub fn run(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// A benchmark's table (`| figure | value |` rows) as one JSON object: the benchmark's
-/// name and its figures by name, emphasis stripped.
-fn table_json(name: &str, table: &str) -> serde_json::Value {
-    let strip = |c: &str| c.replace("**", "").trim().to_string();
-    let mut figures = serde_json::Map::new();
-    for row in table.lines().skip(2) {
-        let cells: Vec<&str> = row.trim().trim_matches('|').split('|').collect();
-        if let [figure, value] = cells.as_slice() {
-            figures.insert(strip(figure), serde_json::Value::String(strip(value)));
-        }
-    }
-    serde_json::json!({"bench": name, "figures": figures})
-}
-
 /// Print a benchmark's table, or its JSON object with `--json`.
 fn print_table(name: &str, table: &str) -> Result<()> {
     if crate::output::json() {
-        crate::output::emit(&table_json(name, table))?;
+        crate::output::emit(&table_json::table_json(name, table))?;
     } else {
         println!("{table}");
     }

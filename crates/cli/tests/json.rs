@@ -144,6 +144,20 @@ fn eds_check_sim_check_fuzz_and_bench_print_json() {
     assert_eq!(v["bench"], "bus");
     let rtf = &v["figures"]["real-time factor (bus time / wall time)"];
     assert!(rtf.as_str().unwrap().parse::<f64>().unwrap() > 0.0, "{v}");
+    // The network's four ways of filtering, each by column.
+    let v = json(&["bench", "network", "--seconds", "0.02"]);
+    let firmware = &v["figures"]["firmware acceptance filters"];
+    assert!(
+        firmware["wall time"].as_str().unwrap().ends_with(" s"),
+        "{v}"
+    );
+    assert!(
+        firmware["real-time factor"]
+            .as_str()
+            .unwrap()
+            .contains("of 200"),
+        "{v}"
+    );
 }
 
 #[test]
