@@ -138,7 +138,7 @@ enum Command {
     /// Run named benchmarks (release build recommended) and optionally record them.
     #[command(
         after_help = "Examples:\n  cantwin bench bus\n  cantwin bench bus --seconds 10\n  \
-                            cantwin bench bus --write"
+                            cantwin bench network sdo --trials 9\n  cantwin bench bus --write"
     )]
     Bench(bench::Args),
     /// Fuzz every decoder and state machine that reads outside input; print cases and failures.

@@ -134,6 +134,11 @@ fn bench_rejects_unknown_names_and_bad_durations() {
     let (ok, _, err) = cantwin(&["bench", "bus", "--seconds", "0"]);
     assert!(!ok);
     assert!(err.contains("--seconds must be a positive number"), "{err}");
+    let (ok, out, err) = cantwin(&["bench", "bus", "--seconds", "0.01", "--trials", "0"]);
+    assert!(!ok);
+    assert!(err.contains("--trials must be at least 1, not 0"), "{err}");
+    // Refused before anything runs.
+    assert!(out.is_empty() && !err.contains("trial 1/"), "{out}{err}");
 }
 
 #[test]
@@ -146,16 +151,43 @@ fn bench_bus_short_run_prints_figures_and_records_them() {
         "bus",
         "--seconds",
         "0.05",
+        "--trials",
+        "2",
         "--write",
         "--file",
         file.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
+    // Each trial is announced; the table gives the best trial and the median.
+    assert!(
+        err.contains("trial 1/2") && err.contains("trial 2/2"),
+        "{err}"
+    );
+    assert!(
+        out.contains("| figure | best of 2 trials (median) |"),
+        "{out}"
+    );
     assert!(out.contains("real-time factor"));
+    let rtf = out
+        .lines()
+        .find(|l| l.starts_with("| **real-time factor**"))
+        .unwrap_or_else(|| panic!("{out}"));
+    let (best, median) = best_and_median(rtf);
+    assert!(best >= median && median > 0.0, "{rtf}");
+    assert!(out.contains("(best of 2 trials; median "), "{out}");
     let md = std::fs::read_to_string(&file).unwrap();
+    assert!(md.contains("the best of 2 trials of the same deterministic run"));
     assert!(md.contains("<!-- bench:bus -->") && md.contains("<!-- /bench:bus -->"));
     assert!(md.contains("cantwin -- bench bus --write"));
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The best and the median of a table row whose value reads `**BEST** (median MEDIAN…`.
+fn best_and_median(row: &str) -> (f64, f64) {
+    let value = row.rsplit_once(" | ").unwrap().1.replace("**", "");
+    let (best, rest) = value.split_once(" (median ").unwrap();
+    let median = rest.split([';', ')']).next().unwrap();
+    (best.trim().parse().unwrap(), median.trim().parse().unwrap())
 }
 
 #[test]
@@ -172,6 +204,8 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
         "--seconds",
         "0.05",
         "--buses",
+        "2",
+        "--trials",
         "2",
         "--write",
         "--file",
@@ -194,6 +228,35 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
         "{out}"
     );
     assert!(err.contains("bench fleet: 2 networks"), "{err}");
+    // Every way of filtering the network, and the expedited SDO figure, as best and median
+    // of the two trials; the transfer fractions in simulated time once.
+    assert!(
+        out.contains("| how frames reach the devices — best of 2 trials (median) |"),
+        "{out}"
+    );
+    for way in [
+        "| firmware acceptance filters |",
+        "| the devices' own acceptance filters |",
+        "| every frame handed to every device, which filters it |",
+        "| every frame through every device's whole stack |",
+    ] {
+        let row = out
+            .lines()
+            .find(|l| l.starts_with(way))
+            .unwrap_or_else(|| panic!("{way}: {out}"));
+        assert_eq!(row.matches("(median ").count(), 3, "{row}");
+    }
+    let expedited = out
+        .lines()
+        .find(|l| l.starts_with("| **expedited round trips per wall second**"))
+        .unwrap_or_else(|| panic!("{out}"));
+    let (best, median) = best_and_median(expedited);
+    assert!(best >= median && median > 0.0, "{expedited}");
+    assert_eq!(
+        err.matches("expedited round trips per wall second").count(),
+        2,
+        "{err}"
+    );
     let md = std::fs::read_to_string(&file).unwrap();
     for name in ["network", "fleet", "sdo", "memory"] {
         assert!(
