@@ -169,6 +169,11 @@ impl Node for MailboxNode {
     fn accepts(&self, id: Id) -> bool {
         self.accept.contains(&id)
     }
+
+    fn acceptance_version(&self) -> Option<u64> {
+        // The identifiers are fixed at construction.
+        Some(0)
+    }
 }
 
 /// Run the scenario described by `config`.

@@ -120,6 +120,11 @@ struct Port {
     stub_at: Option<Instant>,
     source: Option<Source>,
     last_bits: Option<(Frame, u32)>,
+    /// The node's [`Node::acceptance_version`] when the acceptance cache last learnt that
+    /// its verdicts may have changed.
+    accept_version: Option<u64>,
+    /// The epoch in which its acceptance verdicts last may have changed.
+    accept_changed: u64,
     stats: PortStats,
 }
 
@@ -209,6 +214,9 @@ pub struct Bus {
     /// (so whose `accepts` may have changed) in each of the last epochs.
     called: Vec<u64>,
     words: usize,
+    /// The latest epoch in which some port's acceptance verdicts may have changed: cached
+    /// verdicts taken after it are all still valid.
+    accept_changed: u64,
     accept_cache: HashMap<Id, AcceptEntry, BuildIdHasher>,
     /// Some receiver needs its counters touched on every frame (REC above 0, or a
     /// bit-rate mismatch): deliver the slow way.
@@ -262,6 +270,7 @@ impl Bus {
             listeners: 0,
             mismatched: 0,
             epoch: 1,
+            accept_changed: 0,
             called: Vec::new(),
             words: 0,
             accept_cache: HashMap::default(),
@@ -381,6 +390,8 @@ impl Bus {
             stub_at: None,
             source: None,
             last_bits: None,
+            accept_version: None,
+            accept_changed: 0,
             stats: PortStats::default(),
         });
         self.arb_keys.push(u64::MAX);
@@ -844,7 +855,7 @@ impl Bus {
     /// After a node was called: queue its frames, report overflow, refresh its arbitration
     /// entry and its deadline.
     fn after_call(&mut self, i: usize) {
-        self.mark_called(i);
+        self.note_acceptance(i);
         if !self.outbox.is_empty() {
             let dropped = self.absorb(i);
             if dropped > 0 {
@@ -877,10 +888,23 @@ impl Bus {
         }
     }
 
+    /// After port `i`'s node was called: its acceptance verdicts are asked again unless it
+    /// says they cannot have changed (an unchanged [`Node::acceptance_version`]).
+    fn note_acceptance(&mut self, i: usize) {
+        let p = &mut self.ports[i];
+        let version = p.node.as_ref().and_then(|n| n.acceptance_version());
+        if version.is_none() || version != p.accept_version {
+            p.accept_version = version;
+            self.mark_called(i);
+        }
+    }
+
     /// Note that port `i`'s node was called in this epoch.
     fn mark_called(&mut self, i: usize) {
         let slot = (self.epoch % CALL_RING as u64) as usize * self.words;
         self.called[slot + i / 64] |= 1 << (i % 64);
+        self.ports[i].accept_changed = self.epoch;
+        self.accept_changed = self.epoch;
     }
 
     fn update_deadline(&mut self, i: usize) {
@@ -1293,7 +1317,7 @@ impl Bus {
     /// Hand a good frame to every receiver whose filter accepts it, when no receiver's
     /// counters need touching. A node's `accepts` can only change when the node was called
     /// (it takes `&self`), so verdicts are cached per identifier and asked again only of the
-    /// nodes called since.
+    /// nodes called since whose acceptance version changed (or that keep none).
     fn receive_fast(&mut self, f: &InFlight) {
         let id = f.frame.id();
         let n = self.ports.len();
@@ -1301,14 +1325,26 @@ impl Bus {
         let entry = self.accept_cache.entry(id).or_default();
         entry.accept.resize(words, 0);
         let since = entry.epoch;
+        // Verdicts taken after the last possible change are all valid: nothing to ask (the
+        // usual case on a bus whose nodes keep their acceptance versions).
+        let valid = since != 0 && since > self.accept_changed;
         let fresh = since != 0 && self.epoch - since < CALL_RING as u64;
         for w in 0..words {
-            // The ports called since the verdicts were taken; all of them if that is too
-            // long ago (or never).
+            if valid {
+                break;
+            }
+            // The ports whose verdicts may have changed since they were taken: from the ring
+            // of recent epochs, else from each port's last change; all of them if never taken.
             let mut stale = if fresh {
                 (since..=self.epoch).fold(0, |m, e| {
                     m | self.called[(e % CALL_RING as u64) as usize * self.words + w]
                 })
+            } else if since != 0 {
+                self.ports[w * 64..n.min(w * 64 + 64)]
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.accept_changed >= since)
+                    .fold(0, |m, (j, _)| m | 1 << j)
             } else {
                 match n - w * 64 {
                     rem if rem >= 64 => u64::MAX,

@@ -111,6 +111,17 @@ pub trait Node {
         let _ = id;
         true
     }
+
+    /// A number that changes whenever [`Node::accepts`] may answer differently, or `None`
+    /// (the default) if it may change whenever the node is called. A bus keeps every
+    /// verdict it got from a node while the number stays the same, instead of asking again
+    /// after each call; on a busy bus most nodes are called between two frames of the same
+    /// identifier, so a node whose filter rarely changes saves that question on every frame.
+    /// A node that answers `Some` must change the number (or answer `None`) before
+    /// `accepts` changes, including through changes made to it between calls.
+    fn acceptance_version(&self) -> Option<u64> {
+        None
+    }
 }
 
 impl<N: Node + ?Sized> Node for Box<N> {
@@ -134,6 +145,9 @@ impl<N: Node + ?Sized> Node for Box<N> {
     }
     fn accepts(&self, id: Id) -> bool {
         (**self).accepts(id)
+    }
+    fn acceptance_version(&self) -> Option<u64> {
+        (**self).acceptance_version()
     }
 }
 

@@ -230,6 +230,11 @@ struct Core<H> {
     /// A COB-ID may have changed since `accept` was built: accept everything until it is
     /// built again.
     accept_stale: bool,
+    /// Counts the changes of `accept`'s contents, for [`Node::acceptance_version`].
+    accept_generation: u64,
+    /// The previous `accept`, kept for its allocation: a rebuild compares the new list with
+    /// the old one.
+    accept_spare: Vec<u32>,
 }
 
 /// A CiA 301 device. See the [module documentation](self).
@@ -312,6 +317,8 @@ impl<H: OdHooks> Device<H> {
             sdo_reset: false,
             accept: Vec::new(),
             accept_stale: true,
+            accept_generation: 0,
+            accept_spare: Vec::new(),
         };
         core.configure();
         let mut device = Device {
@@ -447,6 +454,8 @@ impl<H: OdHooks> Device<H> {
             + self.core.emcy.heap_bytes()
             + self.core.consumer.heap_bytes()
             + self.core.pdo_faults.capacity() * 4
+            + (self.core.accept.capacity() + self.core.accept_spare.capacity())
+                * core::mem::size_of::<u32>()
     }
 
     fn apply_sdo_config(&mut self) {
@@ -528,7 +537,7 @@ impl<H: OdHooks> Device<H> {
     /// requests, 0x1400..0x15FF and 0x1800..0x19FF sub 1).
     fn rebuild_acceptance(&mut self) {
         let core = &mut self.core;
-        let mut keys = core::mem::take(&mut core.accept);
+        let mut keys = core::mem::take(&mut core.accept_spare);
         keys.clear();
         let guard = |node: u8| u32::from(wire::ERROR_CONTROL_BASE) + u32::from(node);
         keys.push(u32::from(wire::NMT_COB_ID));
@@ -545,8 +554,11 @@ impl<H: OdHooks> Device<H> {
         }
         keys.sort_unstable();
         keys.dedup();
-        keys.shrink_to_fit();
-        core.accept = keys;
+        if keys != core.accept {
+            core.accept_generation += 1;
+            core::mem::swap(&mut core.accept, &mut keys);
+        }
+        core.accept_spare = keys;
         core.accept_stale = false;
     }
 
@@ -1417,5 +1429,17 @@ impl<H: OdHooks> Node for Device<H> {
 
     fn accepts(&self, id: Id) -> bool {
         self.filter_passes(id)
+    }
+
+    fn acceptance_version(&self) -> Option<u64> {
+        // Everything `filter_passes` reads: the list (through its generation), and the
+        // states in which every identifier passes.
+        let core = &self.core;
+        Some(
+            core.accept_generation << 3
+                | u64::from(core.accept_stale) << 2
+                | u64::from(core.overrun) << 1
+                | u64::from(core.config.acceptance_filter),
+        )
     }
 }

@@ -339,3 +339,23 @@ fn cia301_device_acceptance_filter_changes_nothing_in_a_long_conversation() {
     assert_eq!(run(&steps, Delivery::Filtered), reference);
     assert_eq!(run(&steps, Delivery::FilterInside), reference);
 }
+
+#[test]
+fn cia301_device_acceptance_version_changes_with_the_filter_only() {
+    let mut h = Harness::booted();
+    let v0 = h.dev.acceptance_version();
+    assert!(v0.is_some(), "a device keeps a version, so a bus keeps its verdicts");
+    // Calls that change no COB-ID leave it: a communication cycle period written, a SYNC
+    // received.
+    assert_eq!(sdo_write(&mut h, 0x1006, 0, 0), 0x60);
+    let t = h.now + Duration::from_millis(1);
+    h.rx(t, "080#");
+    assert_eq!(h.dev.acceptance_version(), v0);
+    // 0x1005: SYNC on 0x081 changes what passes, and the version with it.
+    assert_eq!(sdo_write(&mut h, 0x1005, 0, 0x81), 0x60);
+    let v1 = h.dev.acceptance_version();
+    assert_ne!(v1, v0);
+    // The same COB-ID written again passes the same identifiers: the version stays.
+    assert_eq!(sdo_write(&mut h, 0x1005, 0, 0x81), 0x60);
+    assert_eq!(h.dev.acceptance_version(), v1);
+}

@@ -130,6 +130,13 @@ impl Node for NetDevice {
             }
         }
     }
+    fn acceptance_version(&self) -> Option<u64> {
+        match self.filtering {
+            Filtering::Device => self.device.acceptance_version(),
+            // Fixed filters.
+            Filtering::Firmware | Filtering::Everything | Filtering::Unfiltered => Some(0),
+        }
+    }
 }
 
 /// A `network` device with node-ID `node` that the bus asks for its own acceptance filter
@@ -170,6 +177,9 @@ impl Node for SyncMaster {
     }
     fn accepts(&self, _: Id) -> bool {
         false
+    }
+    fn acceptance_version(&self) -> Option<u64> {
+        Some(0)
     }
 }
 
@@ -497,6 +507,9 @@ impl Node for ExpeditedClient {
     fn accepts(&self, id: Id) -> bool {
         id.as_raw() == 0x580 + u32::from(SDO_NODE)
     }
+    fn acceptance_version(&self) -> Option<u64> {
+        Some(0)
+    }
 }
 
 /// A client downloading `data` by segmented transfer (§7.2.4.3.3, §7.2.4.3.4).
@@ -556,6 +569,9 @@ impl Node for SegmentedClient {
     }
     fn accepts(&self, id: Id) -> bool {
         id.as_raw() == 0x580 + u32::from(SDO_NODE)
+    }
+    fn acceptance_version(&self) -> Option<u64> {
+        Some(0)
     }
 }
 
@@ -634,6 +650,9 @@ impl Node for BlockClient {
     }
     fn accepts(&self, id: Id) -> bool {
         id.as_raw() == 0x580 + u32::from(SDO_NODE)
+    }
+    fn acceptance_version(&self) -> Option<u64> {
+        Some(0)
     }
 }
 

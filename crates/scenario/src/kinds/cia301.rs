@@ -213,6 +213,10 @@ impl Node for Cia301Node {
     fn accepts(&self, id: Id) -> bool {
         self.device.accepts(id)
     }
+
+    fn acceptance_version(&self) -> Option<u64> {
+        self.device.acceptance_version()
+    }
 }
 
 /// The object dictionary of the kind, from its settings.
