@@ -61,9 +61,16 @@ impl Node for Switcher {
     }
 }
 
-/// Frames on A and B every millisecond for 20 ms, SWITCH at 10.5 ms; returns the switcher's
-/// received (time, id) and how often it was asked.
-fn run(versioned: bool) -> (Vec<(u64, u32)>, u32, Vec<(u64, Frame)>) {
+/// What a run leaves: the switcher's received (time, id), how often it was asked, and the
+/// sender's sent frames.
+struct Run {
+    rx: Vec<(u64, u32)>,
+    asked: u32,
+    sent: Vec<(u64, Frame)>,
+}
+
+/// Frames on A and B every millisecond for 20 ms, SWITCH at 10.5 ms.
+fn run(versioned: bool) -> Run {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
     let mut sender = Probe::new();
@@ -80,7 +87,11 @@ fn run(versioned: bool) -> (Vec<(u64, u32)>, u32, Vec<(u64, Frame)>) {
     sim.run_until(Instant::from_nanos(25_000_000));
     let s: &Switcher = sim.node(sw).unwrap();
     let sent = sim.node::<Probe>(tx).unwrap().sent.clone();
-    (s.rx.clone(), s.asked.get(), sent)
+    Run {
+        rx: s.rx.clone(),
+        asked: s.asked.get(),
+        sent,
+    }
 }
 
 /// What the switcher must have received: every A, the SWITCH, and the Bs that ended after
@@ -99,16 +110,19 @@ fn expected(sent: &[(u64, Frame)]) -> Vec<(u64, u32)> {
 
 #[test]
 fn a_versioned_node_is_asked_again_only_when_its_version_changes() {
-    let (rx, asked, sent) = run(true);
+    let Run { rx, asked, sent } = run(true);
     assert_eq!(rx, expected(&sent));
-    assert!(rx.iter().any(|(_, id)| *id == u32::from(B)), "B passes after the switch");
+    assert!(
+        rx.iter().any(|(_, id)| *id == u32::from(B)),
+        "B passes after the switch"
+    );
     // A, B and SWITCH once each, then A and B again after the version changed.
     assert_eq!(asked, 5);
 }
 
 #[test]
 fn a_node_without_a_version_is_asked_again_after_its_calls() {
-    let (rx, asked, sent) = run(false);
+    let Run { rx, asked, sent } = run(false);
     assert_eq!(rx, expected(&sent));
     // Called every 100 µs, so asked again for nearly every one of the 41 frames.
     assert!(asked > 30, "asked {asked} times");

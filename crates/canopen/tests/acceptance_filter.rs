@@ -344,7 +344,10 @@ fn cia301_device_acceptance_filter_changes_nothing_in_a_long_conversation() {
 fn cia301_device_acceptance_version_changes_with_the_filter_only() {
     let mut h = Harness::booted();
     let v0 = h.dev.acceptance_version();
-    assert!(v0.is_some(), "a device keeps a version, so a bus keeps its verdicts");
+    assert!(
+        v0.is_some(),
+        "a device keeps a version, so a bus keeps its verdicts"
+    );
     // Calls that change no COB-ID leave it: a communication cycle period written, a SYNC
     // received.
     assert_eq!(sdo_write(&mut h, 0x1006, 0, 0), 0x60);
