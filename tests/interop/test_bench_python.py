@@ -35,5 +35,6 @@ def test_bench_python_runs_and_measures_both_servers():
         assert 0 < server["round_trip_median_us"] <= server["round_trip_p99_us"]
         # 9,363 segments of 7 bytes, each a request and an answer of at least 111 µs.
         assert server["upload_64k_s"] > 2.0 and server["download_64k_s"] > 2.0
+    assert result["twin_alone_median_us"] > 0
     bare = result["bare_client_us"]
     assert 111 <= bare["bus"] <= 136
