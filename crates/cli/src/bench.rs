@@ -596,29 +596,8 @@ fn bench_memory(args: &Args) -> Result<()> {
     let exe = std::env::current_exe().context("locating the cantwin executable")?;
     let dir = std::env::temp_dir().join(format!("cantwin-bench-sim-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let measure = |devices: u8| -> Result<process::SimProcessReport> {
-        let text = canopen::scenario_text(devices);
-        let mut best: Option<process::SimProcessReport> = None;
-        for _ in 0..3 {
-            let m = process::measure_sim(
-                &exe,
-                &dir,
-                &text,
-                devices,
-                std::time::Duration::from_millis(600),
-            )?;
-            best = Some(match best {
-                Some(b) => process::SimProcessReport {
-                    startup: b.startup.min(m.startup),
-                    rss_kib: b.rss_kib.max(m.rss_kib),
-                    peak_kib: b.peak_kib.max(m.peak_kib),
-                    ..b
-                },
-                None => m,
-            });
-        }
-        best.ok_or_else(|| anyhow::anyhow!("no cantwin sim run"))
-    };
+    let measure =
+        |devices: u8| process::best_of(&exe, &dir, &canopen::scenario_text(devices), devices, 3);
     let one = measure(1);
     let full = one.and_then(|one| Ok((one, measure(127)?)));
     let _ = std::fs::remove_dir_all(&dir);
