@@ -11,6 +11,7 @@ use indicatif::ProgressBar;
 use crate::benchmarks_md;
 
 mod canopen;
+mod memory_twins;
 mod process;
 mod python;
 mod table_json;
@@ -37,7 +38,7 @@ const NAMES: &[(&str, &str)] = &[
     ),
     (
         "memory",
-        "bytes per CiA 301 device; RSS and start-up time of `cantwin sim` with 127 devices",
+        "bytes per CiA 301 device; RSS and start-up time of `cantwin sim` with 127 devices; RSS per TM3BCCO with 14 modules and per ADV200",
     ),
     (
         "python",
@@ -588,30 +589,76 @@ fn bench_sdo(args: &Args, spinner: &ProgressBar) -> Result<()> {
     )
 }
 
+/// `cantwin sim` starts per `cia301` scenario, and per twin scenario: fewer, so that the
+/// eight twin scenarios keep the whole benchmark short.
+const CIA301_STARTS: usize = 3;
+const TWIN_STARTS: usize = 2;
+
+/// What `bench memory` measured in `cantwin sim`.
+struct SimRuns {
+    /// One `cia301` device.
+    one: process::SimProcessReport,
+    /// The 127-device `cia301` scenario.
+    full: process::SimProcessReport,
+    /// Per twin kind: one twin, and as many as one bus takes.
+    twins: Vec<(
+        memory_twins::TwinFleet,
+        process::SimProcessReport,
+        process::SimProcessReport,
+    )>,
+}
+
+fn measure_sims(dir: &std::path::Path, devices: u8) -> Result<SimRuns> {
+    let exe = std::env::current_exe().context("locating the cantwin executable")?;
+    eprintln!("  cantwin sim with 1 and {devices} devices, {CIA301_STARTS} starts each …");
+    let cia301 = |n: u8| process::best_of(&exe, dir, &canopen::scenario_text(n), n, CIA301_STARTS);
+    let one = cia301(1)?;
+    let full = cia301(devices)?;
+    let mut twins = Vec::new();
+    for fleet in memory_twins::FLEETS {
+        let n = fleet.devices;
+        eprintln!(
+            "  cantwin sim with 1 and {n}: {}, {TWIN_STARTS} starts each …",
+            fleet.what
+        );
+        let twin = |count: u8| {
+            process::best_of(&exe, dir, &fleet.scenario_text(count), count, TWIN_STARTS)
+        };
+        twins.push((*fleet, twin(1)?, twin(n)?));
+    }
+    Ok(SimRuns { one, full, twins })
+}
+
+/// KiB of resident memory each device after the first adds.
+fn rss_per_further_device(
+    one: &process::SimProcessReport,
+    full: &process::SimProcessReport,
+) -> f64 {
+    full.rss_kib.saturating_sub(one.rss_kib) as f64
+        / f64::from(full.devices.saturating_sub(1).max(1))
+}
+
 fn bench_memory(args: &Args) -> Result<()> {
     eprintln!("bench memory: devices and a 127-device scenario build …");
     let r = canopen::run_memory(127)?;
+    let tm3_heap = memory_twins::tm3_device_heap()?;
     let ms = r.scenario_build.as_secs_f64() * 1e3;
-    eprintln!("  cantwin sim with 1 and 127 devices, 3 starts each …");
-    let exe = std::env::current_exe().context("locating the cantwin executable")?;
     let dir = std::env::temp_dir().join(format!("cantwin-bench-sim-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let measure =
-        |devices: u8| process::best_of(&exe, &dir, &canopen::scenario_text(devices), devices, 3);
-    let one = measure(1);
-    let full = one.and_then(|one| Ok((one, measure(127)?)));
+    let runs = measure_sims(&dir, 127);
     let _ = std::fs::remove_dir_all(&dir);
-    let (one, full) = full?;
+    let SimRuns { one, full, twins } = runs?;
     let mib = |kib: u64| kib as f64 / 1024.0;
     let start_ms = full.startup.as_secs_f64() * 1e3;
-    let table = format!(
+    let mut table = format!(
         "| figure | value |\n|---|---|\n\
          | `Device` inline size | {inline} bytes |\n\
          | heap per device, CiA 301 defaults | {default} bytes |\n\
          | heap per device, 4 RPDOs + 4 TPDOs | {pdo} bytes |\n\
          | heap per `network` device (1 TPDO) | {net} bytes |\n\
+         | heap of the CiA 301 `Device` in a TM3BCCO with 14 modules (its own description not counted) | {tm3_heap} bytes |\n\
          | parse and build a {n}-device `cia301` scenario, in process | {ms:.1} ms |\n\
-         | **start-up of `cantwin sim` with {n} devices** (spawn → socketcand gateway listening, best of 3) | **{start_ms:.1} ms** ({v} of < 100 ms) |\n\
+         | **start-up of `cantwin sim` with {n} devices** (spawn → socketcand gateway listening, best of {CIA301_STARTS}) | **{start_ms:.1} ms** ({v} of < 100 ms) |\n\
          | start-up of `cantwin sim` with 1 device | {one_ms:.1} ms |\n\
          | **RSS of `cantwin sim` with {n} devices**, running paced with its gateway | **{rss:.1} MiB** (peak {peak:.1} MiB) |\n\
          | RSS of `cantwin sim` with 1 device | {one_rss:.1} MiB |\n\
@@ -626,19 +673,43 @@ fn bench_memory(args: &Args) -> Result<()> {
         rss = mib(full.rss_kib),
         peak = mib(full.peak_kib),
         one_rss = mib(one.rss_kib),
-        per = full.rss_kib.saturating_sub(one.rss_kib) as f64 / f64::from(full.devices - 1),
+        per = rss_per_further_device(&one, &full),
     );
-    let intro = "`Device::heap_bytes` of a device whose object dictionary description is shared \
-        (the description itself is counted once per kind, not per device). The scenario has \
-        127 devices of kind `cia301` (each with its 64 KiB DOMAIN, 4 RPDOs and 4 TPDOs, \
-        heartbeat 100 ms) on one 1 Mbit/s bus; `cantwin sim` runs it as a child process \
-        (`--socketcand 0`), its resident set read from `/proc/PID/status` after 0.6 s of \
-        paced running. Floor: start-up < 100 ms.";
+    table.push_str(&format!(
+        "\n\n| twin, N of them on one bus (best of {TWIN_STARTS}) | N | RSS with 1 | RSS with N | **RSS per further twin** | start-up with N |\n\
+         |---|---|---|---|---|---|"
+    ));
+    for (fleet, one, full) in &twins {
+        table.push_str(&format!(
+            "\n| {what} | {n} | {one_rss:.1} MiB | {rss:.1} MiB | **{per:.1} KiB** | {start:.1} ms |",
+            what = fleet.what,
+            n = full.devices,
+            one_rss = mib(one.rss_kib),
+            rss = mib(full.rss_kib),
+            per = rss_per_further_device(one, full),
+            start = full.startup.as_secs_f64() * 1e3,
+        ));
+    }
+    let intro = format!(
+        "`Device::heap_bytes` of a device whose object dictionary description is shared \
+         (the description itself is counted once per kind, not per device). The scenario has \
+         127 devices of kind `cia301` (each with its 64 KiB DOMAIN, 4 RPDOs and 4 TPDOs, \
+         heartbeat 100 ms) on one 1 Mbit/s bus; `cantwin sim` runs it as a child process \
+         (`--socketcand 0`), its resident set read from `/proc/PID/status` after 0.6 s of \
+         paced running. Floor: start-up < 100 ms. The second table does the same for the \
+         twins: N of one kind with node-IDs 1..N (the ADV200's DeviceNet MAC IDs stop at 63) \
+         and a listener on one 500 kbit/s bus, set up as `scenarios/tm3-island.toml` and \
+         `scenarios/adv200-*.toml` set them up, against 1 of them with the listener; RSS per \
+         further twin = (RSS with N − RSS with 1) / (N − 1), best of {TWIN_STARTS} starts \
+         rather than {CIA301_STARTS} to keep the whole benchmark short. Each TM3BCCO carries \
+         14 modules: {modules}.",
+        modules = memory_twins::TM3_MODULES.join(", "),
+    );
     record(
         args,
         "memory",
         "bytes per device and start-up time",
-        intro,
+        &intro,
         &table,
     )
 }

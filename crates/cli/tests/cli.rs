@@ -227,6 +227,33 @@ fn bench_canopen_short_runs_print_figures_and_record_their_sections() {
         out.contains("RSS of `cantwin sim` with 127 devices"),
         "{out}"
     );
+    // The twins in `cantwin sim` too: every node-ID of one bus (MAC ID for DeviceNet), and
+    // what each twin after the first adds to the resident set.
+    for (twin, n) in [
+        ("TM3BCCO with 14 modules", 127),
+        ("ADV200, CANopen worked example", 127),
+        ("ADV200, DS402", 127),
+        ("ADV200, DeviceNet", 63),
+    ] {
+        let row = out
+            .lines()
+            .find(|l| l.starts_with(&format!("| {twin} |")))
+            .unwrap_or_else(|| panic!("{twin}: {out}"));
+        let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
+        assert_eq!(cells[1], n.to_string(), "{row}");
+        let figure = |cell: &str, unit: &str| -> f64 {
+            let v = cell.replace("**", "");
+            v.strip_suffix(unit).unwrap().trim().parse().unwrap()
+        };
+        let (one, full) = (figure(cells[2], "MiB"), figure(cells[3], "MiB"));
+        assert!(full >= one && one > 0.0, "{row}");
+        assert!(figure(cells[4], "KiB") > 0.0, "{row}");
+        assert!(figure(cells[5], "ms") > 0.0, "{row}");
+    }
+    assert!(
+        out.contains("heap of the CiA 301 `Device` in a TM3BCCO with 14 modules"),
+        "{out}"
+    );
     assert!(err.contains("bench fleet: 2 networks"), "{err}");
     // Every way of filtering the network, and the expedited SDO figure, as best and median
     // of the two trials; the transfer fractions in simulated time once.
