@@ -12,6 +12,9 @@
 
 use crate::frame::Frame;
 
+#[cfg(test)]
+mod reference;
+
 /// The CRC-15 generator polynomial x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1 (§10.4.2.6).
 pub const CRC15_POLY: u16 = 0x4599;
 
@@ -321,6 +324,54 @@ mod tests {
         let bits = stuffed_bit_stream_unstuffed(&rtr);
         assert_eq!(&bits[..19], &bits_of("0 11100001100 1 0 0 1000")[..]);
         assert_eq!(r.crc, crc_reference(&bits[..19]));
+    }
+
+    /// A left-aligned bit sequence from a string of 0s and 1s (other characters ignored).
+    fn left_aligned(s: &str) -> (u128, u32) {
+        bits_of(s)
+            .iter()
+            .enumerate()
+            .fold((0u128, 0u32), |(bits, len), (i, &b)| {
+                (bits | (u128::from(b) << (127 - i)), len + 1)
+            })
+    }
+
+    #[test]
+    fn runs_ending_exactly_on_a_stuff_bit() {
+        // (sequence, stuffed by hand per §10.5, stuff bits). A stuff bit closing a run has
+        // the next run's value and counts as its first bit, so after it four equal bits are
+        // enough for the next stuff bit; without it, a run of four never stuffs. Inside a
+        // run the stuff bit breaks the run, and five more equal bits are needed.
+        let cases = [
+            ("0000 1111", "0000 1111", 0),
+            ("00000", "00000 [1]", 1),
+            ("00000 1111", "00000 [1] 1111 [0]", 2),
+            ("00000 111", "00000 [1] 111", 1),
+            ("00000 1111 0000 1", "00000 [1] 1111 [0] 0000 [1] 1", 3),
+            ("000000000 1111", "00000 [1] 0000 1111", 1),
+            ("0000000000 1111", "00000 [1] 00000 [1] 1111 [0]", 3),
+            ("0000000000000", "00000 [1] 00000 [1] 000", 2),
+            ("1 00000 11111 0", "1 00000 [1] 1111 [0] 1 0", 2),
+        ];
+        for (plain, stuffed, n) in cases {
+            let (bits, len) = left_aligned(plain);
+            assert_eq!(count_stuff_bits(bits, len), n, "{plain}");
+            assert_eq!(reference::count_stuff_bits(bits, len), n, "{plain}");
+            assert_eq!(bits_of(stuffed).len() as u32, len + n, "{stuffed}");
+        }
+    }
+
+    #[test]
+    fn bench_worst_case_frame_has_22_stuff_bits_and_133_bits() {
+        // ID 0x078, data 01 E1 E1 E1 E1 E1 E0 0F: repeated 0xE1 is runs of four, each after a
+        // stuff bit of its own value, so a stuff bit follows every four bits.
+        let f = Frame::std(0x078, &[0x01, 0xE1, 0xE1, 0xE1, 0xE1, 0xE1, 0xE0, 0x0F]).unwrap();
+        let r = stuffed_region(&f);
+        assert_eq!(r.len, 19 + 64 + 15);
+        assert_eq!(count_stuff_bits(r.bits, r.len), 22);
+        assert_eq!(stuffed_bit_stream(&f).len(), 98 + 22);
+        assert_eq!(f.bit_length(), 133);
+        assert_eq!(reference::frame_bits(&f), 133);
     }
 
     #[test]
