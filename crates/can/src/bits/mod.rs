@@ -12,11 +12,11 @@
 
 use crate::frame::Frame;
 
+mod crc;
 #[cfg(test)]
 mod reference;
 
-/// The CRC-15 generator polynomial x^15 + x^14 + x^10 + x^8 + x^7 + x^4 + x^3 + 1 (§10.4.2.6).
-pub const CRC15_POLY: u16 = 0x4599;
+pub use crc::{CRC15_POLY, crc15, crc15_continue};
 
 /// Bits after the CRC sequence: CRC delimiter, ACK slot, ACK delimiter and 7 EOF bits.
 pub const TAIL_BITS: u32 = 10;
@@ -33,30 +33,6 @@ pub struct StuffedRegion {
     pub len: u32,
     /// The CRC-15 computed over SOF … DATA.
     pub crc: u16,
-}
-
-/// Feed the `n` lowest bits of `value` (most significant first) into the CRC-15 register.
-fn crc15_bits(mut crc: u16, value: u64, n: u32) -> u16 {
-    for i in (0..n).rev() {
-        let bit = ((value >> i) & 1) as u16;
-        let crc_next = bit ^ ((crc >> 14) & 1);
-        crc = (crc << 1) & 0x7FFF;
-        if crc_next != 0 {
-            crc ^= CRC15_POLY;
-        }
-    }
-    crc
-}
-
-/// The CRC-15 of a bit sequence given as the `n` lowest bits of `value`, most significant
-/// first (n ≤ 64; call repeatedly through [`crc15_continue`] for longer sequences).
-pub fn crc15(value: u64, n: u32) -> u16 {
-    crc15_bits(0, value, n)
-}
-
-/// Continue a CRC-15 computation with `n` more bits.
-pub fn crc15_continue(crc: u16, value: u64, n: u32) -> u16 {
-    crc15_bits(crc, value, n)
 }
 
 /// Build the unstuffed region SOF … CRC of a frame.
@@ -87,7 +63,7 @@ pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
     let mut bits: u128 = u128::from(header) << (128 - header_len);
     let mut len = header_len;
     for &b in data {
-        crc = crc15_continue(crc, u64::from(b), 8);
+        crc = crc::crc15_byte(crc, b);
         bits |= u128::from(b) << (128 - len - 8);
         len += 8;
     }
