@@ -15,8 +15,10 @@ use crate::frame::Frame;
 mod crc;
 #[cfg(test)]
 mod reference;
+mod stuff;
 
 pub use crc::{CRC15_POLY, crc15, crc15_continue};
+pub use stuff::count_stuff_bits;
 
 /// Bits after the CRC sequence: CRC delimiter, ACK slot, ACK delimiter and 7 EOF bits.
 pub const TAIL_BITS: u32 = 10;
@@ -70,33 +72,6 @@ pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
     bits |= u128::from(crc) << (128 - len - 15);
     len += 15;
     StuffedRegion { bits, len, crc }
-}
-
-/// The number of stuff bits a transmitter inserts into a left-aligned bit sequence of `len`
-/// bits (§10.5: after five consecutive equal bits, a complementary bit; the stuff bit starts
-/// the next run).
-pub fn count_stuff_bits(bits: u128, len: u32) -> u32 {
-    let mut stuffed = 0;
-    let mut run = 0u32;
-    let mut last = 2u8; // neither 0 nor 1
-    let mut i = 0;
-    while i < len {
-        let bit = ((bits >> (127 - i)) & 1) as u8;
-        if bit == last {
-            run += 1;
-        } else {
-            last = bit;
-            run = 1;
-        }
-        if run == 5 {
-            stuffed += 1;
-            // The stuff bit is the complement and starts a new run of length 1.
-            last ^= 1;
-            run = 1;
-        }
-        i += 1;
-    }
-    stuffed
 }
 
 /// The stuffed bit stream of the region SOF … CRC as a vector of bits (0 = dominant), for
