@@ -1,6 +1,8 @@
 //! The length of a frame on the wire, `Frame::bit_length`: the CRC-15 over the header and
-//! data, then a pass counting stuff bits over SOF … CRC. The bus asks it for every distinct
-//! frame a port queues, so its cost grows with the header and the data, not with the values.
+//! data, a table step per byte, then a count of stuff bits that visits each run of four or
+//! more equal bits in SOF … CRC. The bus asks it for every distinct frame a port queues. Its
+//! cost grows with the header and the data, and with the number of such runs, which the
+//! worst-case stuffing below maximises.
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use std::hint::black_box;
