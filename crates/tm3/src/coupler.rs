@@ -46,7 +46,7 @@
 
 use crate::diag::{self, Status};
 use crate::island::{Island, MAX_MODULES};
-use crate::od;
+use crate::od::{self, IslandDescription};
 use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
@@ -95,6 +95,9 @@ pub enum CouplerError {
     /// The node-ID is outside 1..=127.
     #[error(transparent)]
     Device(#[from] DeviceError),
+    /// A shared description built for other modules than the configured island's.
+    #[error("the object dictionary description was built for another island")]
+    OtherIsland,
 }
 
 /// A wrong channel or module number in an I/O call.
@@ -233,7 +236,21 @@ impl Tm3Coupler {
     /// A coupler with every configured module fitted. It is unpowered until
     /// [`Node::on_power_up`].
     pub fn new(config: CouplerConfig) -> Result<Self, CouplerError> {
-        let desc = Arc::new(od::description(&config.island)?);
+        let shared = IslandDescription::new(&config.island)?;
+        Self::with_description(config, &shared)
+    }
+
+    /// Like [`Tm3Coupler::new`], on a description built once for couplers carrying the
+    /// same modules: the description is most of a coupler's memory, and couplers of one
+    /// island differ only in their values.
+    pub fn with_description(
+        config: CouplerConfig,
+        shared: &IslandDescription,
+    ) -> Result<Self, CouplerError> {
+        if !shared.fits(&config.island) {
+            return Err(CouplerError::OtherIsland);
+        }
+        let desc = Arc::clone(shared.description());
         let device = Device::with_hooks(desc.clone(), device_config(config.node_id), ManualLimits)?;
         let n = config.island.modules().len();
         let fitted = config

@@ -13,11 +13,13 @@
 //!   of 0, as the manual says.
 //! * 0x1201 sub 3 (client node-ID) is UNSIGNED8, as in CiA 301.
 
+use crate::catalogue::ModuleSpec;
 use crate::island::{Island, MAX_MODULES};
 use cantwin_canopen::od::{
     Access, DataType, OdBuildError, OdBuilder, OdDescription, SubObject, Value,
 };
 use cantwin_cia401::objects as cia401;
+use std::sync::Arc;
 
 /// 0x1000 with no module: CiA 401, device-specific PDO mapping (manual bit 8 = bit 23).
 pub const DEVICE_TYPE_BASE: u32 = 0x0080_0191;
@@ -331,4 +333,70 @@ pub fn description(island: &Island) -> Result<OdDescription, OdBuildError> {
         .hook(0x1005..=0x1016)
         .hook(0x1400..=0x1BFF);
     cia401::add_objects(b, &island.layout()).build()
+}
+
+/// The description of one island's dictionary, to be shared by every coupler carrying the
+/// same modules in the same order (see [`crate::coupler::Tm3Coupler::with_description`]).
+///
+/// The dictionary follows from the modules alone: the node-ID only enters through
+/// `$NODEID` defaults, which each coupler's values resolve, and whether a module is
+/// optional changes its status, not the objects.
+#[derive(Debug, Clone)]
+pub struct IslandDescription {
+    modules: Vec<ModuleSpec>,
+    desc: Arc<OdDescription>,
+}
+
+impl IslandDescription {
+    /// Builds the description of `island`.
+    pub fn new(island: &Island) -> Result<Self, OdBuildError> {
+        Ok(IslandDescription {
+            modules: Self::specs(island).collect(),
+            desc: Arc::new(description(island)?),
+        })
+    }
+
+    fn specs(island: &Island) -> impl Iterator<Item = ModuleSpec> + '_ {
+        island.modules().iter().map(|m| *m.spec)
+    }
+
+    /// Whether this is the description of `island`'s dictionary.
+    pub fn fits(&self, island: &Island) -> bool {
+        Self::specs(island).eq(self.modules.iter().copied())
+    }
+
+    /// The description.
+    pub fn description(&self) -> &Arc<OdDescription> {
+        &self.desc
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::island::ModuleSlot;
+
+    #[test]
+    fn a_description_fits_the_same_modules_whichever_are_optional() {
+        let island = Island::from_references(&["TM3DI16", "TM3AI4"]).unwrap();
+        let shared = IslandDescription::new(&island).unwrap();
+        assert!(shared.fits(&island));
+        let mut slots = island.modules().to_vec();
+        slots[1] = ModuleSlot {
+            optional: true,
+            ..slots[1]
+        };
+        assert!(shared.fits(&Island::new(slots).unwrap()));
+        for other in [
+            &["TM3AI4", "TM3DI16"][..],
+            &["TM3DI16"],
+            &["TM3DI16", "TM3AI4", "TM3DQ8R"],
+            &[],
+        ] {
+            assert!(
+                !shared.fits(&Island::from_references(other).unwrap()),
+                "{other:?}"
+            );
+        }
+    }
 }
