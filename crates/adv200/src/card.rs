@@ -40,12 +40,13 @@ use cantwin_canopen::nmt::State;
 use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
 
 use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
+use std::sync::Arc;
 
 use crate::alarms::{Alarm, CardFault, opt_bus};
 use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
 use crate::ds402::{Ds402, State as PowerState};
-use crate::od::{Personality, build, value_of};
+use crate::od::{Descriptions, Personality, value_of};
 use crate::params::{ParamAccess, ParamDb, ParamError, catalog, def, par};
 use crate::pdc::{self, Format, Pdc};
 
@@ -129,6 +130,8 @@ pub struct Adv200 {
     card_faults: std::collections::BTreeSet<CardFault>,
     /// When the controller last recovered from bus-off.
     bus_off_recovered: Option<Instant>,
+    /// Where the card's dictionary description comes from at a drive reset.
+    descriptions: Arc<Descriptions>,
 }
 
 impl core::fmt::Debug for Adv200 {
@@ -173,6 +176,13 @@ fn abort_frame(node: u8, index: u16, sub: u8, code: AbortCode) -> Option<Frame> 
 impl Adv200 {
     /// A drive with factory parameters, not powered.
     pub fn new(config: Adv200Config) -> Self {
+        Self::with_descriptions(config, Arc::new(Descriptions::new()))
+    }
+
+    /// Like [`Adv200::new`], sharing the dictionary descriptions of `descriptions` with
+    /// the other drives given it: drives whose card runs the same personality, PDC layout
+    /// and serial number then hold one description between them.
+    pub fn with_descriptions(config: Adv200Config, descriptions: Arc<Descriptions>) -> Self {
         Adv200 {
             config,
             params: ParamDb::new(),
@@ -186,6 +196,7 @@ impl Adv200 {
             dirty: false,
             card_faults: std::collections::BTreeSet::new(),
             bus_off_recovered: None,
+            descriptions,
         }
     }
 
@@ -337,7 +348,9 @@ impl Adv200 {
     pub fn reset_drive(&mut self, now: Instant, out: &mut Outbox) {
         self.powered = true;
         self.last_now = now;
-        self.card = None;
+        // Kept until the reset is over so that a card rebuilt alike finds its description
+        // still in use, instead of building it again.
+        let _previous = self.card.take();
         self.dnet = None;
         self.drive.restart();
         self.sticky = None;
@@ -391,13 +404,15 @@ impl Adv200 {
         };
         let fault = fault.or(self.database_fault());
         let node = self.latched.address as u8;
-        let built = build(personality, &pdc, self.config.serial)
+        let built = self
+            .descriptions
+            .get(personality, &pdc, self.config.serial)
             .ok()
             .and_then(|d| {
                 let mut c = DeviceConfig::new(node);
                 c.sync_producer = false;
                 c.time_producer = false;
-                Device::with_hooks(std::sync::Arc::new(d), c, Hooks).ok()
+                Device::with_hooks(d, c, Hooks).ok()
             });
         let Some(dev) = built else {
             return self.config_fault(0xFF04, now);

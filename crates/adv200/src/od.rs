@@ -16,6 +16,7 @@
 use cantwin_canopen::od::{
     Access, DataType, OdBuildError, OdBuilder, OdDescription, SubObject, Value,
 };
+use std::sync::{Arc, Mutex, PoisonError, Weak};
 
 use crate::params::{ParamAccess, catalog, par};
 use crate::pdc::{Dir, Pdc};
@@ -354,4 +355,69 @@ pub fn build(
         b = ds402_objects(b);
     }
     b.build()
+}
+
+/// What a card's dictionary follows from. The node-ID is not part of it: it only enters
+/// through `$NODEID` defaults, which each card's values resolve.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Key {
+    personality: Personality,
+    /// The PDC's default mappings; DS402 has fixed ones and ignores the PDC.
+    pdc: Pdc,
+    serial: u32,
+}
+
+/// The descriptions drives built ([`build`]), so that drives of the same personality, PDC
+/// layout and serial number share one while any of them uses it: the description, with
+/// one object per drive parameter, is most of a drive's memory.
+///
+/// A drive builds its dictionary at every drive reset from parameters that may have
+/// changed, so this keeps descriptions only while a drive uses them.
+#[derive(Debug, Default)]
+pub struct Descriptions {
+    built: Mutex<Vec<(Key, Weak<OdDescription>)>>,
+}
+
+impl Descriptions {
+    /// None built yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The dictionary of `personality` with the PDC layout `pdc` and serial number
+    /// `serial`, the one a drive already uses if there is one.
+    pub fn get(
+        &self,
+        personality: Personality,
+        pdc: &Pdc,
+        serial: u32,
+    ) -> Result<Arc<OdDescription>, OdBuildError> {
+        let key = Key {
+            personality,
+            pdc: match personality {
+                Personality::CanOpen => pdc.clone(),
+                Personality::Ds402 => Pdc::default(),
+            },
+            serial,
+        };
+        // A poisoned lock only means another build panicked; the list is still valid.
+        let mut built = self.built.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some(d) = built
+            .iter()
+            .find(|(k, _)| *k == key)
+            .and_then(|(_, d)| d.upgrade())
+        {
+            return Ok(d);
+        }
+        let d = Arc::new(build(personality, &key.pdc, serial)?);
+        built.retain(|(k, d)| d.strong_count() > 0 && *k != key);
+        built.push((key, Arc::downgrade(&d)));
+        Ok(d)
+    }
+
+    /// How many descriptions drives use.
+    pub fn in_use(&self) -> usize {
+        let built = self.built.lock().unwrap_or_else(PoisonError::into_inner);
+        built.iter().filter(|(_, d)| d.strong_count() > 0).count()
+    }
 }
