@@ -117,8 +117,8 @@ impl Registry {
         r.register(Box::new(crate::kinds::master::MasterKind));
         r.register(Box::new(crate::kinds::cia301::Cia301::default()));
         r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
-        r.register(Box::new(crate::kinds::adv200::Adv200Kind));
-        r.register(Box::new(crate::kinds::tm3::Tm3Kind));
+        r.register(Box::new(crate::kinds::adv200::Adv200Kind::default()));
+        r.register(Box::new(crate::kinds::tm3::Tm3Kind::default()));
         r.register(Box::new(crate::kinds::eds::EdsKind));
         r
     }

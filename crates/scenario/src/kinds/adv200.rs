@@ -20,13 +20,19 @@
 //! the internal errors of the §1.5/§3.7.1 tables (found at the next drive reset: a
 //! `power_off`/`power_on`); `action = "repair"` removes them.
 //!
+//! Drives whose cards run the same personality with the same PDC layout and `serial` share
+//! one object dictionary description (each keeps its own values), so a scenario of many
+//! alike drives holds it once.
+//!
 //! With the factory parameters (`Fieldbus baudrate` None, `Fieldbus address` 0) the card
 //! stays off the bus in Opt Bus Fault FF02, as the real one does until it is configured. A card
 //! whose baud rate differs from the bus's stays silent.
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use cantwin_adv200::alarms::CardFault;
+use cantwin_adv200::od::Descriptions;
 use cantwin_adv200::params::def;
 use cantwin_adv200::{Adv200, Adv200Config, example};
 use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
@@ -39,8 +45,12 @@ use crate::live::{LiveValue, Role};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
-/// The `adv200` kind.
-pub struct Adv200Kind;
+/// The `adv200` kind. Its drives build their dictionaries at every drive reset, from the
+/// descriptions the kind gives them all.
+#[derive(Default)]
+pub struct Adv200Kind {
+    descriptions: Arc<Descriptions>,
+}
 
 #[derive(Deserialize)]
 #[serde(untagged)]
@@ -173,7 +183,7 @@ impl DeviceKind for Adv200Kind {
             bus_bit_rate: Some(bus.bit_rate.bits_per_second()),
             serial: s.get_or("serial", 1)?,
         };
-        let mut node = Adv200::new(config);
+        let mut node = Adv200::with_descriptions(config, Arc::clone(&self.descriptions));
         if s.get_or("example", false)? {
             example::configure(&mut node).map_err(|e| s.error("example", e.to_string()))?;
         }
@@ -324,12 +334,43 @@ mod tests {
         assert!(e.contains("unknown key `speed`"), "{e}");
     }
 
+    /// Drives whose cards are alike share one description; another personality or serial
+    /// gets its own. Values stay per drive.
+    #[test]
+    fn alike_drives_share_their_description() {
+        let drive = |name: &str, keys: &str| {
+            format!("[[device]]\nname = \"{name}\"\nkind = \"adv200\"\nbus = \"can0\"\n{keys}\n")
+        };
+        let text = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n".to_string()
+            + &drive("a", "example = true\nparams = { 4006 = 12 }")
+            + &drive("b", "example = true\nparams = { 4006 = 13 }")
+            + &drive("c", "example = true\nparams = { 4006 = 14 }\nserial = 7")
+            + &drive(
+                "d",
+                "params = { 4000 = \"DS402\", 4004 = \"500k\", 4006 = 15 }",
+            );
+        let mut built = built(&text);
+        built.sim.run_until(Instant::from_nanos(1_000_000));
+        let device = |name: &str| {
+            let port = built.device(name).unwrap().port;
+            built.sim.node::<Adv200>(port).unwrap().device().unwrap()
+        };
+        let description = |name: &str| device(name).od().description();
+        assert!(std::sync::Arc::ptr_eq(description("a"), description("b")));
+        assert!(!std::sync::Arc::ptr_eq(description("a"), description("c")));
+        assert!(!std::sync::Arc::ptr_eq(description("a"), description("d")));
+        assert_eq!(device("a").node_id(), 12);
+        assert_eq!(device("b").node_id(), 13);
+        assert_eq!(device("b").od().get_unsigned(0x1014, 0), Some(0x8D));
+        assert_eq!(device("c").od().get_unsigned(0x1018, 4), Some(7));
+    }
+
     #[test]
     fn live_values_show_the_terminals_and_signals_set_them() {
         use crate::registry::DeviceKind;
         let mut b = shipped("adv200-example.toml");
         let port = b.device("drive").unwrap().port;
-        let kind = super::Adv200Kind;
+        let kind = super::Adv200Kind::default();
         let value = |b: &crate::Built, name: &str| {
             kind.live_values(&b.sim, port)
                 .into_iter()

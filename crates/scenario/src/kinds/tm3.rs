@@ -14,7 +14,9 @@
 //! | `analog_inputs` | `[]` | analog input values: `[[module, channel, value], ...]`, raw 16-bit |
 //!
 //! The object dictionary (and the EDS, `cantwin_tm3::eds`) follows from `modules`;
-//! `[[expect]] value = …` reads it.
+//! `[[expect]] value = …` reads it. Couplers with the same `modules` share one object
+//! dictionary description (each keeps its own values), so a scenario of many alike
+//! couplers builds it once.
 //!
 //! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`); modules are
 //! numbered from 1, channels from 0:
@@ -36,6 +38,8 @@ use cantwin_canopen::nmt::State;
 use cantwin_tm3::catalogue;
 use cantwin_tm3::coupler::{CouplerConfig, Fitted, Tm3Coupler};
 use cantwin_tm3::island::{Island, MAX_MODULES, ModuleSlot};
+use cantwin_tm3::od::IslandDescription;
+use std::sync::{Mutex, PoisonError};
 
 use crate::build::BuildEnv;
 use crate::error::ScenarioError;
@@ -44,8 +48,29 @@ use crate::live::{LiveValue, Role};
 use crate::model::BusSpec;
 use crate::registry::{DeviceKind, Settings};
 
-/// The TM3 coupler kind.
-pub struct Tm3Kind;
+/// The TM3 coupler kind. It remembers the descriptions it built, to share them between
+/// couplers carrying the same modules.
+#[derive(Default)]
+pub struct Tm3Kind {
+    descriptions: Mutex<Vec<IslandDescription>>,
+}
+
+impl Tm3Kind {
+    /// The description of `island`'s dictionary, built once and shared.
+    fn description_for(&self, island: &Island) -> Result<IslandDescription, String> {
+        // A poisoned lock only means another build panicked; the list is still valid.
+        let mut known = self
+            .descriptions
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some(d) = known.iter().find(|d| d.fits(island)) {
+            return Ok(d.clone());
+        }
+        let d = IslandDescription::new(island).map_err(|e| e.to_string())?;
+        known.push(d.clone());
+        Ok(d)
+    }
+}
 
 fn positions(s: &Settings<'_>, key: &str, modules: usize) -> Result<Vec<usize>, ScenarioError> {
     let v: Vec<usize> = s.get_or(key, Vec::new())?;
@@ -287,7 +312,11 @@ impl DeviceKind for Tm3Kind {
         let island = Island::new(slots).map_err(|e| s.error("modules", e.to_string()))?;
         let mut config = CouplerConfig::new(node_id, island);
         config.configured = s.get_or("configured", true)?;
-        let mut coupler = Tm3Coupler::new(config).map_err(|e| s.error("modules", e.to_string()))?;
+        let shared = self
+            .description_for(&config.island)
+            .map_err(|e| s.error("modules", format!("object dictionary: {e}")))?;
+        let mut coupler = Tm3Coupler::with_description(config, &shared)
+            .map_err(|e| s.error("modules", e.to_string()))?;
         for p in missing {
             // Before power-up: only what is fitted changes.
             let mut out = cantwin_can::Outbox::new();
@@ -379,7 +408,7 @@ mod tests {
         let mut built = build("node_id = 5\nmodules = [\"TM3DI8\", \"TM3DQ8R\"]\n").unwrap();
         let port = built.device("io").unwrap().port;
         built.sim.run_until(Instant::from_nanos(1_000_000));
-        let kind = Tm3Kind;
+        let kind = Tm3Kind::default();
         let v = |s: &str| toml::Value::String(s.into());
         assert_eq!(
             kind.read_signal(&built.sim, port, "nmt_state"),
@@ -409,6 +438,45 @@ mod tests {
             .read_signal(&built.sim, port, "digital_output.2.9")
             .unwrap_err();
         assert!(e.contains("no channel 9"), "{e}");
+    }
+
+    /// Couplers with the same modules share one description, whichever are optional or
+    /// missing; a coupler with other modules gets its own. Values stay per coupler.
+    #[test]
+    fn couplers_with_the_same_modules_share_their_description() {
+        let coupler = |name: &str, node: u8, extra: &str| {
+            format!(
+                "[[device]]\nname = \"{name}\"\nkind = \"tm3\"\nbus = \"can0\"\nnode_id = {node}\n{extra}\n"
+            )
+        };
+        let text = "name = \"t\"\n[[bus]]\nname = \"can0\"\nbit_rate = \"1M\"\n".to_string()
+            + &coupler("a", 1, "modules = [\"TM3DI8\", \"TM3AI4\"]")
+            + &coupler(
+                "b",
+                2,
+                "modules = [\"TM3DI8\", \"TM3AI4\"]\noptional = [2]\nmissing = [2]",
+            )
+            + &coupler("c", 3, "modules = [\"TM3DI8\"]");
+        let mut built = try_build(&text).unwrap();
+        built.sim.run_until(Instant::from_nanos(1_000_000));
+        let coupler = |name: &str| {
+            let port = built.device(name).unwrap().port;
+            built.sim.node::<Tm3Coupler>(port).unwrap()
+        };
+        assert!(std::sync::Arc::ptr_eq(
+            coupler("a").description(),
+            coupler("b").description()
+        ));
+        assert!(!std::sync::Arc::ptr_eq(
+            coupler("a").description(),
+            coupler("c").description()
+        ));
+        let od = |name: &str| coupler(name).device().od();
+        assert_eq!(od("a").get_unsigned(0x1014, 0), Some(0x81));
+        assert_eq!(od("b").get_unsigned(0x1014, 0), Some(0x82));
+        // Module 2 of b is optional and absent (status 3), a's is working.
+        assert_eq!(coupler("a").manufacturer_status(), 0);
+        assert_eq!(coupler("b").manufacturer_status(), 0x0000_000C);
     }
 
     #[test]
