@@ -37,12 +37,11 @@ pub struct StuffedRegion {
     pub crc: u16,
 }
 
-/// Build the unstuffed region SOF … CRC of a frame.
-pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
+/// The header: everything from SOF to the end of DLC, as (value, bit count).
+pub(super) fn header(frame: &Frame) -> (u64, u32) {
     let rtr = u64::from(frame.is_remote());
     let dlc = u64::from(frame.dlc());
-    // Header: everything from SOF to the end of DLC, as (value, bit count).
-    let (header, header_len) = match frame.id() {
+    match frame.id() {
         crate::Id::Standard(id) => {
             // SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4)
             let v = (u64::from(id.as_raw()) << 7) | (rtr << 6) | dlc;
@@ -59,7 +58,12 @@ pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
                 | dlc;
             (v, 39)
         }
-    };
+    }
+}
+
+/// Build the unstuffed region SOF … CRC of a frame.
+pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
+    let (header, header_len) = header(frame);
     let data = frame.data_bytes();
     let mut crc = crc15(header, header_len);
     let mut bits: u128 = u128::from(header) << (128 - header_len);
@@ -176,25 +180,7 @@ mod tests {
         }
         // Hand count on the header: 0 11111 [0] 11111 [0] 1 0 0 0 0 [1]... — compare with an
         // explicit stuffing pass over the full region.
-        let expected_stream = {
-            let mut out = Vec::new();
-            let (mut run, mut last) = (0, 2u8);
-            for &b in &stream {
-                out.push(b);
-                if b == last {
-                    run += 1
-                } else {
-                    last = b;
-                    run = 1
-                }
-                if run == 5 {
-                    last ^= 1;
-                    out.push(last);
-                    run = 1;
-                }
-            }
-            out
-        };
+        let expected_stream = stuff_explicitly(&stream);
         assert_eq!(stuffed_bit_stream(&f), expected_stream);
         assert_eq!(&expected_stream[..14], &bits_of("0 11111 0 11111 0 1")[..]);
     }
@@ -214,6 +200,28 @@ mod tests {
         assert!(f.bit_length() >= 111 && f.bit_length() <= 135);
     }
 
+    /// An explicit stuffing pass: a complementary bit after every five equal bits, the stuff
+    /// bit counting towards the next run (ISO 11898-1 §10.5).
+    fn stuff_explicitly(stream: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        let (mut run, mut last) = (0, 2u8);
+        for &b in stream {
+            out.push(b);
+            if b == last {
+                run += 1
+            } else {
+                last = b;
+                run = 1
+            }
+            if run == 5 {
+                last ^= 1;
+                out.push(last);
+                run = 1;
+            }
+        }
+        out
+    }
+
     fn stuffed_bit_stream_unstuffed(f: &Frame) -> Vec<u8> {
         let r = stuffed_region(f);
         (0..r.len)
@@ -231,24 +239,8 @@ mod tests {
         let zeros = Frame::std(0x000, &[0; 8]).unwrap();
         let r = stuffed_region(&zeros);
         assert_eq!(r.crc, 0x145B);
-        let reference = {
-            let bits = stuffed_bit_stream_unstuffed(&zeros);
-            let (mut n, mut run, mut last) = (0, 0, 2u8);
-            for b in bits {
-                if b == last {
-                    run += 1
-                } else {
-                    last = b;
-                    run = 1
-                }
-                if run == 5 {
-                    n += 1;
-                    last ^= 1;
-                    run = 1;
-                }
-            }
-            n
-        };
+        let bits = stuffed_bit_stream_unstuffed(&zeros);
+        let reference = (stuff_explicitly(&bits).len() - bits.len()) as u32;
         assert_eq!(count_stuff_bits(r.bits, r.len), reference);
         assert_eq!(reference, 16);
         assert_eq!(zeros.bit_length(), 98 + 16 + 13);

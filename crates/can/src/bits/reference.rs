@@ -22,26 +22,7 @@ pub(super) fn crc15_bits(mut crc: u16, value: u64, n: u32) -> u16 {
 
 /// The unstuffed region SOF … CRC, with the CRC fed bit by bit.
 pub(super) fn stuffed_region(frame: &Frame) -> StuffedRegion {
-    let rtr = u64::from(frame.is_remote());
-    let dlc = u64::from(frame.dlc());
-    let (header, header_len) = match frame.id() {
-        crate::Id::Standard(id) => {
-            // SOF(0) ID(11) RTR IDE(0) r0(0) DLC(4)
-            let v = (u64::from(id.as_raw()) << 7) | (rtr << 6) | dlc;
-            (v, 19)
-        }
-        crate::Id::Extended(id) => {
-            // SOF(0) ID-A(11) SRR(1) IDE(1) ID-B(18) RTR r1(0) r0(0) DLC(4)
-            let raw = u64::from(id.as_raw());
-            let v = ((raw >> 18) << 27)
-                | (1 << 26)
-                | (1 << 25)
-                | ((raw & 0x3_FFFF) << 7)
-                | (rtr << 6)
-                | dlc;
-            (v, 39)
-        }
-    };
+    let (header, header_len) = super::header(frame);
     let mut crc = crc15_bits(0, header, header_len);
     let mut bits: u128 = u128::from(header) << (128 - header_len);
     let mut len = header_len;
