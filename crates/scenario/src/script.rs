@@ -1023,32 +1023,19 @@ pub fn validate(
 ) -> Result<Built, ScenarioError> {
     let built = scenario.build(registry, env)?;
     for (i, e) in scenario.script.expectations.iter().enumerate() {
-        if let Expect::Signal { device, name, .. } = &e.what {
-            let problem = match built.device(device) {
-                None => Some(format!("no device named {device:?}")),
-                Some(d) => registry
+        let (device, key) = match &e.what {
+            Expect::Signal { device, .. } => (device, "signal"),
+            Expect::Value { device, .. } => (device, "value"),
+            _ => continue,
+        };
+        let problem = match built.device(device) {
+            None => Some(format!("no device named {device:?}")),
+            Some(d) => match &e.what {
+                Expect::Signal { name, .. } => registry
                     .get(&d.kind)
                     .map(|k| k.read_signal(&built.sim, d.port, name))
                     .and_then(Result::err),
-            };
-            if let Some(message) = problem {
-                return Err(ScenarioError::Invalid {
-                    at: Located {
-                        file: scenario.file.clone(),
-                        line: Some(e.line),
-                        key: Some(format!("expect[{i}].signal")),
-                    },
-                    message,
-                });
-            }
-        }
-        if let Expect::Value {
-            device, index, sub, ..
-        } = &e.what
-        {
-            let problem = match built.device(device) {
-                None => Some(format!("no device named {device:?}")),
-                Some(d) => {
+                Expect::Value { index, sub, .. } => {
                     let readable = registry
                         .get(&d.kind)
                         .and_then(|k| k.read_object(&built.sim, d.port, *index, *sub))
@@ -1060,17 +1047,18 @@ pub fn validate(
                         )
                     })
                 }
-            };
-            if let Some(message) = problem {
-                return Err(ScenarioError::Invalid {
-                    at: Located {
-                        file: scenario.file.clone(),
-                        line: Some(e.line),
-                        key: Some(format!("expect[{i}].value")),
-                    },
-                    message,
-                });
-            }
+                _ => None,
+            },
+        };
+        if let Some(message) = problem {
+            return Err(ScenarioError::Invalid {
+                at: Located {
+                    file: scenario.file.clone(),
+                    line: Some(e.line),
+                    key: Some(format!("expect[{i}].{key}")),
+                },
+                message,
+            });
         }
     }
     Ok(built)
