@@ -156,11 +156,8 @@ impl Port {
     }
 }
 
-/// How many epochs (frame completions) of node calls the acceptance cache remembers.
-const CALL_RING: usize = 64;
-
 /// Cached acceptance verdicts for one identifier: bit `i` of `accept` is port `i`'s answer,
-/// valid for ports not called since `epoch`.
+/// valid for ports whose verdicts cannot have changed since `epoch`.
 #[derive(Debug, Default)]
 struct AcceptEntry {
     epoch: u64,
@@ -210,10 +207,6 @@ pub struct Bus {
     mismatched: usize,
     /// Completions so far; stamps the acceptance cache.
     epoch: u64,
-    /// A ring of [`CALL_RING`] bitsets of `words` words: the ports whose node was called
-    /// (so whose `accepts` may have changed) in each of the last epochs.
-    called: Vec<u64>,
-    words: usize,
     /// The latest epoch in which some port's acceptance verdicts may have changed: cached
     /// verdicts taken after it are all still valid.
     accept_changed: u64,
@@ -271,8 +264,6 @@ impl Bus {
             mismatched: 0,
             epoch: 1,
             accept_changed: 0,
-            called: Vec::new(),
-            words: 0,
             accept_cache: HashMap::default(),
             rx_slow: false,
             scratch: Vec::new(),
@@ -395,12 +386,6 @@ impl Bus {
             stats: PortStats::default(),
         });
         self.arb_keys.push(u64::MAX);
-        let words = self.ports.len().div_ceil(64);
-        if words > self.words {
-            self.words = words;
-            self.called = vec![0; CALL_RING * words];
-            self.accept_cache.clear();
-        }
         self.mark_called(index);
         if config.powered {
             self.power_up(index);
@@ -901,8 +886,6 @@ impl Bus {
 
     /// Note that port `i`'s node was called in this epoch.
     fn mark_called(&mut self, i: usize) {
-        let slot = (self.epoch % CALL_RING as u64) as usize * self.words;
-        self.called[slot + i / 64] |= 1 << (i % 64);
         self.ports[i].accept_changed = self.epoch;
         self.accept_changed = self.epoch;
     }
@@ -1222,8 +1205,6 @@ impl Bus {
 
     fn complete(&mut self, f: InFlight) {
         self.epoch += 1;
-        let slot = (self.epoch % CALL_RING as u64) as usize * self.words;
-        self.called[slot..slot + self.words].fill(0);
         let now = self.now;
         let sender_id = self.port_id(f.port);
         match f.outcome {
@@ -1327,30 +1308,18 @@ impl Bus {
         let since = entry.epoch;
         // Verdicts taken after the last possible change are all valid: nothing to ask (the
         // usual case on a bus whose nodes keep their acceptance versions).
-        let valid = since != 0 && since > self.accept_changed;
-        let fresh = since != 0 && self.epoch - since < CALL_RING as u64;
+        let valid = since > self.accept_changed;
         for w in 0..words {
             if valid {
                 break;
             }
-            // The ports whose verdicts may have changed since they were taken: from the ring
-            // of recent epochs, else from each port's last change; all of them if never taken.
-            let mut stale = if fresh {
-                (since..=self.epoch).fold(0, |m, e| {
-                    m | self.called[(e % CALL_RING as u64) as usize * self.words + w]
-                })
-            } else if since != 0 {
-                self.ports[w * 64..n.min(w * 64 + 64)]
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, p)| p.accept_changed >= since)
-                    .fold(0, |m, (j, _)| m | 1 << j)
-            } else {
-                match n - w * 64 {
-                    rem if rem >= 64 => u64::MAX,
-                    rem => (1u64 << rem) - 1,
-                }
-            };
+            // The ports whose verdicts may have changed since they were taken (in the same
+            // epoch included); every port when they never were (`since` 0).
+            let mut stale = self.ports[w * 64..n.min(w * 64 + 64)]
+                .iter()
+                .enumerate()
+                .filter(|(_, p)| p.accept_changed >= since)
+                .fold(0u64, |m, (j, _)| m | 1 << j);
             while stale != 0 {
                 let j = stale.trailing_zeros() as usize;
                 stale &= stale - 1;
