@@ -29,21 +29,23 @@ fn python(root: &Path) -> Option<PathBuf> {
 
 /// What stands in the way of running the benchmark from `root`, if anything.
 pub fn missing(root: &Path) -> Option<String> {
+    interpreter(root).err()
+}
+
+/// The Python to run the script with, or why it cannot run from `root`.
+fn interpreter(root: &Path) -> Result<PathBuf, String> {
     if !root.join(SCRIPT).is_file() {
-        return Some(format!(
+        return Err(format!(
             "{SCRIPT} is not under {}: run it from the cantwin repository (or give --file \
              the repository's BENCHMARKS.md)",
             display_root(root)
         ));
     }
-    if python(root).is_none() {
-        return Some(
-            "no Python with python-can and python-canopen: run `bash tests/interop/run.sh` once \
-             to create target/interop-venv, or set CANTWIN_PYTHON to such an interpreter"
-                .to_string(),
-        );
-    }
-    None
+    python(root).ok_or_else(|| {
+        "no Python with python-can and python-canopen: run `bash tests/interop/run.sh` once \
+         to create target/interop-venv, or set CANTWIN_PYTHON to such an interpreter"
+            .to_string()
+    })
 }
 
 fn display_root(root: &Path) -> String {
@@ -57,10 +59,7 @@ fn display_root(root: &Path) -> String {
 /// Run the benchmark: `requests` expedited uploads per server and `transfers` 64 KiB
 /// segmented uploads and downloads per server; with `write`, record it in `file`.
 pub fn run(root: &Path, file: &Path, requests: usize, transfers: usize, write: bool) -> Result<()> {
-    if let Some(why) = missing(root) {
-        bail!("bench python: {why}");
-    }
-    let python = python(root).context("no Python found")?;
+    let python = interpreter(root).map_err(|why| anyhow::anyhow!("bench python: {why}"))?;
     let exe = std::env::current_exe().context("locating this cantwin binary")?;
     let mut cmd = Command::new(&python);
     cmd.arg(root.join(SCRIPT))
