@@ -71,7 +71,7 @@ pub use error::BusError;
 pub use fault::{FaultAction, FaultRule, FrameSelector};
 pub use ids::{BusId, PortId};
 pub use paced::{
-    ExternalConfig, ExternalPort, PacedConfig, PacedSimulation, Received, SimHandle, TimeMap,
+    ExternalConfig, ExternalPort, PacedConfig, PacedSimulation, Received, SimHandle, Sink, TimeMap,
 };
 pub use port::{AnyNode, PortConfig, PortStatus};
 pub use queue::TxOrder;

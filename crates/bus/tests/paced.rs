@@ -197,3 +197,52 @@ fn a_simulation_that_falls_behind_gives_up_the_backlog_and_slips_its_time_map() 
     let sim = paced.stop().unwrap();
     assert_eq!(sim.node::<Probe>(rx).unwrap().rx, [(us(bits(&f) - 3), f)]);
 }
+
+#[test]
+fn a_port_delivering_to_a_sink_hands_over_buffered_frames_first_then_each_as_it_completes() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let handle = paced.handle();
+    let tool = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let listener = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let frame = |n: u8| std_frame(0x181, &[n]);
+    // Two frames reach the listener's buffer before it has a sink.
+    tool.send(frame(0)).unwrap();
+    tool.send(frame(1)).unwrap();
+    let mut buffered = 0;
+    while buffered < 2 {
+        // Wait for both without taking them: the port's status counts received frames.
+        std::thread::sleep(WallDuration::from_millis(1));
+        buffered = listener.status().unwrap().stats.rx_frames;
+    }
+    let (tx, rx) = std::sync::mpsc::channel();
+    let map = handle.clone();
+    listener
+        .deliver_to(move |r: cantwin_bus::Received| {
+            // The time map is readable from inside the simulation.
+            let _ = map.time_map().wall_time(r.at);
+            let _ = tx.send((r.frame, r.at));
+        })
+        .unwrap();
+    for n in 2..6 {
+        tool.send(frame(n)).unwrap();
+    }
+    let got: Vec<(Frame, Instant)> = (0..6).map(|_| rx.recv_timeout(PATIENCE).unwrap()).collect();
+    let frames: Vec<Frame> = got.iter().map(|g| g.0).collect();
+    assert_eq!(frames, (0..6).map(frame).collect::<Vec<_>>());
+    // Each frame at its own end on the bus, in order.
+    assert!(got.windows(2).all(|w| w[0].1 < w[1].1));
+    // Nothing is left for the buffer's reader; detaching ends it.
+    assert_eq!(listener.try_recv().unwrap(), None);
+    assert_eq!(listener.overruns(), 0);
+    paced.stop();
+    assert_eq!(
+        listener.recv_timeout(WallDuration::ZERO),
+        Err(BusError::Stopped)
+    );
+}
