@@ -93,7 +93,8 @@ impl BusConnector for PacedBus {
     }
 }
 
-/// A port on a paced bus; dropping it detaches it.
+/// A port on a paced bus; dropping it detaches it. It delivers frames on the simulation's
+/// thread when asked ([`BusPort::deliver_to`]).
 struct PacedPort {
     port: ExternalPort,
     handle: SimHandle,
@@ -117,5 +118,17 @@ impl BusPort for PacedPort {
 
     fn overflows(&self) -> u64 {
         self.port.overruns()
+    }
+
+    fn deliver_to(&self, mut sink: Box<dyn FnMut(Received) + Send>) -> bool {
+        let handle = self.handle.clone();
+        self.port
+            .deliver_to(move |rx: cantwin_bus::Received| {
+                sink(Received {
+                    frame: rx.frame,
+                    timestamp: handle.time_map().wall_time(rx.at),
+                });
+            })
+            .is_ok()
     }
 }

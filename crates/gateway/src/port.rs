@@ -58,6 +58,17 @@ pub trait BusPort: Send + Sync {
 
     /// How many received frames were dropped because the receive buffer was full.
     fn overflows(&self) -> u64;
+
+    /// Have the bus hand every frame this port receives to `sink`, on the bus's own thread
+    /// as the frame completes, instead of buffering it for [`BusPort::recv_timeout`]; frames
+    /// buffered so far go to the sink first. The sink must not block.
+    ///
+    /// Returns whether the port does so. A port that cannot (the default) drops the sink and
+    /// keeps buffering; its reader keeps calling [`BusPort::recv_timeout`].
+    fn deliver_to(&self, sink: Box<dyn FnMut(Received) + Send>) -> bool {
+        drop(sink);
+        false
+    }
 }
 
 /// Hands out ports on named buses.
@@ -76,6 +87,9 @@ impl<T: BusPort + ?Sized> BusPort for Box<T> {
     }
     fn overflows(&self) -> u64 {
         (**self).overflows()
+    }
+    fn deliver_to(&self, sink: Box<dyn FnMut(Received) + Send>) -> bool {
+        (**self).deliver_to(sink)
     }
 }
 

@@ -6,12 +6,20 @@
 //!
 //! * the reader thread reads the socket, feeds the protocol session, and writes its replies
 //!   (each reply is one `write` call, so a reply never shares a write with frames);
-//! * the writer thread drains the client's bus port (a bounded receive buffer, filled by the
-//!   bus whatever the client does) and writes frames to the socket. When the buffer overflows
-//!   because the client reads too slowly, or a write blocks longer than
-//!   [`Limits::write_timeout`], the client is disconnected; the bus never waits for it.
+//! * frames reach the socket in one of two ways. A port that can deliver on the bus's own
+//!   thread ([`BusPort::deliver_to`], the paced virtual bus) hands each frame over as it
+//!   completes: when nothing is waiting to be written, the bus thread writes it at once
+//!   without blocking, which saves a thread wake-up per frame in every tool's round trip;
+//!   otherwise (a write under way, the client's socket full, frames already waiting) the frame
+//!   is queued for the client's writer thread. Other ports are drained by the writer thread.
+//!   When the queue overflows because the client reads too slowly, or a write blocks longer
+//!   than [`Limits::write_timeout`], the client is disconnected; the bus never waits for it.
+//!
+//! Whoever writes to the socket holds the connection's `busy` mark, so frames and replies
+//! never interleave, and a frame the socket took only part of is finished before anything
+//! else.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::io::{self, ErrorKind, Read, Write};
 use std::net::{Shutdown, SocketAddr, TcpListener, TcpStream};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -49,6 +57,11 @@ pub struct Limits {
     /// Bind to addresses other than loopback. Default `false`: a server on a non-loopback
     /// address is refused unless this is set.
     pub allow_remote: bool,
+    /// The kernel's send buffer per client socket (`SO_SNDBUF`, which Linux doubles), in
+    /// bytes. Default `None`: the kernel sizes it (and grows it up to `net.ipv4.tcp_wmem`).
+    /// A small buffer bounds the kernel memory a client that stops reading can hold, and
+    /// makes it count as too slow sooner.
+    pub send_buffer: Option<usize>,
 }
 
 impl Default for Limits {
@@ -61,6 +74,7 @@ impl Default for Limits {
             handshake_timeout: Duration::from_secs(10),
             settle: Duration::from_millis(50),
             allow_remote: false,
+            send_buffer: None,
         }
     }
 }
@@ -113,13 +127,13 @@ pub(crate) struct Link<'a> {
 impl Link<'_> {
     /// Write a reply, alone in one write.
     pub(crate) fn reply(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.conn.write(bytes)
+        self.conn.reply(bytes, self.limits.write_timeout)
     }
 
     /// Write an error reply.
     pub(crate) fn error(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.stats.error_replies.fetch_add(1, Ordering::Relaxed);
-        self.conn.write(bytes)
+        self.conn.reply(bytes, self.limits.write_timeout)
     }
 
     /// Attach the client to bus `channel`.
@@ -127,6 +141,7 @@ impl Link<'_> {
         let port = self.connector.open(channel, self.limits.client_queue)?;
         *self.conn.port() = Some(Arc::from(port));
         self.conn.ready.notify_all();
+        self.conn.work.notify_all();
         Ok(())
     }
 
@@ -137,6 +152,8 @@ impl Link<'_> {
     pub(crate) fn close(&mut self) {
         self.forward(false);
         let port = self.conn.port().take();
+        // The writer lets go of the port when it next looks.
+        self.conn.work.notify_all();
         if let Some(port) = port {
             let deadline = Instant::now() + RECV_POLL * 2;
             while Arc::strong_count(&port) > 1 && Instant::now() < deadline {
@@ -180,19 +197,29 @@ impl Link<'_> {
     /// stream starts: the client gets exactly the frames that reach the bus port after the
     /// switch. Starting again while started only restarts the pause.
     pub(crate) fn forward(&mut self, on: bool) {
-        let mut f = self.conn.forward();
-        if on && !f.on {
-            // Under the lock the writer drains with, so no frame from before the switch can
-            // be in flight in the writer when it sees the stream on.
-            if let Some(port) = self.conn.port().clone() {
-                while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
-                f.overflow_base = port.overflows();
+        let mut out = self.conn.out();
+        if on != out.on {
+            // Queued frames are from before the switch either way. A frame the socket took
+            // only part of stays: the client's stream must not be cut mid-frame.
+            out.queue.clear();
+        }
+        if on && !out.on {
+            // Under the lock a draining writer holds, so no frame from before the switch can
+            // be in flight in the writer when it sees the stream on. A port that delivers on
+            // the bus's thread buffers nothing to drain (and is not touched here: the bus
+            // thread takes this lock while it holds the port's).
+            if !out.delivered {
+                let port = self.conn.port().clone();
+                if let Some(port) = port {
+                    while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
+                    out.overflow_base = port.overflows();
+                }
             }
         }
-        f.on = on;
-        f.after = Instant::now() + self.limits.settle;
-        drop(f);
-        self.conn.switched.notify_all();
+        out.on = on;
+        out.after = Instant::now() + self.limits.settle;
+        drop(out);
+        self.conn.work.notify_all();
     }
 }
 
@@ -205,24 +232,65 @@ struct Stats {
     error_replies: AtomicU64,
 }
 
-struct Forward {
+/// Why the writer ends a connection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// The client reads too slowly or not at all: its queue overflowed or a write blocked
+    /// past [`Limits::write_timeout`].
+    TooSlow,
+    /// The socket failed (the client went away).
+    Gone,
+}
+
+/// What goes to the client's socket, and who may write it.
+struct Out {
+    /// Whether bus frames are forwarded to the client at all.
     on: bool,
-    /// When the first frame may be written.
+    /// When the first frame after switching the stream on may be written.
     after: Instant,
     /// The port's overflow count when the stream started: overflows while stopped (the
     /// writer drains only now and then) do not count against the client.
     overflow_base: u64,
+    /// The port hands frames over on the bus's thread ([`BusPort::deliver_to`]).
+    delivered: bool,
+    /// The tail of a frame write the socket did not take at once; it goes out before
+    /// anything else.
+    pending: Vec<u8>,
+    /// Frames waiting for the writer thread, oldest first.
+    queue: VecDeque<Received>,
+    /// Someone is writing to the socket (the writer thread or a reply): nobody else may.
+    busy: bool,
+    /// Replies waiting for their turn; the writer lets them go before its next batch, so a
+    /// steady stream of frames to a slow client cannot hold a reply back.
+    replies_waiting: usize,
+    /// Set when the connection must end; the writer acts on it.
+    end: Option<End>,
+    /// Reused for the bus thread's immediate writes.
+    scratch: Vec<u8>,
+}
+
+impl Out {
+    /// Whether a frame may be written at once: nothing before it is waiting or being written,
+    /// and the stream's start pause is over.
+    fn can_write_now(&self) -> bool {
+        !self.busy
+            && self.pending.is_empty()
+            && self.queue.is_empty()
+            && Instant::now() >= self.after
+    }
 }
 
 pub(crate) struct Conn {
     stream: TcpStream,
-    writer: Mutex<TcpStream>,
     port: Mutex<Option<Arc<dyn BusPort>>>,
-    forward: Mutex<Forward>,
+    out: Mutex<Out>,
     /// Signalled with `port` when a bus is opened or the connection closed.
     ready: Condvar,
-    /// Signalled with `forward` when the stream is switched or the connection closed.
-    switched: Condvar,
+    /// Signalled with `out` when the writer has something to do: frames queued, a partial
+    /// write to finish, the stream switched, the port changed, the connection ending.
+    work: Condvar,
+    /// Signalled with `out` when a write ends (`busy` cleared), for replies waiting their turn.
+    quiet: Condvar,
     closed: AtomicBool,
 }
 
@@ -230,28 +298,226 @@ fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+fn wait_on<'a, T>(c: &Condvar, g: MutexGuard<'a, T>, timeout: Duration) -> MutexGuard<'a, T> {
+    c.wait_timeout(g, timeout)
+        .unwrap_or_else(|e| e.into_inner())
+        .0
+}
+
 impl Conn {
     fn port(&self) -> MutexGuard<'_, Option<Arc<dyn BusPort>>> {
         relock(&self.port)
     }
-    fn forward(&self) -> MutexGuard<'_, Forward> {
-        relock(&self.forward)
+    fn out(&self) -> MutexGuard<'_, Out> {
+        relock(&self.out)
     }
-    fn write(&self, bytes: &[u8]) -> io::Result<()> {
-        let mut w = relock(&self.writer);
-        w.write_all(bytes)?;
-        w.flush()
+
+    /// Write a reply alone, after any write under way, waiting at most `timeout` for its
+    /// turn (the socket's own write timeout bounds the write itself).
+    fn reply(&self, bytes: &[u8], timeout: Duration) -> io::Result<()> {
+        let give_up = Instant::now() + timeout;
+        let mut out = self.out();
+        out.replies_waiting += 1;
+        while out.busy || !out.pending.is_empty() {
+            let left = give_up.saturating_duration_since(Instant::now());
+            if self.is_closed() || left.is_zero() {
+                out.replies_waiting -= 1;
+                return Err(io::Error::new(
+                    ErrorKind::TimedOut,
+                    "the connection's writes did not end",
+                ));
+            }
+            out = wait_on(&self.quiet, out, left);
+        }
+        out.replies_waiting -= 1;
+        out.busy = true;
+        drop(out);
+        let written = (&self.stream).write_all(bytes);
+        self.out().busy = false;
+        self.quiet.notify_all();
+        // Frames may have been queued while the reply was written.
+        self.work.notify_all();
+        written
     }
+
+    /// Take a frame the bus delivered. Called on the bus's thread for a port that delivers
+    /// there (`now` true: write it at once if nothing is ahead of it and the server's
+    /// [`DirectBudget`] allows), or on the writer thread for a port it drains (`now` false:
+    /// queue it, the writer writes queued frames in batches). Never blocks on the socket.
+    fn offer<P: Protocol>(&self, shared: &Shared<P>, rx: &Received, now: bool) {
+        let mut out = self.out();
+        if !out.on || out.end.is_some() {
+            return;
+        }
+        if now && out.can_write_now() && shared.direct.take() {
+            let mut bytes = std::mem::take(&mut out.scratch);
+            bytes.clear();
+            if shared.protocol.write_frame(rx, &mut bytes) {
+                match send_now(&self.stream, &bytes) {
+                    Ok(n) if n == bytes.len() => {}
+                    Ok(n) => out.pending.extend_from_slice(&bytes[n..]),
+                    Err(e)
+                        if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::Interrupted) =>
+                    {
+                        out.pending.extend_from_slice(&bytes);
+                    }
+                    Err(_) => out.end = Some(End::Gone),
+                }
+            }
+            out.scratch = bytes;
+            let wake = !out.pending.is_empty() || out.end.is_some();
+            drop(out);
+            if wake {
+                self.work.notify_all();
+            }
+            return;
+        }
+        if out.queue.len() >= shared.limits.client_queue {
+            out.end = Some(End::TooSlow);
+        } else {
+            out.queue.push_back(*rx);
+        }
+        drop(out);
+        self.work.notify_all();
+    }
+
+    /// Write what is pending and queued, blocking (bounded by the socket's write timeout).
+    /// Writer thread only.
+    fn flush<P: Protocol>(
+        &self,
+        protocol: &P,
+        batch: &mut VecDeque<Received>,
+        buf: &mut Vec<u8>,
+    ) -> Result<(), End> {
+        let mut out = self.out();
+        loop {
+            if let Some(end) = out.end {
+                return Err(end);
+            }
+            if out.pending.is_empty() && out.queue.is_empty() {
+                return Ok(());
+            }
+            if out.busy || (out.replies_waiting > 0 && out.pending.is_empty()) {
+                // A reply is being written or waits for its turn; frames follow it.
+                out = wait_on(&self.quiet, out, RECV_POLL);
+                continue;
+            }
+            if out.pending.is_empty() {
+                let wait = out.after.saturating_duration_since(Instant::now());
+                if !wait.is_zero() {
+                    drop(out);
+                    thread::sleep(wait);
+                    out = self.out();
+                    continue;
+                }
+            }
+            buf.clear();
+            buf.append(&mut out.pending);
+            // A waiting reply goes right after the tail of the frame it waits for. The frames
+            // are taken out under the lock and formatted after it: the bus's thread may be
+            // waiting for the lock to hand over the next frame.
+            batch.clear();
+            if out.replies_waiting == 0 {
+                if out.queue.len() <= WRITE_BATCH {
+                    std::mem::swap(&mut out.queue, batch);
+                } else {
+                    batch.extend(out.queue.drain(..WRITE_BATCH));
+                }
+            }
+            out.busy = true;
+            drop(out);
+            for rx in batch.drain(..) {
+                protocol.write_frame(&rx, buf);
+            }
+            let written = (&self.stream).write_all(buf);
+            out = self.out();
+            out.busy = false;
+            self.quiet.notify_all();
+            if let Err(e) = written {
+                // A write that blocked past the write timeout: the client is stuck.
+                return Err(match e.kind() {
+                    ErrorKind::WouldBlock | ErrorKind::TimedOut => End::TooSlow,
+                    _ => End::Gone,
+                });
+            }
+        }
+    }
+
     fn close(&self) {
         self.closed.store(true, Ordering::SeqCst);
         // Errors here mean the socket is already gone, which is the goal.
         let _ = self.stream.shutdown(Shutdown::Both);
         *self.port() = None;
         self.ready.notify_all();
-        self.switched.notify_all();
+        self.work.notify_all();
+        self.quiet.notify_all();
     }
     fn is_closed(&self) -> bool {
         self.closed.load(Ordering::SeqCst)
+    }
+}
+
+/// Write without blocking: as much of `bytes` as the socket takes now.
+#[cfg(target_os = "linux")]
+fn send_now(stream: &TcpStream, bytes: &[u8]) -> io::Result<usize> {
+    // MSG_NOSIGNAL: a vanished client is an error, not a signal that ends the process (the
+    // library may be embedded in a program that did not ignore SIGPIPE).
+    socket2::SockRef::from(stream).send_with_flags(bytes, libc::MSG_DONTWAIT | libc::MSG_NOSIGNAL)
+}
+
+/// Without a per-call non-blocking send every frame goes through the writer thread.
+#[cfg(not(target_os = "linux"))]
+fn send_now(_stream: &TcpStream, _bytes: &[u8]) -> io::Result<usize> {
+    Err(ErrorKind::WouldBlock.into())
+}
+
+/// How many frames per second the bus's thread may write to this server's clients itself.
+/// Each such write is a system call on the bus's thread (a few microseconds on loopback);
+/// beyond this rate frames go to the clients' writer threads, which batch them, so that a busy
+/// bus fanned out to many clients never slows the simulation down. A few clients in a
+/// request-and-answer exchange stay far below it.
+const DIRECT_PER_SECOND: u64 = 10_000;
+/// Direct writes allowed at once, beyond the rate: one frame to each of a few clients.
+const DIRECT_BURST: u64 = 16;
+
+/// The server-wide budget of the bus thread's direct writes: a generic cell rate algorithm
+/// (ITU-T I.371) on one atomic, the theoretical arrival time of the next write.
+struct DirectBudget {
+    origin: Instant,
+    /// Nanoseconds after `origin`.
+    next: AtomicU64,
+}
+
+impl DirectBudget {
+    const INTERVAL: u64 = 1_000_000_000 / DIRECT_PER_SECOND;
+    const TOLERANCE: u64 = Self::INTERVAL * (DIRECT_BURST - 1);
+
+    fn new() -> Self {
+        DirectBudget {
+            origin: Instant::now(),
+            next: AtomicU64::new(0),
+        }
+    }
+
+    /// Whether one more direct write fits the budget now (and count it if so).
+    fn take(&self) -> bool {
+        let now = u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX);
+        let mut next = self.next.load(Ordering::Relaxed);
+        loop {
+            let from = next.max(now);
+            if from - now > Self::TOLERANCE {
+                return false;
+            }
+            match self.next.compare_exchange_weak(
+                next,
+                from + Self::INTERVAL,
+                Ordering::Relaxed,
+                Ordering::Relaxed,
+            ) {
+                Ok(_) => return true,
+                Err(seen) => next = seen,
+            }
+        }
     }
 }
 
@@ -260,6 +526,7 @@ struct Shared<P: Protocol> {
     connector: Arc<dyn BusConnector>,
     limits: Limits,
     stats: Stats,
+    direct: DirectBudget,
     conns: Mutex<HashMap<u64, Arc<Conn>>>,
     idle: Condvar,
     stop: AtomicBool,
@@ -291,6 +558,7 @@ impl<P: Protocol> TcpServer<P> {
             connector,
             limits,
             stats: Stats::default(),
+            direct: DirectBudget::new(),
             conns: Mutex::new(HashMap::new()),
             idle: Condvar::new(),
             stop: AtomicBool::new(false),
@@ -388,17 +656,27 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
     stream.set_nonblocking(false)?;
     stream.set_nodelay(true)?;
     stream.set_write_timeout(Some(shared.limits.write_timeout))?;
+    if let Some(size) = shared.limits.send_buffer {
+        socket2::SockRef::from(&stream).set_send_buffer_size(size)?;
+    }
     let conn = Arc::new(Conn {
-        writer: Mutex::new(stream.try_clone()?),
         stream,
         port: Mutex::new(None),
-        forward: Mutex::new(Forward {
+        out: Mutex::new(Out {
             on: false,
             after: Instant::now(),
             overflow_base: 0,
+            delivered: false,
+            pending: Vec::new(),
+            queue: VecDeque::new(),
+            busy: false,
+            replies_waiting: 0,
+            end: None,
+            scratch: Vec::new(),
         }),
         ready: Condvar::new(),
-        switched: Condvar::new(),
+        work: Condvar::new(),
+        quiet: Condvar::new(),
         closed: AtomicBool::new(false),
     });
     {
@@ -408,7 +686,7 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
             shared.stats.refused.fetch_add(1, Ordering::Relaxed);
             conn.stream
                 .set_write_timeout(Some(Duration::from_millis(100)))?;
-            let _ = conn.write(shared.protocol.refusal());
+            let _ = conn.reply(shared.protocol.refusal(), Duration::from_millis(100));
             conn.close();
             return Ok(());
         }
@@ -439,7 +717,7 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
 /// The reader side of one client; spawns and joins its writer.
 fn serve<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
     if let Some(hi) = shared.protocol.greeting()
-        && conn.write(hi).is_err()
+        && conn.reply(hi, shared.limits.write_timeout).is_err()
     {
         return;
     }
@@ -505,69 +783,106 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
     }
 }
 
-fn write_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
-    let mut out = Vec::with_capacity(4096);
+fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
+    let mut buf = Vec::with_capacity(4096);
+    let mut batch = VecDeque::with_capacity(WRITE_BATCH);
+    // The port that delivers to this connection on the bus's thread, if any.
+    let mut delivering: Option<Arc<dyn BusPort>> = None;
     while !conn.is_closed() {
         let Some(port) = conn.port().clone() else {
+            delivering = None;
+            conn.out().delivered = false;
             // Wait for `open` (or for the close that ends the loop).
             let guard = conn.port();
             if guard.is_none() {
-                drop(
-                    conn.ready
-                        .wait_timeout(guard, RECV_POLL)
-                        .unwrap_or_else(|e| e.into_inner()),
-                );
+                drop(wait_on(&conn.ready, guard, RECV_POLL));
             }
             continue;
         };
-        let (after, overflow_base) = {
-            let f = conn.forward();
-            if !f.on {
-                // Stopped: drop what the bus delivers, under the lock `forward` takes, then
-                // sleep until the stream starts or it is time to drain again.
-                while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
-                drop(
-                    conn.switched
-                        .wait_timeout(f, RECV_POLL)
-                        .unwrap_or_else(|e| e.into_inner()),
-                );
-                continue;
-            }
-            (f.after, f.overflow_base)
-        };
-        let first = match port.recv_timeout(RECV_POLL) {
-            Ok(Some(rx)) => rx,
-            Ok(None) => continue,
-            Err(_) => break,
-        };
-        if port.overflows() > overflow_base {
-            shared.stats.too_slow.fetch_add(1, Ordering::Relaxed);
-            break;
-        }
-        let wait = after.saturating_duration_since(Instant::now());
-        if !wait.is_zero() {
-            thread::sleep(wait);
-        }
-        out.clear();
-        shared.protocol.write_frame(&first, &mut out);
-        for _ in 1..WRITE_BATCH {
-            match port.recv_timeout(Duration::ZERO) {
-                Ok(Some(rx)) => {
-                    shared.protocol.write_frame(&rx, &mut out);
-                }
-                _ => break,
+        let same = delivering
+            .as_ref()
+            .is_some_and(|d| std::ptr::addr_eq(Arc::as_ptr(d), Arc::as_ptr(&port)));
+        if !same {
+            delivering = None;
+            conn.out().delivered = false;
+            if port.deliver_to(sink(shared, conn)) {
+                conn.out().delivered = true;
+                delivering = Some(Arc::clone(&port));
             }
         }
-        if out.is_empty() || !conn.forward().on {
-            continue;
-        }
-        if let Err(e) = conn.write(&out) {
-            if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) {
-                // A write that blocked past the write timeout: the client is stuck.
+        let step = if delivering.is_some() {
+            wait_delivered(conn, &*port)
+        } else {
+            drain(shared, conn, &*port)
+        };
+        let flushed = step.and_then(|()| conn.flush(&shared.protocol, &mut batch, &mut buf));
+        match flushed {
+            Ok(()) => {}
+            Err(End::TooSlow) => {
                 shared.stats.too_slow.fetch_add(1, Ordering::Relaxed);
+                break;
             }
-            break;
+            Err(End::Gone) => break,
         }
     }
     conn.close();
+}
+
+/// What the bus's thread calls with each frame for this connection. It holds the connection
+/// weakly: the bus owns the sink, and a closed connection must not be kept alive by it.
+fn sink<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) -> Box<dyn FnMut(Received) + Send> {
+    let shared = Arc::downgrade(shared);
+    let conn = Arc::downgrade(conn);
+    Box::new(move |rx: Received| {
+        if let (Some(shared), Some(conn)) = (shared.upgrade(), conn.upgrade()) {
+            conn.offer(&shared, &rx, true);
+        }
+    })
+}
+
+/// A delivering port: wait until there is something to write or to act on.
+fn wait_delivered(conn: &Conn, port: &dyn BusPort) -> Result<(), End> {
+    let out = conn.out();
+    if out.end.is_none() && out.pending.is_empty() && out.queue.is_empty() {
+        drop(wait_on(&conn.work, out, RECV_POLL));
+    } else {
+        drop(out);
+    }
+    // The port buffers nothing now; it only reports that the bus stopped or let it go.
+    match port.recv_timeout(Duration::ZERO) {
+        Err(_) => Err(End::Gone),
+        Ok(_) => Ok(()),
+    }
+}
+
+/// A port the writer drains: take what the bus buffered (dropping it while the stream is
+/// stopped), waiting up to a poll interval for the first frame.
+fn drain<P: Protocol>(shared: &Shared<P>, conn: &Conn, port: &dyn BusPort) -> Result<(), End> {
+    let overflow_base = {
+        let out = conn.out();
+        if !out.on {
+            // Stopped: drop what the bus delivers, under the lock `forward` takes, then sleep
+            // until the stream starts or it is time to drain again.
+            while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
+            drop(wait_on(&conn.work, out, RECV_POLL));
+            return Ok(());
+        }
+        out.overflow_base
+    };
+    let first = match port.recv_timeout(RECV_POLL) {
+        Ok(Some(rx)) => rx,
+        Ok(None) => return Ok(()),
+        Err(_) => return Err(End::Gone),
+    };
+    if port.overflows() > overflow_base {
+        return Err(End::TooSlow);
+    }
+    conn.offer(shared, &first, false);
+    for _ in 1..WRITE_BATCH {
+        match port.recv_timeout(Duration::ZERO) {
+            Ok(Some(rx)) => conn.offer(shared, &rx, false),
+            _ => break,
+        }
+    }
+    Ok(())
 }
