@@ -355,7 +355,7 @@ def write(n, transfers, rows, ratios, parts, alone):
         "| part | median |\n|---|---|\n"
         f"| client sends → end of the request frame (gateway read, queueing, the request's bits) | {way_in:.0f} µs |\n"
         f"| end of the request → end of the response (the twin's answer, arbitration, the response's bits) | {bus:.0f} µs |\n"
-        f"| end of the response → client holds it (simulation thread, gateway writer, TCP) | {way_out:.0f} µs |\n"
+        f"| end of the response → client holds it (the simulation thread's write, TCP, the client's wake) | {way_out:.0f} µs |\n"
         f"| **whole round trip, bare client** | **{total:.0f} µs** |"
     )
     body = (
