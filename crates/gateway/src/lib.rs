@@ -1,8 +1,9 @@
 //! Gateways between a cantwin bus and the tools outside it.
 //!
-//! * [`socketcand`]: a socketcand server (raw mode) in front of cantwin buses, for python-can,
-//!   python-canopen and anything else that speaks the linux-can socketcand protocol; and a
-//!   client that attaches to such a server or to a real socketcand daemon.
+//! * [`socketcand`]: a socketcand server (raw and broadcast-manager modes) in front of cantwin
+//!   buses, for python-can, python-canopen and anything else that speaks the linux-can
+//!   socketcand protocol; and a client that attaches to such a server or to a real socketcand
+//!   daemon.
 //! * [`slcan`]: a Lawicel/slcan server over TCP, for tools that need remote frames
 //!   (python-can's `slcan` interface with a `socket://` channel).
 //! * `socketcan` (cargo feature `socketcan`, Linux): real CAN interfaces as a

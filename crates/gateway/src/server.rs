@@ -119,6 +119,7 @@ pub(crate) trait Session: Send + 'static {
 /// What a session may do to its client and its bus.
 pub(crate) struct Link<'a> {
     conn: &'a Conn,
+    handle: &'a ConnHandle,
     connector: &'a dyn BusConnector,
     limits: &'a Limits,
     stats: &'a Stats,
@@ -160,6 +161,27 @@ impl Link<'_> {
                 thread::sleep(Duration::from_millis(1));
             }
         }
+    }
+
+    /// Have the stream pass frames through `selector` (and write them its way), or, with
+    /// `None`, carry every frame in the protocol's own format. Frames queued under another
+    /// selector are dropped.
+    pub(crate) fn select(&mut self, selector: Option<Arc<dyn Selector>>) {
+        let mut out = self.conn.out();
+        let same = match (&out.selector, &selector) {
+            (Some(a), Some(b)) => std::ptr::addr_eq(Arc::as_ptr(a), Arc::as_ptr(b)),
+            (None, None) => true,
+            _ => false,
+        };
+        if !same {
+            out.queue.clear();
+            out.selector = selector;
+        }
+    }
+
+    /// A handle on this connection for other threads (a session's timers).
+    pub(crate) fn handle(&self) -> ConnHandle {
+        self.handle.clone()
     }
 
     /// Whether the client is attached to a bus.
@@ -232,6 +254,71 @@ struct Stats {
     error_replies: AtomicU64,
 }
 
+/// Which frames of the bus a connection's stream carries and how it writes them, when that is
+/// not every frame in the protocol's own format (socketcand's broadcast-manager mode).
+pub(crate) trait Selector: Send + Sync {
+    /// Whether a frame from the bus goes to the client now. A selector may keep a frame and
+    /// hand it over later through [`ConnHandle::deliver`]. Called with the connection's
+    /// stream locked: it must not call back into the connection.
+    fn select(&self, rx: &Received) -> bool;
+    /// Append the frame as the stream writes it; `false` if it cannot be carried.
+    fn write(&self, rx: &Received, out: &mut Vec<u8>) -> bool;
+}
+
+/// Where a frame handed to a connection's stream comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    /// The bus's own thread: it may be written at once.
+    BusThread,
+    /// The writer thread draining its port: queued, written in batches.
+    Drained,
+    /// A frame the selector kept and hands over now (already selected).
+    Held,
+}
+
+/// Hands a connection a frame through its server's protocol (which a handle does not name).
+type Deliver = Arc<dyn Fn(&Conn, &Received) + Send + Sync>;
+
+/// A connection as seen from other threads: it ends with the connection.
+#[derive(Clone)]
+pub(crate) struct ConnHandle {
+    conn: std::sync::Weak<Conn>,
+    deliver: Deliver,
+}
+
+impl ConnHandle {
+    fn new<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) -> Self {
+        let shared = Arc::downgrade(shared);
+        ConnHandle {
+            conn: Arc::downgrade(conn),
+            deliver: Arc::new(move |conn: &Conn, rx: &Received| {
+                if let Some(shared) = shared.upgrade() {
+                    conn.offer(&shared, rx, Source::Held);
+                }
+            }),
+        }
+    }
+
+    /// Whether the connection has ended.
+    pub(crate) fn is_closed(&self) -> bool {
+        self.conn.upgrade().is_none_or(|c| c.is_closed())
+    }
+
+    /// Hand the client a frame its selector kept.
+    pub(crate) fn deliver(&self, rx: &Received) {
+        if let Some(conn) = self.conn.upgrade() {
+            (self.deliver)(&conn, rx);
+        }
+    }
+
+    /// Queue a frame on the client's bus without waiting: a full transmit queue refuses it.
+    pub(crate) fn send(&self, frame: Frame) -> Result<(), PortError> {
+        let conn = self.conn.upgrade().ok_or(PortError::Closed)?;
+        let port = conn.port().clone().ok_or(PortError::Closed)?;
+        port.send(frame)
+    }
+}
+
 /// Why the writer ends a connection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum End {
@@ -267,6 +354,9 @@ struct Out {
     end: Option<End>,
     /// Reused for the bus thread's immediate writes.
     scratch: Vec<u8>,
+    /// Which frames go to the client, and how they are written; `None`: all, the protocol's
+    /// way.
+    selector: Option<Arc<dyn Selector>>,
 }
 
 impl Out {
@@ -340,19 +430,30 @@ impl Conn {
         written
     }
 
-    /// Take a frame the bus delivered. Called on the bus's thread for a port that delivers
-    /// there (`now` true: write it at once if nothing is ahead of it and the server's
-    /// [`DirectBudget`] allows), or on the writer thread for a port it drains (`now` false:
-    /// queue it, the writer writes queued frames in batches). Never blocks on the socket.
-    fn offer<P: Protocol>(&self, shared: &Shared<P>, rx: &Received, now: bool) {
+    /// Take a frame for the client: from the bus's thread for a port that delivers there, or
+    /// from a selector's timer (written at once if nothing is ahead of it and the server's
+    /// [`DirectBudget`] allows), or from the writer thread for a port it drains (queued; the
+    /// writer writes queued frames in batches). Frames from the bus go through the stream's
+    /// selector. Never blocks on the socket.
+    fn offer<P: Protocol>(&self, shared: &Shared<P>, rx: &Received, from: Source) {
         let mut out = self.out();
         if !out.on || out.end.is_some() {
             return;
         }
-        if now && out.can_write_now() && shared.direct.take() {
+        if from != Source::Held
+            && let Some(selector) = &out.selector
+            && !selector.select(rx)
+        {
+            return;
+        }
+        if from != Source::Drained && out.can_write_now() && shared.direct.take() {
             let mut bytes = std::mem::take(&mut out.scratch);
             bytes.clear();
-            if shared.protocol.write_frame(rx, &mut bytes) {
+            let written = match &out.selector {
+                Some(selector) => selector.write(rx, &mut bytes),
+                None => shared.protocol.write_frame(rx, &mut bytes),
+            };
+            if written {
                 match send_now(&self.stream, &bytes) {
                     Ok(n) if n == bytes.len() => {}
                     Ok(n) => out.pending.extend_from_slice(&bytes[n..]),
@@ -417,6 +518,7 @@ impl Conn {
             // are taken out under the lock and formatted after it: the bus's thread may be
             // waiting for the lock to hand over the next frame.
             batch.clear();
+            let selector = out.selector.clone();
             if out.replies_waiting == 0 {
                 if out.queue.len() <= WRITE_BATCH {
                     std::mem::swap(&mut out.queue, batch);
@@ -427,7 +529,10 @@ impl Conn {
             out.busy = true;
             drop(out);
             for rx in batch.drain(..) {
-                protocol.write_frame(&rx, buf);
+                match &selector {
+                    Some(selector) => selector.write(&rx, buf),
+                    None => protocol.write_frame(&rx, buf),
+                };
             }
             let written = (&self.stream).write_all(buf);
             out = self.out();
@@ -673,6 +778,7 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
             replies_waiting: 0,
             end: None,
             scratch: Vec::new(),
+            selector: None,
         }),
         ready: Condvar::new(),
         work: Condvar::new(),
@@ -729,13 +835,13 @@ fn serve<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
             .spawn(move || write_loop(&shared, &conn))
     };
     let Ok(writer) = writer else { return };
-    read_loop(shared, conn);
+    read_loop(shared, conn, &ConnHandle::new(shared, conn));
     conn.close();
     // The writer only returns; a panic in it would already have closed the connection.
     let _ = writer.join();
 }
 
-fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
+fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn, handle: &ConnHandle) {
     let mut session = shared.protocol.session();
     let mut buf = [0u8; 1024];
     let deadline = Instant::now() + shared.limits.handshake_timeout;
@@ -767,6 +873,7 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn) {
         };
         let mut link = Link {
             conn,
+            handle,
             connector: &*shared.connector,
             limits: &shared.limits,
             stats: &shared.stats,
@@ -835,7 +942,7 @@ fn sink<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) -> Box<dyn FnMut
     let conn = Arc::downgrade(conn);
     Box::new(move |rx: Received| {
         if let (Some(shared), Some(conn)) = (shared.upgrade(), conn.upgrade()) {
-            conn.offer(&shared, &rx, true);
+            conn.offer(&shared, &rx, Source::BusThread);
         }
     })
 }
@@ -877,10 +984,10 @@ fn drain<P: Protocol>(shared: &Shared<P>, conn: &Conn, port: &dyn BusPort) -> Re
     if port.overflows() > overflow_base {
         return Err(End::TooSlow);
     }
-    conn.offer(shared, &first, false);
+    conn.offer(shared, &first, Source::Drained);
     for _ in 1..WRITE_BATCH {
         match port.recv_timeout(Duration::ZERO) {
-            Ok(Some(rx)) => conn.offer(shared, &rx, false),
+            Ok(Some(rx)) => conn.offer(shared, &rx, Source::Drained),
             _ => break,
         }
     }

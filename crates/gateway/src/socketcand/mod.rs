@@ -1,7 +1,9 @@
-//! The socketcand protocol (linux-can/socketcand), raw mode: a [`Server`] that puts cantwin
-//! buses behind it, and a [`Client`] that attaches to such a server or to a real socketcand
-//! daemon.
+//! The socketcand protocol (linux-can/socketcand): a [`Server`] that puts cantwin buses behind
+//! it, in raw mode and in the daemon's default broadcast-manager mode (subscriptions, content
+//! filters, throttling, cyclic transmission), and a [`Client`] (raw mode) that attaches to
+//! such a server or to a real socketcand daemon.
 
+mod bcm;
 mod client;
 mod server;
 pub mod wire;

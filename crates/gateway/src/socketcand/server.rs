@@ -2,13 +2,17 @@
 
 use std::io;
 use std::net::SocketAddr;
-use std::sync::Arc;
-use std::time::Duration;
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::thread;
+use std::time::{Duration, Instant};
 
+use super::bcm::{Bcm, Due};
 use super::wire::{self, Command, Framed, Framer, WireError};
 use crate::GatewayError;
 use crate::port::{BusConnector, PortError, Received};
-use crate::server::{Limits, Link, Protocol, ServerStats, Session, TcpServer};
+use crate::server::{
+    ConnHandle, Limits, Link, Protocol, Selector, ServerStats, Session, TcpServer,
+};
 
 /// socketcand's default TCP port.
 pub const DEFAULT_PORT: u16 = 29536;
@@ -19,10 +23,14 @@ pub const DEFAULT_PORT: u16 = 29536;
 /// Each client that opens a bus is a node on it: its frames arbitrate and take bus time like
 /// any other node's, and in raw mode it receives every frame on the bus except its own.
 ///
-/// What the server accepts, beyond the daemon's raw mode, is listed in [`wire`]: the remote
-/// frame form python-can writes, and error replies for every malformed command (the daemon
-/// logs a bad `send` silently; here it gets `< error syntax error in send command >`).
-/// Broadcast-manager, control and ISO-TP commands get `< error command not supported >`.
+/// Both of the daemon's frame modes are served: raw mode (`< rawmode >`: every frame on the
+/// bus) and its default broadcast-manager mode (cyclic jobs with `add`, `update`, `delete`;
+/// frames selected with `subscribe`, `filter`, `muxfilter`, `unsubscribe`, throttled as asked;
+/// see the broadcast manager's module for what each does). What the server accepts beyond the
+/// daemon is listed in [`wire`]: the remote frame form python-can writes, and error replies
+/// for every malformed command (the daemon logs a bad command silently; here it gets
+/// `< error syntax error in send command >` and the like). Control and ISO-TP commands get
+/// `< error command not supported >`.
 pub struct Server {
     inner: TcpServer<Socketcand>,
 }
@@ -74,6 +82,7 @@ impl Protocol for Socketcand {
         ScSession {
             framer: Framer::new(self.max_line),
             state: State::NoBus,
+            bcm: None,
         }
     }
 
@@ -100,6 +109,105 @@ enum State {
 pub(crate) struct ScSession {
     framer: Framer,
     state: State,
+    /// The broadcast manager of BCM mode, from the first broadcast-manager command on; a new
+    /// one each time the mode is entered (the daemon opens a new BCM socket, so jobs and
+    /// subscriptions end with the mode).
+    bcm: Option<Arc<BcmEngine>>,
+}
+
+impl Drop for ScSession {
+    fn drop(&mut self) {
+        self.leave_bcm();
+    }
+}
+
+/// A client's broadcast manager at work: its state, shared with the stream (which asks it
+/// which frames to pass) and with its timer thread (cyclic jobs and throttles).
+struct BcmEngine {
+    state: Mutex<BcmState>,
+    /// Signalled when a command or a frame may have moved the next deadline, or on stop.
+    changed: Condvar,
+}
+
+struct BcmState {
+    bcm: Bcm,
+    stop: bool,
+}
+
+impl BcmEngine {
+    fn lock(&self) -> MutexGuard<'_, BcmState> {
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Change the broadcast manager and let the timer re-plan.
+    fn with<R>(&self, f: impl FnOnce(&mut Bcm) -> R) -> R {
+        let r = f(&mut self.lock().bcm);
+        self.changed.notify_all();
+        r
+    }
+
+    fn stop(&self) {
+        self.lock().stop = true;
+        self.changed.notify_all();
+    }
+
+    /// The timer thread: transmit due cyclic frames and hand over throttled ones, until the
+    /// engine stops or the connection ends. Nothing is called on the connection or the bus
+    /// with the state locked: the bus's thread takes the state's lock through [`Selector`]
+    /// while it holds its own.
+    fn run(&self, conn: &ConnHandle) {
+        let mut due = Due::default();
+        loop {
+            {
+                let mut st = self.lock();
+                loop {
+                    if st.stop || conn.is_closed() {
+                        return;
+                    }
+                    let now = Instant::now();
+                    st.bcm.poll(now, &mut due);
+                    if !due.transmit.is_empty() || !due.deliver.is_empty() {
+                        break;
+                    }
+                    // Without a deadline, look at the connection now and then.
+                    let wait = st.bcm.next_deadline().map_or(IDLE_POLL, |t| {
+                        t.saturating_duration_since(now).min(IDLE_POLL)
+                    });
+                    st = self
+                        .changed
+                        .wait_timeout(st, wait)
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .0;
+                }
+            }
+            for frame in due.transmit.drain(..) {
+                // A full transmit queue loses the frame, as the kernel's broadcast manager
+                // loses one the device queue refuses; the job goes on.
+                let _ = conn.send(frame);
+            }
+            for rx in due.deliver.drain(..) {
+                conn.deliver(&rx);
+            }
+        }
+    }
+}
+
+/// How often an idle broadcast-manager timer looks whether its connection ended.
+const IDLE_POLL: Duration = Duration::from_millis(100);
+
+impl Selector for BcmEngine {
+    fn select(&self, rx: &Received) -> bool {
+        let passed = self.lock().bcm.on_frame(rx, Instant::now()).is_some();
+        if !passed {
+            // A held frame may have started a throttle timer.
+            self.changed.notify_all();
+        }
+        passed
+    }
+
+    fn write(&self, rx: &Received, out: &mut Vec<u8>) -> bool {
+        wire::write_bcm_frame(out, &rx.frame, rx.timestamp)
+    }
 }
 
 fn error(link: &mut Link<'_>, text: &str) -> io::Result<()> {
@@ -109,6 +217,65 @@ fn error(link: &mut Link<'_>, text: &str) -> io::Result<()> {
 }
 
 impl ScSession {
+    /// The broadcast manager of this BCM session, started (with its timer thread and as the
+    /// stream's selector) on first use.
+    fn bcm(&mut self, link: &mut Link<'_>) -> io::Result<Arc<BcmEngine>> {
+        if let Some(engine) = &self.bcm {
+            return Ok(Arc::clone(engine));
+        }
+        let engine = Arc::new(BcmEngine {
+            state: Mutex::new(BcmState {
+                bcm: Bcm::default(),
+                stop: false,
+            }),
+            changed: Condvar::new(),
+        });
+        let conn = link.handle();
+        let timer = Arc::clone(&engine);
+        thread::Builder::new()
+            .name("socketcand-bcm".into())
+            .spawn(move || timer.run(&conn))?;
+        link.select(Some(Arc::clone(&engine) as Arc<dyn Selector>));
+        link.forward(true);
+        self.bcm = Some(Arc::clone(&engine));
+        Ok(engine)
+    }
+
+    /// End the broadcast manager's jobs and subscriptions.
+    fn leave_bcm(&mut self) {
+        if let Some(engine) = self.bcm.take() {
+            engine.stop();
+        }
+    }
+
+    /// A broadcast-manager command, in BCM mode. Like the daemon, a command that succeeds has
+    /// no reply (nor has `delete` or `unsubscribe` of something that does not exist).
+    fn on_bcm(&mut self, cmd: Command, link: &mut Link<'_>) -> io::Result<()> {
+        let engine = self.bcm(link)?;
+        let now = Instant::now();
+        match cmd {
+            Command::Add { interval, frame } => engine.with(|b| b.add(interval, frame, now)),
+            Command::Update(frame) => engine.with(|b| b.update(frame)),
+            Command::Delete(id) => {
+                engine.with(|b| b.delete(id));
+            }
+            Command::Subscribe { throttle, id } => engine.with(|b| b.subscribe(id, throttle)),
+            Command::Filter { throttle, id, mask } => {
+                engine.with(|b| b.filter(id, throttle, &mask));
+            }
+            Command::MuxFilter {
+                throttle,
+                id,
+                masks,
+            } => engine.with(|b| b.muxfilter(id, throttle, &masks)),
+            Command::Unsubscribe(id) => {
+                engine.with(|b| b.unsubscribe(id));
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
     fn on_element(&mut self, element: &[u8], link: &mut Link<'_>) -> io::Result<()> {
         let cmd = match wire::parse_command(element) {
             Ok(c) => c,
@@ -136,17 +303,25 @@ impl ScSession {
             }
             (Command::RawMode, _) => {
                 self.state = State::Raw;
+                self.leave_bcm();
                 // The stream starts with the frames that reach the bus port from now on, so
                 // that a client may act on the bus as soon as it reads `< ok >`; the first
                 // frame is written only after a pause, so the `< ok >` is read alone.
+                link.select(None);
                 link.forward(true);
                 link.reply(wire::OK)
             }
+            (Command::BcmMode, State::Bcm) => link.reply(wire::OK),
             (Command::BcmMode, _) => {
                 self.state = State::Bcm;
                 link.forward(false);
+                link.select(None);
                 link.reply(wire::OK)
             }
+            (cmd, State::Bcm) if cmd.is_broadcast_manager() => self.on_bcm(cmd, link),
+            (cmd, State::NoBus) if cmd.is_broadcast_manager() => error(link, "no bus open"),
+            // As the daemon answers a broadcast-manager command in raw mode.
+            (cmd, State::Raw) if cmd.is_broadcast_manager() => error(link, "unknown command"),
             (Command::Send(frame), _) => match link.send(frame) {
                 Ok(()) => Ok(()),
                 Err(PortError::TxQueueFull) => error(link, "transmit queue full"),
@@ -154,9 +329,7 @@ impl ScSession {
                 // The bus is gone: end the session as the daemon does when its socket fails.
                 Err(e) => Err(io::Error::new(io::ErrorKind::BrokenPipe, e)),
             },
-            (Command::ControlMode | Command::IsoTpMode | Command::Other(_), _) => {
-                error(link, "command not supported")
-            }
+            (_, _) => error(link, "command not supported"),
         }
     }
 }

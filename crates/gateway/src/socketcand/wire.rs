@@ -71,10 +71,66 @@ pub enum Command {
     Echo,
     /// `< send ID DLC DATA… >`: transmit a frame.
     Send(Frame),
-    /// A broadcast-manager, control or ISO-TP command (`add`, `update`, `delete`, `filter`,
-    /// `muxfilter`, `subscribe`, `unsubscribe`, `statistics`, `isotpconf`, `sendpdu`,
-    /// `fdsend`, `sendfd`) or a bus configuration command, named here by its first word.
+    /// `< add SECS USECS ID DLC DATA… >`: send a frame every interval (broadcast manager).
+    Add {
+        /// The interval; zero sets up a job that never sends.
+        interval: Duration,
+        /// The frame.
+        frame: Frame,
+    },
+    /// `< update ID DLC DATA… >`: change the frame of a job, its timer untouched.
+    Update(Frame),
+    /// `< delete ID >`: remove a job.
+    Delete(Id),
+    /// `< subscribe SECS USECS ID >`: receive every frame of an identifier, at most one per
+    /// throttle time.
+    Subscribe {
+        /// The throttle time (zero: every frame).
+        throttle: Duration,
+        /// The identifier.
+        id: Id,
+    },
+    /// `< filter SECS USECS ID DLC MASK… >`: receive frames whose data changed under a mask.
+    Filter {
+        /// The throttle time (zero: every change).
+        throttle: Duration,
+        /// The identifier.
+        id: Id,
+        /// The mask's bytes (zero beyond them).
+        mask: Vec<u8>,
+    },
+    /// `< muxfilter SECS USECS ID N MASKS… >`: a multiplexer mask and N − 1 filters, each for
+    /// the multiplexer value it carries under the multiplexer mask.
+    MuxFilter {
+        /// The throttle time.
+        throttle: Duration,
+        /// The identifier.
+        id: Id,
+        /// The multiplexer mask first, then the filters (2 to 257 in all).
+        masks: Vec<[u8; 8]>,
+    },
+    /// `< unsubscribe ID >`: remove a subscription or filter.
+    Unsubscribe(Id),
+    /// A control or ISO-TP command (`statistics`, `isotpconf`, `sendpdu`, `fdsend`, `sendfd`)
+    /// or a bus configuration command, named here by its first word.
     Other(String),
+}
+
+impl Command {
+    /// Whether this is a broadcast-manager command (`add`, `update`, `delete`, `subscribe`,
+    /// `filter`, `muxfilter`, `unsubscribe`).
+    pub fn is_broadcast_manager(&self) -> bool {
+        matches!(
+            self,
+            Command::Add { .. }
+                | Command::Update(_)
+                | Command::Delete(_)
+                | Command::Subscribe { .. }
+                | Command::Filter { .. }
+                | Command::MuxFilter { .. }
+                | Command::Unsubscribe(_)
+        )
+    }
 }
 
 /// A message from the server to a client.
@@ -231,8 +287,47 @@ pub fn parse_command(element: &[u8]) -> Result<Command, WireError> {
         "isotpmode" => bare(Command::IsoTpMode, "isotpmode"),
         "echo" => bare(Command::Echo, "echo"),
         "send" => parse_send(args).map(Command::Send),
-        "add" | "update" | "delete" | "filter" | "muxfilter" | "subscribe" | "unsubscribe"
-        | "statistics" | "isotpconf" | "sendpdu" | "fdsend" | "sendfd" => {
+        "add" => match args {
+            [secs, usecs, id, dlc, bytes @ ..] => Ok(Command::Add {
+                interval: parse_interval(secs, usecs, "add")?,
+                frame: parse_data_frame(id, dlc, bytes, "add")?,
+            }),
+            _ => Err(WireError::Syntax("add")),
+        },
+        "update" => match args {
+            [id, dlc, bytes @ ..] => {
+                parse_data_frame(id, dlc, bytes, "update").map(Command::Update)
+            }
+            _ => Err(WireError::Syntax("update")),
+        },
+        "delete" => match args {
+            [id] => parse_id(id, "delete").map(Command::Delete),
+            _ => Err(WireError::Syntax("delete")),
+        },
+        "subscribe" => match args {
+            [secs, usecs, id] => Ok(Command::Subscribe {
+                throttle: parse_interval(secs, usecs, "subscribe")?,
+                id: parse_id(id, "subscribe")?,
+            }),
+            _ => Err(WireError::Syntax("subscribe")),
+        },
+        "filter" => match args {
+            [secs, usecs, id, dlc, bytes @ ..] => {
+                let mask = parse_data_frame(id, dlc, bytes, "filter")?;
+                Ok(Command::Filter {
+                    throttle: parse_interval(secs, usecs, "filter")?,
+                    id: mask.id(),
+                    mask: mask.data_bytes().to_vec(),
+                })
+            }
+            _ => Err(WireError::Syntax("filter")),
+        },
+        "muxfilter" => parse_muxfilter(args),
+        "unsubscribe" => match args {
+            [id] => parse_id(id, "unsubscribe").map(Command::Unsubscribe),
+            _ => Err(WireError::Syntax("unsubscribe")),
+        },
+        "statistics" | "isotpconf" | "sendpdu" | "fdsend" | "sendfd" => {
             Ok(Command::Other(words[0].to_owned()))
         }
         // Bus configuration: `< NAME B … >` and `< NAME C … >`.
@@ -248,26 +343,98 @@ fn parse_send(args: &[&str]) -> Result<Frame, WireError> {
     let [id, dlc, bytes @ ..] = args else {
         return Err(WireError::Syntax(CMD));
     };
-    let id = parse_id(id, CMD)?;
-    let dlc: u8 = match dlc.as_bytes() {
-        [d @ b'0'..=b'8'] => d - b'0',
-        _ => return Err(WireError::Syntax(CMD)),
-    };
-    if bytes.is_empty() && dlc > 0 {
+    if bytes.is_empty() && parse_dlc(dlc, CMD)? > 0 {
         // python-can's remote frame (see the module documentation).
-        return Ok(Frame::remote(id, dlc)?);
+        return Ok(Frame::remote(parse_id(id, CMD)?, parse_dlc(dlc, CMD)?)?);
     }
+    parse_data_frame(id, dlc, bytes, CMD)
+}
+
+/// A DLC token: one decimal digit 0–8.
+fn parse_dlc(dlc: &str, cmd: &'static str) -> Result<u8, WireError> {
+    match dlc.as_bytes() {
+        [d @ b'0'..=b'8'] => Ok(d - b'0'),
+        _ => Err(WireError::Syntax(cmd)),
+    }
+}
+
+/// One byte token: one or two hex digits.
+fn parse_byte(b: &str, cmd: &'static str) -> Result<u8, WireError> {
+    if b.is_empty() || b.len() > 2 {
+        return Err(WireError::Syntax(cmd));
+    }
+    parse_hex_u32(b)
+        .map(|v| v as u8)
+        .ok_or(WireError::Syntax(cmd))
+}
+
+/// `ID DLC DATA…` with exactly DLC data bytes.
+fn parse_data_frame(
+    id: &str,
+    dlc: &str,
+    bytes: &[&str],
+    cmd: &'static str,
+) -> Result<Frame, WireError> {
+    let id = parse_id(id, cmd)?;
+    let dlc = parse_dlc(dlc, cmd)?;
     if bytes.len() != usize::from(dlc) {
-        return Err(WireError::Syntax(CMD));
+        return Err(WireError::Syntax(cmd));
     }
     let mut data = [0u8; 8];
     for (slot, b) in data.iter_mut().zip(bytes) {
-        if b.is_empty() || b.len() > 2 {
-            return Err(WireError::Syntax(CMD));
-        }
-        *slot = parse_hex_u32(b).ok_or(WireError::Syntax(CMD))? as u8;
+        *slot = parse_byte(b, cmd)?;
     }
     Ok(Frame::data(id, &data[..usize::from(dlc)])?)
+}
+
+/// The broadcast manager's longest timer, 400 days (`BCM_TIMER_SEC_MAX` in the kernel); a
+/// longer one, or microseconds of a second or more, is refused as the kernel refuses it.
+const MAX_INTERVAL_SECS: u64 = 400 * 24 * 60 * 60;
+
+/// `SECS USECS`, both decimal.
+fn parse_interval(secs: &str, usecs: &str, cmd: &'static str) -> Result<Duration, WireError> {
+    let number = |s: &str| {
+        if s.is_empty() || s.len() > 19 || !s.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        s.parse::<u64>().ok()
+    };
+    match (number(secs), number(usecs)) {
+        (Some(s), Some(us)) if s <= MAX_INTERVAL_SECS && us < 1_000_000 => {
+            Ok(Duration::from_secs(s) + Duration::from_micros(us))
+        }
+        _ => Err(WireError::Syntax(cmd)),
+    }
+}
+
+/// `SECS USECS ID N` then N times eight bytes; bytes after them are ignored, as the daemon
+/// ignores them.
+fn parse_muxfilter(args: &[&str]) -> Result<Command, WireError> {
+    const CMD: &str = "muxfilter";
+    let [secs, usecs, id, n, bytes @ ..] = args else {
+        return Err(WireError::Syntax(CMD));
+    };
+    let count: usize = match n.parse() {
+        Ok(count) if (2..=257).contains(&count) && n.bytes().all(|b| b.is_ascii_digit()) => count,
+        _ => return Err(WireError::Syntax(CMD)),
+    };
+    let n = count;
+    if bytes.len() < n * 8 {
+        return Err(WireError::Syntax(CMD));
+    }
+    let mut masks = Vec::with_capacity(n);
+    for chunk in bytes[..n * 8].chunks(8) {
+        let mut mask = [0u8; 8];
+        for (slot, b) in mask.iter_mut().zip(chunk) {
+            *slot = parse_byte(b, CMD)?;
+        }
+        masks.push(mask);
+    }
+    Ok(Command::MuxFilter {
+        throttle: parse_interval(secs, usecs, CMD)?,
+        id: parse_id(id, CMD)?,
+        masks,
+    })
 }
 
 /// Parse a server message from one element (`<` and `>` included).
@@ -339,6 +506,15 @@ fn push_id(out: &mut Vec<u8>, id: Id) {
 /// Remote frames are not carried to clients (see the module documentation): for one, nothing
 /// is appended and `false` is returned.
 pub fn write_frame(out: &mut Vec<u8>, frame: &Frame, timestamp: SystemTime) -> bool {
+    write_frame_element(out, frame, timestamp, b"")
+}
+
+fn write_frame_element(
+    out: &mut Vec<u8>,
+    frame: &Frame,
+    timestamp: SystemTime,
+    after_byte: &[u8],
+) -> bool {
     if frame.is_remote() {
         return false;
     }
@@ -348,9 +524,16 @@ pub fn write_frame(out: &mut Vec<u8>, frame: &Frame, timestamp: SystemTime) -> b
     out.extend_from_slice(format!(" {}.{:06} ", since.as_secs(), since.subsec_micros()).as_bytes());
     for &b in frame.data_bytes() {
         push_hex(out, b);
+        out.extend_from_slice(after_byte);
     }
     out.extend_from_slice(b" >");
     true
+}
+
+/// Append a broadcast-manager-mode `< frame … >` element: as [`write_frame`], but each data
+/// byte followed by a space (the daemon's BCM mode writes `%02X ` per byte, then ` >`).
+pub fn write_bcm_frame(out: &mut Vec<u8>, frame: &Frame, timestamp: SystemTime) -> bool {
+    write_frame_element(out, frame, timestamp, b" ")
 }
 
 /// Append a `< send … >` element for `frame`; a remote frame is written with its DLC and no
@@ -495,8 +678,8 @@ mod tests {
         assert_eq!(parse_command(b"<rawmode>"), Ok(Command::RawMode));
         assert_eq!(parse_command(b"< echo >"), Ok(Command::Echo));
         assert_eq!(
-            parse_command(b"< add 1 0 123 0 >"),
-            Ok(Command::Other("add".into()))
+            parse_command(b"< statistics 1000 >"),
+            Ok(Command::Other("statistics".into()))
         );
         assert_eq!(
             parse_command(b"< vcan0 C 0 0 0 >"),
@@ -509,6 +692,107 @@ mod tests {
             Err(WireError::Syntax("rawmode"))
         );
         assert_eq!(parse_command(b"< \xff >"), Err(WireError::Malformed));
+    }
+
+    #[test]
+    fn broadcast_manager_commands_from_the_daemons_documentation() {
+        let std = |id| Id::standard(id).unwrap();
+        assert_eq!(
+            parse_command(b"< add 1 0 123 8 11 22 33 44 55 66 77 88 >"),
+            Ok(Command::Add {
+                interval: Duration::from_secs(1),
+                frame: Frame::std(0x123, &[0x11, 0x22, 0x33, 0x44, 0x55, 0x66, 0x77, 0x88])
+                    .unwrap()
+            })
+        );
+        assert_eq!(
+            parse_command(b"< add 0 20000 123 4 42 42 42 42 >"),
+            Ok(Command::Add {
+                interval: Duration::from_millis(20),
+                frame: Frame::std(0x123, &[0x42; 4]).unwrap()
+            })
+        );
+        assert_eq!(
+            parse_command(b"< update 123 3 11 22 33 >"),
+            Ok(Command::Update(
+                Frame::std(0x123, &[0x11, 0x22, 0x33]).unwrap()
+            ))
+        );
+        assert_eq!(
+            parse_command(b"< delete 123 >"),
+            Ok(Command::Delete(std(0x123)))
+        );
+        assert_eq!(
+            parse_command(b"< filter 1 500000 123 8 FF 00 F8 00 00 00 00 00 >"),
+            Ok(Command::Filter {
+                throttle: Duration::from_millis(1500),
+                id: std(0x123),
+                mask: vec![0xFF, 0, 0xF8, 0, 0, 0, 0, 0]
+            })
+        );
+        assert_eq!(
+            parse_command(
+                b"< muxfilter 0 0 123 2 FF 00 00 00 00 00 00 00 33 FF FF FF FF FF FF FF >"
+            ),
+            Ok(Command::MuxFilter {
+                throttle: Duration::ZERO,
+                id: std(0x123),
+                masks: vec![
+                    [0xFF, 0, 0, 0, 0, 0, 0, 0],
+                    [0x33, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF]
+                ]
+            })
+        );
+        assert_eq!(
+            parse_command(b"< subscribe 0 0 123 >"),
+            Ok(Command::Subscribe {
+                throttle: Duration::ZERO,
+                id: std(0x123)
+            })
+        );
+        assert_eq!(
+            parse_command(b"< subscribe 0 0 1AAAAAAA >"),
+            Ok(Command::Subscribe {
+                throttle: Duration::ZERO,
+                id: Id::extended(0x1AAA_AAAA).unwrap()
+            })
+        );
+        assert_eq!(
+            parse_command(b"< unsubscribe 123 >"),
+            Ok(Command::Unsubscribe(std(0x123)))
+        );
+        for bad in [
+            &b"< add 1 0 123 2 11 >"[..],
+            b"< add 1 1000000 123 0 >",
+            b"< add 34560001 0 123 0 >",
+            b"< add -1 0 123 0 >",
+            b"< update 123 >",
+            b"< delete >",
+            b"< subscribe 0 123 >",
+            b"< filter 0 0 123 9 >",
+            b"< muxfilter 0 0 123 1 FF 00 00 00 00 00 00 00 >",
+            b"< muxfilter 0 0 123 2 FF 00 00 00 00 00 00 00 33 >",
+            b"< unsubscribe 123 456 >",
+        ] {
+            assert!(
+                matches!(parse_command(bad), Err(WireError::Syntax(_))),
+                "{}",
+                String::from_utf8_lossy(bad)
+            );
+        }
+    }
+
+    #[test]
+    fn broadcast_manager_frames_have_a_space_after_each_byte() {
+        let mut out = Vec::new();
+        let frame = Frame::std(0x123, &[0x11, 0x22, 0x33]).unwrap();
+        assert!(write_bcm_frame(&mut out, &frame, ts(1_700_000_000, 250)));
+        assert_eq!(out, b"< frame 123 1700000000.000250 11 22 33  >");
+        out.clear();
+        write_bcm_frame(&mut out, &Frame::std(0x80, &[]).unwrap(), ts(1, 0));
+        assert_eq!(out, b"< frame 080 1.000000  >");
+        let remote = Frame::remote(Id::standard(0x123).unwrap(), 1).unwrap();
+        assert!(!write_bcm_frame(&mut out, &remote, ts(1, 0)));
     }
 
     #[test]
