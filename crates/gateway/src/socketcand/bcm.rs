@@ -84,6 +84,8 @@ struct RxOp {
 pub(crate) struct Bcm {
     tx: Vec<TxJob>,
     rx: Vec<RxOp>,
+    /// A frame started a throttle timer since [`Bcm::take_replan`] was last asked.
+    replan: bool,
 }
 
 /// What is due at a given time: frames to transmit on the bus, frames to send to the client.
@@ -211,7 +213,15 @@ impl Bcm {
                 slot
             }
         };
-        op.pass(slot, rx, now)
+        let timer_was = op.flush_at;
+        let passed = op.pass(slot, rx, now);
+        self.replan |= op.flush_at != timer_was;
+        passed
+    }
+
+    /// Whether [`Bcm::next_deadline`] may have moved because of a frame since last asked.
+    pub(crate) fn take_replan(&mut self) -> bool {
+        std::mem::take(&mut self.replan)
     }
 
     /// Run what is due at `now`: cyclic frames to transmit, throttled frames to send.
@@ -389,8 +399,11 @@ mod tests {
         b.subscribe(std(0x181), Duration::from_millis(100));
         let f = |n: u8| rx(0x181, &[n]);
         assert_eq!(data(b.on_frame(&f(1), t)), Some(vec![1]));
+        assert!(!b.take_replan());
         assert_eq!(b.on_frame(&f(2), at(t, 10)), None);
+        assert!(b.take_replan(), "the throttle timer started");
         assert_eq!(b.on_frame(&f(3), at(t, 20)), None);
+        assert!(!b.take_replan(), "it was running already");
         assert_eq!(b.next_deadline(), Some(at(t, 100)));
         let mut due = Due::default();
         b.poll(at(t, 99), &mut due);

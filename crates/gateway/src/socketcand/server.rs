@@ -197,9 +197,13 @@ const IDLE_POLL: Duration = Duration::from_millis(100);
 
 impl Selector for BcmEngine {
     fn select(&self, rx: &Received) -> bool {
-        let passed = self.lock().bcm.on_frame(rx, Instant::now()).is_some();
-        if !passed {
-            // A held frame may have started a throttle timer.
+        let (passed, replan) = {
+            let mut st = self.lock();
+            let passed = st.bcm.on_frame(rx, Instant::now()).is_some();
+            (passed, st.bcm.take_replan())
+        };
+        if replan {
+            // A held frame started a throttle timer.
             self.changed.notify_all();
         }
         passed
