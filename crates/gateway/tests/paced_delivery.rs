@@ -204,3 +204,26 @@ fn a_slow_reader_gets_every_frame_and_every_reply_whole_and_in_order() {
     assert!(echoes >= 10, "too few replies crossed the stream: {echoes}");
     assert_eq!(srv.stats().too_slow, 0);
 }
+
+#[test]
+fn a_broadcast_manager_subscription_selects_frames_on_the_bus_thread() {
+    let (_paced, buses, srv) = paced_server(Limits::default());
+    let node = buses.open("can0", 1).unwrap();
+    let mut c = Peer::connect(srv.local_addr());
+    assert_eq!(c.read_once(), b"< hi >");
+    c.write(b"< open can0 >");
+    assert_eq!(c.read_once(), b"< ok >");
+    c.write(b"< subscribe 0 0 182 >< echo >");
+    assert_eq!(c.read_element(), "< echo >");
+    for n in 0..20u8 {
+        let id = if n % 2 == 0 { 0x181 } else { 0x182 };
+        node.send(Frame::std(id, &[n]).unwrap()).unwrap();
+    }
+    for n in (1..20u8).step_by(2) {
+        let e = c.read_element();
+        assert!(
+            e.starts_with("< frame 182 ") && e.ends_with(&format!(" {n:02X}  >")),
+            "{e}"
+        );
+    }
+}
