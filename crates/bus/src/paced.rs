@@ -132,12 +132,13 @@ impl State {
         }
     }
 
-    /// Run the simulation up to the wall clock, applying the catch-up policy; returns the
-    /// time map in force.
-    fn advance(&mut self) -> TimeMap {
+    /// Run the simulation up to the wall clock, applying the catch-up policy. The time map
+    /// in force is handed to `publish` before any event runs, so that whoever reads it while
+    /// the simulation runs (a sink stamping a frame) reads the map the frame is stamped with.
+    fn advance(&mut self, publish: impl FnOnce(TimeMap)) {
         let mut target = self.target();
         let Some(sim) = self.sim.as_mut() else {
-            return self.time_map();
+            return;
         };
         // Late is an event that was due more than `max_lag` ago and has not run yet.
         if let Some(next) = sim.next_event_time()
@@ -149,13 +150,13 @@ impl State {
             target -= give_up;
         }
         let map = self.time_map();
+        publish(map);
         if let Some(sim) = self.sim.as_mut() {
             if sim.time_map() != Some(map) {
                 sim.set_time_map(Some(map));
             }
             sim.run_until(target);
         }
-        map
     }
 
     /// How long to sleep until the next event is due.
@@ -178,7 +179,7 @@ struct Shared {
     wake: Condvar,
     /// The current time map, published apart from `state` so that reading it never waits for
     /// the simulation (and can be done while the simulation is running, from a node).
-    map: Mutex<TimeMap>,
+    map: Arc<Mutex<TimeMap>>,
 }
 
 impl Shared {
@@ -190,14 +191,15 @@ impl Shared {
         *self.map.lock().unwrap_or_else(PoisonError::into_inner)
     }
 
-    /// Run the simulation up to the wall clock (see [`State::advance`]) and publish the time
-    /// map it ran with.
+    /// Run the simulation up to the wall clock (see [`State::advance`]), publishing the time
+    /// map it runs with.
     fn advance(&self, g: &mut State) {
-        let map = g.advance();
-        let mut published = self.map.lock().unwrap_or_else(PoisonError::into_inner);
-        if *published != map {
-            *published = map;
-        }
+        g.advance(|map| {
+            let mut published = self.map.lock().unwrap_or_else(PoisonError::into_inner);
+            if *published != map {
+                *published = map;
+            }
+        });
     }
 }
 
@@ -232,7 +234,7 @@ impl PacedSimulation {
         let shared = Arc::new(Shared {
             state: Mutex::new(state),
             wake: Condvar::new(),
-            map: Mutex::new(map),
+            map: Arc::new(Mutex::new(map)),
         });
         let thread_shared = Arc::clone(&shared);
         let thread = std::thread::Builder::new()
@@ -382,6 +384,7 @@ impl SimHandle {
         let node = ExternalNode {
             rx: Arc::clone(&rx),
             sink: Arc::clone(&sink),
+            map: Arc::clone(&self.shared.map),
         };
         let port = self.with(|sim| sim.attach(bus, node, config.port))??;
         {
@@ -431,15 +434,18 @@ pub struct Received {
     pub at: Instant,
 }
 
-/// Where an external port's frames go instead of its receive buffer: see
-/// [`ExternalPort::deliver_to`].
-pub type Sink = Box<dyn FnMut(Received) + Send>;
+/// Where an external port's frames go instead of its receive buffer, each with the time map in
+/// force: see [`ExternalPort::deliver_to`].
+pub type Sink = Box<dyn FnMut(Received, TimeMap) + Send>;
 
 /// The node behind an external port: it hands every frame to its sink if it has one, else to
 /// the receive buffer.
 struct ExternalNode {
     rx: Arc<RxQueue>,
     sink: Arc<Mutex<Option<Sink>>>,
+    /// The simulation's published time map (not its handle: a sink held by the simulation
+    /// must not keep the simulation alive).
+    map: Arc<Mutex<TimeMap>>,
 }
 
 impl Node for ExternalNode {
@@ -450,7 +456,7 @@ impl Node for ExternalNode {
         };
         let mut sink = self.sink.lock().unwrap_or_else(PoisonError::into_inner);
         match sink.as_mut() {
-            Some(sink) => sink(rx),
+            Some(sink) => sink(rx, *self.map.lock().unwrap_or_else(PoisonError::into_inner)),
             // A full buffer loses the frame and counts it (`RxQueue`'s overflow policy).
             None => {
                 self.rx.push(rx);
@@ -503,27 +509,37 @@ impl ExternalPort {
             .map_err(|RxClosed| BusError::Stopped)
     }
 
-    /// Hand every frame this port receives to `sink`, on the thread that runs the simulation
-    /// at the moment the frame completes, instead of buffering it for
-    /// [`ExternalPort::recv_timeout`]. Frames buffered so far go to the sink first, so it sees
-    /// every frame once and in bus order.
+    /// Hand every frame this port receives to `sink`, with the time map in force (to stamp it
+    /// in wall time), on the thread that runs the simulation at the moment the frame
+    /// completes, instead of buffering it for [`ExternalPort::recv_timeout`]. Frames buffered
+    /// so far go to the sink first, so it sees every frame once and in bus order. Detaching or
+    /// dropping the port drops the sink; another call replaces it.
     ///
     /// This saves a reader thread's wake-up per frame (tens of microseconds on a loaded host),
     /// which a tool waiting for an answer sees in every round trip. The sink runs with the
     /// simulation locked: it must not block (queue the frame when it cannot pass it on at once)
-    /// and must not call back into a [`SimHandle`] or [`ExternalPort`] other than
-    /// [`SimHandle::time_map`]. From then on [`ExternalPort::recv_timeout`] returns no frames,
-    /// only [`BusError::Stopped`] once the simulation stopped or the port was detached.
-    pub fn deliver_to(&self, sink: impl FnMut(Received) + Send + 'static) -> Result<(), BusError> {
+    /// and must not call back into a [`SimHandle`] or [`ExternalPort`]. From then on
+    /// [`ExternalPort::recv_timeout`] returns no frames, only [`BusError::Stopped`] once the
+    /// simulation stopped or the port was detached.
+    pub fn deliver_to(
+        &self,
+        sink: impl FnMut(Received, TimeMap) + Send + 'static,
+    ) -> Result<(), BusError> {
         let mut sink: Sink = Box::new(sink);
         // Under the simulation's lock no frame can complete meanwhile: the buffered frames and
         // the ones after reach the sink in order.
-        self.handle.with(|_| {
+        let map = self.handle.shared.map();
+        let old = self.handle.with(|_| {
             while let Ok(Some(rx)) = self.rx.try_recv() {
-                sink(rx);
+                sink(rx, map);
             }
-            *self.sink.lock().unwrap_or_else(PoisonError::into_inner) = Some(sink);
-        })
+            self.sink
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .replace(sink)
+        })?;
+        drop(old);
+        Ok(())
     }
 
     /// The next received frame if one is buffered.
@@ -551,6 +567,13 @@ impl ExternalPort {
     }
 
     fn detach_inner(&self) -> Result<(), BusError> {
+        // The sink goes first, whatever else happens: it may hold what owns this port.
+        let sink = self
+            .sink
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+        drop(sink);
         if !self.rx.close() {
             return Ok(());
         }

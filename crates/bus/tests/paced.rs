@@ -214,29 +214,29 @@ fn a_port_delivering_to_a_sink_hands_over_buffered_frames_first_then_each_as_it_
     // Two frames reach the listener's buffer before it has a sink.
     tool.send(frame(0)).unwrap();
     tool.send(frame(1)).unwrap();
-    let mut buffered = 0;
-    while buffered < 2 {
-        // Wait for both without taking them: the port's status counts received frames.
+    let give_up = std::time::Instant::now() + PATIENCE;
+    // Wait for both without taking them: the port's status counts received frames.
+    while listener.status().unwrap().stats.rx_frames < 2 {
+        assert!(std::time::Instant::now() < give_up, "two frames in time");
         std::thread::sleep(WallDuration::from_millis(1));
-        buffered = listener.status().unwrap().stats.rx_frames;
     }
     let (tx, rx) = std::sync::mpsc::channel();
-    let map = handle.clone();
     listener
-        .deliver_to(move |r: cantwin_bus::Received| {
-            // The time map is readable from inside the simulation.
-            let _ = map.time_map().wall_time(r.at);
-            let _ = tx.send((r.frame, r.at));
+        .deliver_to(move |r: cantwin_bus::Received, map: TimeMap| {
+            let _ = tx.send((r.frame, r.at, map.wall_time(r.at)));
         })
         .unwrap();
     for n in 2..6 {
         tool.send(frame(n)).unwrap();
     }
-    let got: Vec<(Frame, Instant)> = (0..6).map(|_| rx.recv_timeout(PATIENCE).unwrap()).collect();
+    let got: Vec<_> = (0..6).map(|_| rx.recv_timeout(PATIENCE).unwrap()).collect();
     let frames: Vec<Frame> = got.iter().map(|g| g.0).collect();
     assert_eq!(frames, (0..6).map(frame).collect::<Vec<_>>());
-    // Each frame at its own end on the bus, in order.
-    assert!(got.windows(2).all(|w| w[0].1 < w[1].1));
+    // Each frame at its own end on the bus, in order, stamped with the time map in force.
+    assert!(got.windows(2).all(|w| w[0].1 < w[1].1 && w[0].2 < w[1].2));
+    if handle.slips() == 0 {
+        assert!(got.iter().all(|g| g.2 == handle.time_map().wall_time(g.1)));
+    }
     // Nothing is left for the buffer's reader; detaching ends it.
     assert_eq!(listener.try_recv().unwrap(), None);
     assert_eq!(listener.overruns(), 0);
@@ -244,5 +244,79 @@ fn a_port_delivering_to_a_sink_hands_over_buffered_frames_first_then_each_as_it_
     assert_eq!(
         listener.recv_timeout(WallDuration::ZERO),
         Err(BusError::Stopped)
+    );
+}
+
+#[test]
+fn frames_handed_to_a_sink_after_a_slip_are_stamped_with_the_slipped_map() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    sim.attach(
+        bus,
+        Heartbeat {
+            frame: std_frame(0x705, &[0x05]),
+            next: Instant::ZERO,
+        },
+        PortConfig::default(),
+    )
+    .unwrap();
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let handle = paced.handle();
+    let port = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    port.deliver_to(move |r: cantwin_bus::Received, map: TimeMap| {
+        let _ = tx.send((map.wall_time(r.at), std::time::SystemTime::now()));
+    })
+    .unwrap();
+    // Hold the simulation for far longer than its lag limit (50 ms): it slips when it runs
+    // again, and the frames it then catches up on are stamped with the new map, not 400 ms
+    // in the past.
+    handle
+        .with(|_| std::thread::sleep(WallDuration::from_millis(400)))
+        .unwrap();
+    let until = std::time::Instant::now() + WallDuration::from_millis(200);
+    let mut seen = 0;
+    while std::time::Instant::now() < until {
+        let Ok((stamp, delivered)) = rx.recv_timeout(PATIENCE) else {
+            panic!("no frames");
+        };
+        let early = delivered.duration_since(stamp).unwrap_or_default();
+        assert!(
+            early < WallDuration::from_millis(250),
+            "stamped {early:?} early"
+        );
+        seen += 1;
+    }
+    assert!(handle.slips() > 0);
+    assert!(seen > 0);
+}
+
+#[test]
+fn dropping_a_port_drops_its_sink_even_after_the_simulation_was_dropped() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let handle = paced.handle();
+    let port = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let token = std::sync::Arc::new(());
+    let held = std::sync::Arc::clone(&token);
+    // A sink holding the simulation's handle: a cycle through the simulation's nodes, which
+    // only dropping the sink breaks.
+    let inside = handle.clone();
+    port.deliver_to(move |_, _| {
+        let _ = (&held, &inside);
+    })
+    .unwrap();
+    drop(handle);
+    drop(paced);
+    drop(port);
+    assert_eq!(
+        std::sync::Arc::strong_count(&token),
+        1,
+        "the sink was dropped"
     );
 }

@@ -1,6 +1,6 @@
 //! The virtual bus as a [`BusConnector`]: a paced simulation's buses, by name, for gateways.
 
-use cantwin_bus::{BusError, ExternalConfig, ExternalPort, PortConfig, SimHandle};
+use cantwin_bus::{BusError, ExternalConfig, ExternalPort, PortConfig, SimHandle, TimeMap};
 use cantwin_can::Frame;
 
 use crate::port::{BusConnector, BusPort, PortError, Received};
@@ -121,12 +121,11 @@ impl BusPort for PacedPort {
     }
 
     fn deliver_to(&self, mut sink: Box<dyn FnMut(Received) + Send>) -> bool {
-        let handle = self.handle.clone();
         self.port
-            .deliver_to(move |rx: cantwin_bus::Received| {
+            .deliver_to(move |rx: cantwin_bus::Received, map: TimeMap| {
                 sink(Received {
                     frame: rx.frame,
-                    timestamp: handle.time_map().wall_time(rx.at),
+                    timestamp: map.wall_time(rx.at),
                 });
             })
             .is_ok()

@@ -128,19 +128,22 @@ pub(crate) struct Link<'a> {
 impl Link<'_> {
     /// Write a reply, alone in one write.
     pub(crate) fn reply(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.conn.reply(bytes, self.limits.write_timeout)
+        self.conn.reply(bytes)
     }
 
     /// Write an error reply.
     pub(crate) fn error(&mut self, bytes: &[u8]) -> io::Result<()> {
         self.stats.error_replies.fetch_add(1, Ordering::Relaxed);
-        self.conn.reply(bytes, self.limits.write_timeout)
+        self.conn.reply(bytes)
     }
 
     /// Attach the client to bus `channel`.
     pub(crate) fn open(&mut self, channel: &str) -> Result<(), PortError> {
         let port = self.connector.open(channel, self.limits.client_queue)?;
-        *self.conn.port() = Some(Arc::from(port));
+        // A port replaced here is dropped (and detached) after the lock is let go: detaching
+        // takes the bus's lock, under which the bus may be waiting for this connection.
+        let old = self.conn.port().replace(Arc::from(port));
+        drop(old);
         self.conn.ready.notify_all();
         self.conn.work.notify_all();
         Ok(())
@@ -153,8 +156,13 @@ impl Link<'_> {
     pub(crate) fn close(&mut self) {
         self.forward(false);
         let port = self.conn.port().take();
-        // The writer lets go of the port when it next looks.
+        // The writer lets go of the port when it next looks, which may be after a write to a
+        // slow client: the port stops handing frames to this connection now (the next open
+        // must not see frames of both).
         self.conn.work.notify_all();
+        if let Some(port) = &port {
+            port.deliver_to(Box::new(|_| {}));
+        }
         if let Some(port) = port {
             let deadline = Instant::now() + RECV_POLL * 2;
             while Arc::strong_count(&port) > 1 && Instant::now() < deadline {
@@ -219,6 +227,8 @@ impl Link<'_> {
     /// stream starts: the client gets exactly the frames that reach the bus port after the
     /// switch. Starting again while started only restarts the pause.
     pub(crate) fn forward(&mut self, on: bool) {
+        // Taken before `out`: nothing holds `out` while it waits for `port`.
+        let port = self.conn.port().clone();
         let mut out = self.conn.out();
         if on != out.on {
             // Queued frames are from before the switch either way. A frame the socket took
@@ -231,8 +241,7 @@ impl Link<'_> {
             // the bus's thread buffers nothing to drain (and is not touched here: the bus
             // thread takes this lock while it holds the port's).
             if !out.delivered {
-                let port = self.conn.port().clone();
-                if let Some(port) = port {
+                if let Some(port) = &port {
                     while let Ok(Some(_)) = port.recv_timeout(Duration::ZERO) {}
                     out.overflow_base = port.overflows();
                 }
@@ -360,10 +369,13 @@ struct Out {
 }
 
 impl Out {
-    /// Whether a frame may be written at once: nothing before it is waiting or being written,
-    /// and the stream's start pause is over.
+    /// Whether a frame may be written at once: nothing before it is waiting or being written
+    /// (a reply included), the stream's start pause is over, and there is a non-blocking send
+    /// for it (Linux).
     fn can_write_now(&self) -> bool {
-        !self.busy
+        cfg!(target_os = "linux")
+            && !self.busy
+            && self.replies_waiting == 0
             && self.pending.is_empty()
             && self.queue.is_empty()
             && Instant::now() >= self.after
@@ -402,22 +414,18 @@ impl Conn {
         relock(&self.out)
     }
 
-    /// Write a reply alone, after any write under way, waiting at most `timeout` for its
-    /// turn (the socket's own write timeout bounds the write itself).
-    fn reply(&self, bytes: &[u8], timeout: Duration) -> io::Result<()> {
-        let give_up = Instant::now() + timeout;
+    /// Write a reply alone, after the write under way. A client that reads slowly but reads
+    /// gets its reply however long the frames ahead of it take; a write that makes no
+    /// progress for the socket's write timeout ends the connection, and the reply with it.
+    fn reply(&self, bytes: &[u8]) -> io::Result<()> {
         let mut out = self.out();
         out.replies_waiting += 1;
         while out.busy || !out.pending.is_empty() {
-            let left = give_up.saturating_duration_since(Instant::now());
-            if self.is_closed() || left.is_zero() {
+            if self.is_closed() {
                 out.replies_waiting -= 1;
-                return Err(io::Error::new(
-                    ErrorKind::TimedOut,
-                    "the connection's writes did not end",
-                ));
+                return Err(ErrorKind::BrokenPipe.into());
             }
-            out = wait_on(&self.quiet, out, left);
+            out = wait_on(&self.quiet, out, RECV_POLL);
         }
         out.replies_waiting -= 1;
         out.busy = true;
@@ -552,7 +560,9 @@ impl Conn {
         self.closed.store(true, Ordering::SeqCst);
         // Errors here mean the socket is already gone, which is the goal.
         let _ = self.stream.shutdown(Shutdown::Both);
-        *self.port() = None;
+        // Dropped after the lock is let go (see `Link::open`).
+        let port = self.port().take();
+        drop(port);
         self.ready.notify_all();
         self.work.notify_all();
         self.quiet.notify_all();
@@ -792,7 +802,7 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
             shared.stats.refused.fetch_add(1, Ordering::Relaxed);
             conn.stream
                 .set_write_timeout(Some(Duration::from_millis(100)))?;
-            let _ = conn.reply(shared.protocol.refusal(), Duration::from_millis(100));
+            let _ = conn.reply(shared.protocol.refusal());
             conn.close();
             return Ok(());
         }
@@ -823,7 +833,7 @@ fn admit<P: Protocol>(shared: &Arc<Shared<P>>, stream: TcpStream, id: u64) -> io
 /// The reader side of one client; spawns and joins its writer.
 fn serve<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
     if let Some(hi) = shared.protocol.greeting()
-        && conn.reply(hi, shared.limits.write_timeout).is_err()
+        && conn.reply(hi).is_err()
     {
         return;
     }
@@ -893,11 +903,11 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn, handle: &ConnHandle) 
 fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
     let mut buf = Vec::with_capacity(4096);
     let mut batch = VecDeque::with_capacity(WRITE_BATCH);
-    // The port that delivers to this connection on the bus's thread, if any.
-    let mut delivering: Option<Arc<dyn BusPort>> = None;
+    // The port this loop last asked to deliver on the bus's thread, and whether it does.
+    let mut asked: Option<(Arc<dyn BusPort>, bool)> = None;
     while !conn.is_closed() {
         let Some(port) = conn.port().clone() else {
-            delivering = None;
+            asked = None;
             conn.out().delivered = false;
             // Wait for `open` (or for the close that ends the loop).
             let guard = conn.port();
@@ -906,18 +916,21 @@ fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
             }
             continue;
         };
-        let same = delivering
+        let known = asked
             .as_ref()
-            .is_some_and(|d| std::ptr::addr_eq(Arc::as_ptr(d), Arc::as_ptr(&port)));
-        if !same {
-            delivering = None;
-            conn.out().delivered = false;
-            if port.deliver_to(sink(shared, conn)) {
-                conn.out().delivered = true;
-                delivering = Some(Arc::clone(&port));
+            .filter(|(p, _)| std::ptr::addr_eq(Arc::as_ptr(p), Arc::as_ptr(&port)))
+            .map(|(_, delivers)| *delivers);
+        let delivers = match known {
+            Some(delivers) => delivers,
+            None => {
+                conn.out().delivered = false;
+                let delivers = port.deliver_to(sink(shared, conn));
+                conn.out().delivered = delivers;
+                asked = Some((Arc::clone(&port), delivers));
+                delivers
             }
-        }
-        let step = if delivering.is_some() {
+        };
+        let step = if delivers {
             wait_delivered(conn, &*port)
         } else {
             drain(shared, conn, &*port)

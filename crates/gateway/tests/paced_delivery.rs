@@ -227,3 +227,43 @@ fn a_broadcast_manager_subscription_selects_frames_on_the_bus_thread() {
         );
     }
 }
+
+#[test]
+fn an_slcan_client_that_closes_and_opens_again_gets_each_frame_once() {
+    let mut sim = Simulation::new();
+    sim.add_bus(BusConfig::new("can0", BitRate::R1M));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let buses = PacedBus::new(paced.handle());
+    let srv = cantwin_gateway::slcan::Server::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        Arc::new(buses.clone()),
+        "can0",
+        Limits::default(),
+    )
+    .unwrap();
+    let node = buses.open("can0", 1).unwrap();
+    let mut c = Peer::connect(srv.local_addr());
+    for _ in 0..3 {
+        c.write(b"O\r");
+        c.expect(b"\r");
+        // Past the stream's start pause.
+        thread::sleep(Limits::default().settle * 2);
+        node.send(Frame::std(0x123, &[0xAB]).unwrap()).unwrap();
+        c.expect(b"t1231AB\r");
+        c.write(b"C\r");
+        c.expect(b"\r");
+    }
+    // Nothing more came: a frame sent while closed is not delivered, and the next reply is
+    // the one to this command.
+    node.send(Frame::std(0x124, &[]).unwrap()).unwrap();
+    thread::sleep(Duration::from_millis(50));
+    c.write(b"V\r");
+    let reply = c.read_once();
+    assert_eq!(
+        reply.first(),
+        Some(&b'V'),
+        "{:?}",
+        String::from_utf8_lossy(&reply)
+    );
+    drop(paced);
+}
