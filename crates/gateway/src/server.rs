@@ -267,9 +267,12 @@ struct Stats {
 /// not every frame in the protocol's own format (socketcand's broadcast-manager mode).
 pub(crate) trait Selector: Send + Sync {
     /// Whether a frame from the bus goes to the client now. A selector may keep a frame and
-    /// hand it over later through [`ConnHandle::deliver`]. Called with the connection's
+    /// hand it over later through [`ConnHandle::deliver_kept`]. Called with the connection's
     /// stream locked: it must not call back into the connection.
     fn select(&self, rx: &Received) -> bool;
+    /// For a frame it kept, handed over now: whether the client should still get it (what
+    /// selected it was not undone meanwhile). Called with the stream locked.
+    fn still_selects(&self, rx: &Received) -> bool;
     /// Append the frame as the stream writes it; `false` if it cannot be carried.
     fn write(&self, rx: &Received, out: &mut Vec<u8>) -> bool;
 }
@@ -277,16 +280,22 @@ pub(crate) trait Selector: Send + Sync {
 /// Where a frame handed to a connection's stream comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Source {
-    /// The bus's own thread: it may be written at once.
+    /// The bus's own thread (or a frame the client sent, looped back): it may be written at
+    /// once.
     BusThread,
     /// The writer thread draining its port: queued, written in batches.
     Drained,
-    /// A frame the selector kept and hands over now (already selected).
-    Held,
+    /// A frame the selector at this address kept and hands over now.
+    Kept(usize),
+}
+
+/// A selector's address, to tell whether it is still the stream's.
+fn selector_addr(selector: &Arc<dyn Selector>) -> usize {
+    Arc::as_ptr(selector).cast::<()>().addr()
 }
 
 /// Hands a connection a frame through its server's protocol (which a handle does not name).
-type Deliver = Arc<dyn Fn(&Conn, &Received) + Send + Sync>;
+type Deliver = Arc<dyn Fn(&Conn, &Received, Source) + Send + Sync>;
 
 /// A connection as seen from other threads: it ends with the connection.
 #[derive(Clone)]
@@ -300,9 +309,9 @@ impl ConnHandle {
         let shared = Arc::downgrade(shared);
         ConnHandle {
             conn: Arc::downgrade(conn),
-            deliver: Arc::new(move |conn: &Conn, rx: &Received| {
+            deliver: Arc::new(move |conn: &Conn, rx: &Received, from: Source| {
                 if let Some(shared) = shared.upgrade() {
-                    conn.offer(&shared, rx, Source::Held);
+                    conn.offer(&shared, rx, from);
                 }
             }),
         }
@@ -313,10 +322,19 @@ impl ConnHandle {
         self.conn.upgrade().is_none_or(|c| c.is_closed())
     }
 
-    /// Hand the client a frame its selector kept.
-    pub(crate) fn deliver(&self, rx: &Received) {
+    /// Hand the client a frame `selector` kept: it goes out if `selector` is still the
+    /// stream's and still selects it ([`Selector::still_selects`]).
+    pub(crate) fn deliver_kept(&self, selector: &Arc<dyn Selector>, rx: &Received) {
         if let Some(conn) = self.conn.upgrade() {
-            (self.deliver)(&conn, rx);
+            (self.deliver)(&conn, rx, Source::Kept(selector_addr(selector)));
+        }
+    }
+
+    /// Offer the client a frame it sent itself, as if the bus had delivered it (the stream's
+    /// selector decides).
+    pub(crate) fn loop_back(&self, rx: &Received) {
+        if let Some(conn) = self.conn.upgrade() {
+            (self.deliver)(&conn, rx, Source::BusThread);
         }
     }
 
@@ -448,10 +466,15 @@ impl Conn {
         if !out.on || out.end.is_some() {
             return;
         }
-        if from != Source::Held
-            && let Some(selector) = &out.selector
-            && !selector.select(rx)
-        {
+        let selected = match (from, &out.selector) {
+            (Source::Kept(by), Some(selector)) => {
+                selector_addr(selector) == by && selector.still_selects(rx)
+            }
+            (Source::Kept(_), None) => false,
+            (_, Some(selector)) => selector.select(rx),
+            (_, None) => true,
+        };
+        if !selected {
             return;
         }
         if from != Source::Drained && out.can_write_now() && shared.direct.take() {

@@ -176,3 +176,60 @@ fn broadcast_manager_commands_need_a_bus_and_valid_arguments() {
     // Deleting what does not exist is silent, as with the daemon.
     command(&mut c, b"< delete 7FF >< unsubscribe 7FF >");
 }
+
+#[test]
+fn a_client_subscribed_to_what_it_sends_sees_its_own_frames() {
+    let bus = MemoryBus::new(["vcan0"]);
+    let srv = server(&bus);
+    let node = bus.open("vcan0", 1024).unwrap();
+    let mut c = bcm_client(&srv);
+    command(&mut c, b"< subscribe 0 0 321 >< subscribe 0 0 322 >");
+    // A cyclic job with a zero interval sends once, at once, and the kernel loops it back.
+    c.write(b"< add 0 0 321 1 AA >");
+    let e = c.read_element();
+    assert!(
+        e.starts_with("< frame 321 ") && e.ends_with(" AA  >"),
+        "{e}"
+    );
+    assert_eq!(
+        node.recv_timeout(GUARD).unwrap().unwrap().frame,
+        Frame::std(0x321, &[0xAA]).unwrap()
+    );
+    c.write(b"< send 322 2 1 2 >");
+    let e = c.read_element();
+    assert!(
+        e.starts_with("< frame 322 ") && e.ends_with(" 01 02  >"),
+        "{e}"
+    );
+    assert_eq!(
+        node.recv_timeout(GUARD).unwrap().unwrap().frame,
+        Frame::std(0x322, &[1, 2]).unwrap()
+    );
+    // The zero-interval job sent only once.
+    assert_eq!(node.recv_timeout(Duration::from_millis(100)).unwrap(), None);
+}
+
+#[test]
+fn a_multiplex_filter_is_not_throttled_as_with_the_daemon() {
+    let bus = MemoryBus::new(["vcan0"]);
+    let srv = server(&bus);
+    let mut c = bcm_client(&srv);
+    command(
+        &mut c,
+        b"< muxfilter 10 0 200 2 FF 00 00 00 00 00 00 00 33 FF 00 00 00 00 00 00 >",
+    );
+    let start = Instant::now();
+    for n in 1..=3u8 {
+        bus.inject("vcan0", Frame::std(0x200, &[0x33, n]).unwrap(), ts());
+    }
+    for n in 1..=3u8 {
+        assert_eq!(
+            c.read_element(),
+            format!("< frame 200 1700000000.000250 33 {n:02X}  >")
+        );
+    }
+    assert!(
+        start.elapsed() < Duration::from_secs(10),
+        "no 10 s throttle"
+    );
+}

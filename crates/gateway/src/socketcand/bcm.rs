@@ -7,9 +7,10 @@
 //! Protocol Sockets"); what each command sets up, as the daemon's `state_bcm.c` does:
 //!
 //! * `add SECS USECS ID DLC DATA…`: `TX_SETUP` with `SETTIMER | STARTTIMER`, interval `ival2`.
-//!   The first frame goes out one interval after the command (no `TX_ANNOUNCE`); an interval
-//!   of zero sets up a job that never sends. `add` for an identifier that has a job replaces
-//!   its frame and restarts its timer.
+//!   Starting the timer announces the frame (the kernel sets `TX_ANNOUNCE` with
+//!   `STARTTIMER`): it goes out at once, then every interval; with an interval of zero it
+//!   goes out once. `add` for an identifier that has a job replaces its frame, sends it at
+//!   once and restarts the timer.
 //! * `update ID DLC DATA…`: `TX_SETUP` without flags: the job's frame changes, its timer runs
 //!   on; without a job, one is set up that does not send.
 //! * `delete ID`: `TX_DELETE`.
@@ -19,18 +20,24 @@
 //! * `muxfilter SECS USECS ID N MASKS…`: `RX_SETUP` with N ≥ 2 masks: the first selects the
 //!   multiplexer bits, each further one is compared under the multiplexer mask with a frame's
 //!   data to find its multiplexer value and, on a match, filters that value's frames as
-//!   `filter` does, each value with its own last frame.
+//!   `filter` does, each value with its own last frame. The daemon writes this command's
+//!   `SECS USECS` into another message than the one it sends, so a multiplex filter is never
+//!   throttled; so it is here.
+//! * A receive command for an identifier that already has an operation updates it, unless it
+//!   has more masks than the operation (the kernel refuses that with `E2BIG`, which the
+//!   daemon does not report: the old operation stays). An update sends what its throttle
+//!   held at once and starts the throttle afresh.
 //! * `unsubscribe ID`: `RX_DELETE`.
 //! * `SECS USECS` of the receive commands is `ival2`, the throttle: a frame that passes is sent
 //!   at once unless one was sent less than the throttle ago; then the newest such frame (per
 //!   multiplexer value) is held and sent when the throttle time is up, and the throttle timer
 //!   keeps running while it has something to send.
 //!
-//! One receive operation and one transmission job per identifier, as a BCM socket keeps them
-//! (`RX_SETUP` and `TX_SETUP` for an identifier that has one replace it). Remote frames match
-//! no receive operation (the kernel registers them with the remote-request bit in the mask).
-//! A job's frames are this client's own, which its bus port does not hand back to it: unlike
-//! the kernel's loopback, a client does not receive what its own jobs send.
+//! One receive operation and one transmission job per identifier, as a BCM socket keeps them.
+//! Remote frames match no receive operation (the kernel registers them with the
+//! remote-request bit in the mask). The client's own frames (its `send` commands and its
+//! jobs' frames) reach its receive operations too, as the kernel loops a socket's frames back
+//! to the broadcast manager (on a virtual CAN interface, at once).
 
 use std::time::{Duration, Instant};
 
@@ -55,6 +62,16 @@ enum Filter {
     /// Changes of the data under a mask; with more than one mask, the first is the
     /// multiplexer mask and the others are compared per multiplexer value.
     Masks(Vec<u64>),
+}
+
+impl Filter {
+    /// The operation's frame count in the kernel (`nframes`: 0 for a subscription).
+    fn masks(&self) -> usize {
+        match self {
+            Filter::All => 0,
+            Filter::Masks(m) => m.len(),
+        }
+    }
 }
 
 /// The state of one mask (or of the whole identifier for [`Filter::All`]).
@@ -95,6 +112,15 @@ pub(crate) struct Due {
     pub(crate) deliver: Vec<Received>,
 }
 
+/// The first time after `now` on the grid `from + k · period` (k ≥ 1): a timer that fired
+/// late keeps its cadence, and cycles the host missed are skipped rather than sent in a
+/// burst.
+fn after(from: Instant, period: Duration, now: Instant) -> Instant {
+    let missed = now.saturating_duration_since(from).as_nanos() / period.as_nanos().max(1);
+    let steps = u32::try_from(missed + 1).unwrap_or(u32::MAX);
+    from + period.saturating_mul(steps)
+}
+
 /// A frame's data as the broadcast manager compares it: eight bytes, zero beyond the DLC.
 fn word(frame: &Frame) -> u64 {
     bytes_word(frame.data_bytes())
@@ -109,14 +135,13 @@ fn bytes_word(bytes: &[u8]) -> u64 {
 }
 
 impl Bcm {
-    /// `add`: set up (or replace) the job for `frame`'s identifier, sending every `interval`
-    /// from `now + interval` on; an interval of zero sends nothing.
+    /// `add`: set up (or replace) the job for `frame`'s identifier, sending it at `now` and
+    /// then every `interval` (once, with an interval of zero).
     pub(crate) fn add(&mut self, interval: Duration, frame: Frame, now: Instant) {
-        let next = (!interval.is_zero()).then(|| now + interval);
         let job = TxJob {
             frame,
             interval,
-            next,
+            next: Some(now),
         };
         match self.tx.iter_mut().find(|j| j.frame.id() == frame.id()) {
             Some(j) => *j = job,
@@ -144,40 +169,62 @@ impl Bcm {
         self.tx.len() != before
     }
 
-    fn set_rx(&mut self, id: Id, throttle: Duration, filter: Filter) {
-        let slots = match &filter {
-            Filter::All => 1,
-            Filter::Masks(m) => m.len(),
-        };
-        let op = RxOp {
-            id,
-            filter,
-            throttle,
-            slots: vec![Slot::default(); slots],
-            last_sent: None,
-            flush_at: None,
-        };
+    /// Set up or update the receive operation of `id`; frames an update flushes from the
+    /// throttle are added to `flushed`, to be sent at once.
+    fn set_rx(&mut self, id: Id, throttle: Duration, filter: Filter, flushed: &mut Vec<Received>) {
+        let masks = filter.masks();
+        let slots = masks.max(1);
         match self.rx.iter_mut().find(|o| o.id == id) {
-            Some(o) => *o = op,
-            None => self.rx.push(op),
+            Some(o) if masks > o.filter.masks() => {}
+            Some(o) => {
+                flushed.extend(o.slots.iter_mut().filter_map(|s| s.held.take()));
+                // A subscription keeps what it received (the kernel clears the last frames
+                // only when the update carries masks).
+                if masks > 0 || o.slots.len() != slots {
+                    o.slots = vec![Slot::default(); slots];
+                }
+                o.filter = filter;
+                o.throttle = throttle;
+                o.last_sent = None;
+                o.flush_at = None;
+            }
+            None => self.rx.push(RxOp {
+                id,
+                filter,
+                throttle,
+                slots: vec![Slot::default(); slots],
+                last_sent: None,
+                flush_at: None,
+            }),
         }
     }
 
     /// `subscribe`: every frame of `id`, at most one per `throttle`.
-    pub(crate) fn subscribe(&mut self, id: Id, throttle: Duration) {
-        self.set_rx(id, throttle, Filter::All);
+    pub(crate) fn subscribe(&mut self, id: Id, throttle: Duration, flushed: &mut Vec<Received>) {
+        self.set_rx(id, throttle, Filter::All, flushed);
     }
 
     /// `filter`: frames of `id` whose data under `mask` changed, at most one per `throttle`.
-    pub(crate) fn filter(&mut self, id: Id, throttle: Duration, mask: &[u8]) {
-        self.set_rx(id, throttle, Filter::Masks(vec![bytes_word(mask)]));
+    pub(crate) fn filter(
+        &mut self,
+        id: Id,
+        throttle: Duration,
+        mask: &[u8],
+        flushed: &mut Vec<Received>,
+    ) {
+        self.set_rx(id, throttle, Filter::Masks(vec![bytes_word(mask)]), flushed);
     }
 
     /// `muxfilter`: the multiplexer mask then one filter per multiplexer value (at least two
-    /// masks in all; the caller checks).
-    pub(crate) fn muxfilter(&mut self, id: Id, throttle: Duration, masks: &[[u8; 8]]) {
+    /// masks in all; the caller checks). Never throttled (see the module documentation).
+    pub(crate) fn muxfilter(&mut self, id: Id, masks: &[[u8; 8]], flushed: &mut Vec<Received>) {
         let masks = masks.iter().map(|m| u64::from_be_bytes(*m)).collect();
-        self.set_rx(id, throttle, Filter::Masks(masks));
+        self.set_rx(id, Duration::ZERO, Filter::Masks(masks), flushed);
+    }
+
+    /// Whether a frame of `id` would still reach the client: its receive operation exists.
+    pub(crate) fn receives(&self, id: Id) -> bool {
+        self.rx.iter().any(|o| o.id == id)
     }
 
     /// `unsubscribe`: remove the receive operation of `id`; `false` if there was none.
@@ -232,22 +279,16 @@ impl Bcm {
                 continue;
             }
             due.transmit.push(job.frame);
-            // Cycles missed while the host was busy are skipped, as the kernel's timer
-            // forwarding does: the next frame is due one interval after the last due time
-            // that has passed.
-            let missed = (now - next).as_nanos() / job.interval.as_nanos().max(1);
-            let step = job
-                .interval
-                .saturating_mul(u32::try_from(missed + 1).unwrap_or(u32::MAX));
-            job.next = Some(next + step);
+            job.next = (!job.interval.is_zero()).then(|| after(next, job.interval, now));
         }
         for op in &mut self.rx {
-            if op.flush_at.is_some_and(|t| t <= now) {
+            let Some(at) = op.flush_at else { continue };
+            if at <= now {
                 let before = due.deliver.len();
                 due.deliver
                     .extend(op.slots.iter_mut().filter_map(|s| s.held.take()));
                 if due.deliver.len() > before {
-                    op.flush_at = Some(now + op.throttle);
+                    op.flush_at = Some(after(at, op.throttle, now));
                 } else {
                     op.flush_at = None;
                     op.last_sent = None;
@@ -317,7 +358,7 @@ mod tests {
     fn subscribe_passes_every_frame_of_its_identifier_only() {
         let t = Instant::now();
         let mut b = Bcm::default();
-        b.subscribe(std(0x123), Duration::ZERO);
+        b.subscribe(std(0x123), Duration::ZERO, &mut Vec::new());
         assert_eq!(data(b.on_frame(&rx(0x123, &[1]), t)), Some(vec![1]));
         assert_eq!(data(b.on_frame(&rx(0x123, &[1]), t)), Some(vec![1]));
         assert_eq!(b.on_frame(&rx(0x124, &[1]), t), None);
@@ -336,7 +377,12 @@ mod tests {
         // The daemon's example: `< filter 0 0 123 8 FF 00 F8 00 00 00 00 00 >`.
         let t = Instant::now();
         let mut b = Bcm::default();
-        b.filter(std(0x123), Duration::ZERO, &[0xFF, 0x00, 0xF8]);
+        b.filter(
+            std(0x123),
+            Duration::ZERO,
+            &[0xFF, 0x00, 0xF8],
+            &mut Vec::new(),
+        );
         let f = |d: &[u8]| rx(0x123, d);
         assert!(
             b.on_frame(&f(&[1, 2, 0x08]), t).is_some(),
@@ -369,12 +415,12 @@ mod tests {
         let mut b = Bcm::default();
         b.muxfilter(
             std(0x123),
-            Duration::ZERO,
             &[
                 [0xFF, 0, 0, 0, 0, 0, 0, 0],
                 [0x33, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF],
                 [0x56, 0xFF, 0, 0, 0, 0, 0xFF, 0xFF],
             ],
+            &mut Vec::new(),
         );
         let f = |d: &[u8]| rx(0x123, d);
         assert!(b.on_frame(&f(&[0x33, 1]), t).is_some());
@@ -396,7 +442,7 @@ mod tests {
     fn a_throttled_subscription_sends_at_once_then_the_newest_frame_per_period() {
         let t = Instant::now();
         let mut b = Bcm::default();
-        b.subscribe(std(0x181), Duration::from_millis(100));
+        b.subscribe(std(0x181), Duration::from_millis(100), &mut Vec::new());
         let f = |n: u8| rx(0x181, &[n]);
         assert_eq!(data(b.on_frame(&f(1), t)), Some(vec![1]));
         assert!(!b.take_replan());
@@ -428,48 +474,81 @@ mod tests {
     }
 
     #[test]
-    fn add_sends_every_interval_from_one_interval_on_and_update_keeps_the_timer() {
+    fn add_sends_at_once_then_every_interval_and_update_keeps_the_timer() {
         let t = Instant::now();
         let mut b = Bcm::default();
         let frame = |n: u8| Frame::std(0x123, &[n]).expect("a valid frame");
         b.add(Duration::from_millis(20), frame(1), t);
-        assert_eq!(b.next_deadline(), Some(at(t, 20)));
         let mut due = Due::default();
+        b.poll(t, &mut due);
+        assert_eq!(due.transmit, [frame(1)], "announced when the timer starts");
         b.poll(at(t, 19), &mut due);
-        assert!(
-            due.transmit.is_empty(),
-            "no frame before the first interval"
-        );
+        assert_eq!(due.transmit.len(), 1);
         b.poll(at(t, 20), &mut due);
-        assert_eq!(due.transmit, [frame(1)]);
+        assert_eq!(due.transmit, [frame(1), frame(1)]);
         b.update(frame(2));
         assert_eq!(
             b.next_deadline(),
             Some(at(t, 40)),
             "update leaves the timer"
         );
-        // The host was away for three cycles: one frame, then the cycle goes on.
+        // The host was away for three cycles: one frame, then the cycle goes on on its grid.
+        due.transmit.clear();
         b.poll(at(t, 95), &mut due);
-        assert_eq!(due.transmit, [frame(1), frame(2)]);
+        assert_eq!(due.transmit, [frame(2)]);
         assert_eq!(b.next_deadline(), Some(at(t, 100)));
-        // `add` again restarts the timer from now.
+        // `add` again sends at once and restarts the timer from now.
         b.add(Duration::from_millis(50), frame(3), at(t, 96));
-        assert_eq!(b.next_deadline(), Some(at(t, 146)));
+        assert_eq!(b.next_deadline(), Some(at(t, 96)));
         assert!(b.delete(std(0x123)));
         assert!(!b.delete(std(0x123)));
         assert_eq!(b.next_deadline(), None);
     }
 
     #[test]
-    fn a_zero_interval_or_an_update_without_a_job_sends_nothing() {
+    fn a_zero_interval_sends_once_and_an_update_without_a_job_sends_nothing() {
         let t = Instant::now();
         let mut b = Bcm::default();
         b.add(Duration::ZERO, Frame::std(0x123, &[1]).expect("a frame"), t);
         b.update(Frame::std(0x124, &[1]).expect("a frame"));
-        assert_eq!(b.next_deadline(), None);
         let mut due = Due::default();
         b.poll(at(t, 10_000), &mut due);
-        assert!(due.transmit.is_empty());
+        assert_eq!(due.transmit, [Frame::std(0x123, &[1]).expect("a frame")]);
+        assert_eq!(b.next_deadline(), None);
+        b.poll(at(t, 20_000), &mut due);
+        assert_eq!(due.transmit.len(), 1);
         assert!(b.delete(std(0x124)), "update set up a job");
+    }
+
+    #[test]
+    fn setting_up_an_identifier_again_updates_it_unless_it_needs_more_masks() {
+        let t = Instant::now();
+        let mut b = Bcm::default();
+        let mut flushed = Vec::new();
+        b.subscribe(std(0x181), Duration::from_millis(100), &mut flushed);
+        assert!(b.on_frame(&rx(0x181, &[1]), t).is_some());
+        assert_eq!(b.on_frame(&rx(0x181, &[2]), at(t, 10)), None, "held");
+        // More masks than the subscription has (none): refused, the subscription stays.
+        b.filter(std(0x181), Duration::ZERO, &[0xFF], &mut flushed);
+        assert!(flushed.is_empty());
+        assert_eq!(
+            b.on_frame(&rx(0x181, &[3]), at(t, 20)),
+            None,
+            "still throttled"
+        );
+        // The same kind again: the held frame is flushed, the throttle starts afresh.
+        b.subscribe(std(0x181), Duration::ZERO, &mut flushed);
+        assert_eq!(data(flushed.pop()), Some(vec![3]));
+        assert_eq!(data(b.on_frame(&rx(0x181, &[4]), at(t, 21))), Some(vec![4]));
+        // A filter may become a subscription (fewer masks).
+        b.filter(std(0x200), Duration::ZERO, &[0xFF], &mut flushed);
+        b.subscribe(std(0x200), Duration::ZERO, &mut flushed);
+        assert!(b.on_frame(&rx(0x200, &[1]), t).is_some());
+        assert!(
+            b.on_frame(&rx(0x200, &[1]), t).is_some(),
+            "no change needed any more"
+        );
+        assert!(b.receives(std(0x200)));
+        assert!(!b.receives(std(0x201)));
     }
 }

@@ -4,7 +4,7 @@ use std::io;
 use std::net::SocketAddr;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 use std::thread;
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 
 use super::bcm::{Bcm, Due};
 use super::wire::{self, Command, Framed, Framer, WireError};
@@ -123,7 +123,14 @@ impl Drop for ScSession {
 
 /// A client's broadcast manager at work: its state, shared with the stream (which asks it
 /// which frames to pass) and with its timer thread (cyclic jobs and throttles).
+///
+/// Lock order: `gate`, then `state`. The bus's thread takes `state` (through [`Selector`])
+/// while it holds the stream's lock, so nothing here calls into the connection or the bus
+/// with `state` held. `gate` is held by the timer across taking due frames and transmitting
+/// them, and by every command: once `delete` (or leaving the mode) returns, no frame of the
+/// job is on its way to the bus, as the kernel cancels a job's timer before it returns.
 struct BcmEngine {
+    gate: Mutex<()>,
     state: Mutex<BcmState>,
     /// Signalled when a command or a frame may have moved the next deadline, or on stop.
     changed: Condvar,
@@ -134,59 +141,79 @@ struct BcmState {
     stop: bool,
 }
 
+fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
 impl BcmEngine {
     fn lock(&self) -> MutexGuard<'_, BcmState> {
-        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+        relock(&self.state)
     }
 
-    /// Change the broadcast manager and let the timer re-plan.
+    /// Run a command against the broadcast manager and let the timer re-plan.
     fn with<R>(&self, f: impl FnOnce(&mut Bcm) -> R) -> R {
+        let _gate = relock(&self.gate);
         let r = f(&mut self.lock().bcm);
         self.changed.notify_all();
         r
     }
 
     fn stop(&self) {
+        let _gate = relock(&self.gate);
         self.lock().stop = true;
         self.changed.notify_all();
     }
 
-    /// The timer thread: transmit due cyclic frames and hand over throttled ones, until the
-    /// engine stops or the connection ends. Nothing is called on the connection or the bus
-    /// with the state locked: the bus's thread takes the state's lock through [`Selector`]
-    /// while it holds its own.
-    fn run(&self, conn: &ConnHandle) {
-        let mut due = Due::default();
+    /// Wait until something is due; `false` once the engine stopped or the connection ended.
+    fn wait_due(&self, conn: &ConnHandle) -> bool {
+        let mut st = self.lock();
         loop {
+            if st.stop || conn.is_closed() {
+                return false;
+            }
+            let now = Instant::now();
+            let wait = match st.bcm.next_deadline() {
+                Some(t) if t <= now => return true,
+                // Without a deadline, look at the connection now and then.
+                Some(t) => (t - now).min(IDLE_POLL),
+                None => IDLE_POLL,
+            };
+            st = self
+                .changed
+                .wait_timeout(st, wait)
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// The timer thread: transmit due cyclic frames and hand over throttled ones, until the
+    /// engine stops or the connection ends.
+    fn run(self: &Arc<Self>, conn: &ConnHandle) {
+        let me: Arc<dyn Selector> = Arc::clone(self) as Arc<dyn Selector>;
+        let mut due = Due::default();
+        while self.wait_due(conn) {
             {
-                let mut st = self.lock();
-                loop {
-                    if st.stop || conn.is_closed() {
+                let _gate = relock(&self.gate);
+                {
+                    let mut st = self.lock();
+                    if st.stop {
                         return;
                     }
-                    let now = Instant::now();
-                    st.bcm.poll(now, &mut due);
-                    if !due.transmit.is_empty() || !due.deliver.is_empty() {
-                        break;
+                    st.bcm.poll(Instant::now(), &mut due);
+                }
+                for frame in due.transmit.drain(..) {
+                    // A full transmit queue loses the frame, as the kernel's broadcast manager
+                    // loses one the device queue refuses; the job goes on.
+                    if conn.send(frame).is_ok() {
+                        conn.loop_back(&Received {
+                            frame,
+                            timestamp: SystemTime::now(),
+                        });
                     }
-                    // Without a deadline, look at the connection now and then.
-                    let wait = st.bcm.next_deadline().map_or(IDLE_POLL, |t| {
-                        t.saturating_duration_since(now).min(IDLE_POLL)
-                    });
-                    st = self
-                        .changed
-                        .wait_timeout(st, wait)
-                        .unwrap_or_else(PoisonError::into_inner)
-                        .0;
                 }
             }
-            for frame in due.transmit.drain(..) {
-                // A full transmit queue loses the frame, as the kernel's broadcast manager
-                // loses one the device queue refuses; the job goes on.
-                let _ = conn.send(frame);
-            }
             for rx in due.deliver.drain(..) {
-                conn.deliver(&rx);
+                conn.deliver_kept(&me, &rx);
             }
         }
     }
@@ -199,7 +226,7 @@ impl Selector for BcmEngine {
     fn select(&self, rx: &Received) -> bool {
         let (passed, replan) = {
             let mut st = self.lock();
-            let passed = st.bcm.on_frame(rx, Instant::now()).is_some();
+            let passed = !st.stop && st.bcm.on_frame(rx, Instant::now()).is_some();
             (passed, st.bcm.take_replan())
         };
         if replan {
@@ -207,6 +234,11 @@ impl Selector for BcmEngine {
             self.changed.notify_all();
         }
         passed
+    }
+
+    fn still_selects(&self, rx: &Received) -> bool {
+        let st = self.lock();
+        !st.stop && st.bcm.receives(rx.frame.id())
     }
 
     fn write(&self, rx: &Received, out: &mut Vec<u8>) -> bool {
@@ -228,6 +260,7 @@ impl ScSession {
             return Ok(Arc::clone(engine));
         }
         let engine = Arc::new(BcmEngine {
+            gate: Mutex::new(()),
             state: Mutex::new(BcmState {
                 bcm: Bcm::default(),
                 stop: false,
@@ -257,25 +290,32 @@ impl ScSession {
     fn on_bcm(&mut self, cmd: Command, link: &mut Link<'_>) -> io::Result<()> {
         let engine = self.bcm(link)?;
         let now = Instant::now();
+        let mut flushed = Vec::new();
         match cmd {
             Command::Add { interval, frame } => engine.with(|b| b.add(interval, frame, now)),
             Command::Update(frame) => engine.with(|b| b.update(frame)),
             Command::Delete(id) => {
                 engine.with(|b| b.delete(id));
             }
-            Command::Subscribe { throttle, id } => engine.with(|b| b.subscribe(id, throttle)),
-            Command::Filter { throttle, id, mask } => {
-                engine.with(|b| b.filter(id, throttle, &mask));
+            Command::Subscribe { throttle, id } => {
+                engine.with(|b| b.subscribe(id, throttle, &mut flushed));
             }
-            Command::MuxFilter {
-                throttle,
-                id,
-                masks,
-            } => engine.with(|b| b.muxfilter(id, throttle, &masks)),
+            Command::Filter { throttle, id, mask } => {
+                engine.with(|b| b.filter(id, throttle, &mask, &mut flushed));
+            }
+            // Never throttled, as by the daemon (see the broadcast manager's module).
+            Command::MuxFilter { id, masks, .. } => {
+                engine.with(|b| b.muxfilter(id, &masks, &mut flushed));
+            }
             Command::Unsubscribe(id) => {
                 engine.with(|b| b.unsubscribe(id));
             }
             _ => {}
+        }
+        let me: Arc<dyn Selector> = engine;
+        let conn = link.handle();
+        for rx in &flushed {
+            conn.deliver_kept(&me, rx);
         }
         Ok(())
     }
@@ -326,8 +366,17 @@ impl ScSession {
             (cmd, State::NoBus) if cmd.is_broadcast_manager() => error(link, "no bus open"),
             // As the daemon answers a broadcast-manager command in raw mode.
             (cmd, State::Raw) if cmd.is_broadcast_manager() => error(link, "unknown command"),
-            (Command::Send(frame), _) => match link.send(frame) {
-                Ok(()) => Ok(()),
+            (Command::Send(frame), state) => match link.send(frame) {
+                Ok(()) => {
+                    // The kernel loops a socket's frames back to its broadcast manager.
+                    if state == State::Bcm && self.bcm.is_some() {
+                        link.handle().loop_back(&Received {
+                            frame,
+                            timestamp: SystemTime::now(),
+                        });
+                    }
+                    Ok(())
+                }
                 Err(PortError::TxQueueFull) => error(link, "transmit queue full"),
                 Err(PortError::Frame(_)) => error(link, "invalid frame"),
                 // The bus is gone: end the session as the daemon does when its socket fails.

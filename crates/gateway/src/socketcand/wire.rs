@@ -255,13 +255,15 @@ fn parse_hex_u32(s: &str) -> Option<u32> {
     u32::from_str_radix(s, 16).ok()
 }
 
-/// An identifier token: eight hex digits mean extended format, one to three standard.
+/// An identifier token: eight hex digits mean extended format, fewer standard (the daemon
+/// reads the value with `%x` and looks only at the token's length).
 fn parse_id(s: &str, cmd: &'static str) -> Result<Id, WireError> {
     let raw = parse_hex_u32(s).ok_or(WireError::Syntax(cmd))?;
-    match s.len() {
-        8 => Ok(Id::extended(raw)?),
-        1..=3 => Ok(Id::standard(raw as u16)?),
-        _ => Err(WireError::Syntax(cmd)),
+    if s.len() == 8 {
+        Ok(Id::extended(raw)?)
+    } else {
+        let raw = u16::try_from(raw).map_err(|_| IdError::StandardOutOfRange(raw))?;
+        Ok(Id::standard(raw)?)
     }
 }
 
@@ -300,12 +302,13 @@ pub fn parse_command(element: &[u8]) -> Result<Command, WireError> {
             }
             _ => Err(WireError::Syntax("update")),
         },
+        // The daemon reads the arguments it needs and ignores what follows them.
         "delete" => match args {
-            [id] => parse_id(id, "delete").map(Command::Delete),
+            [id, ..] => parse_id(id, "delete").map(Command::Delete),
             _ => Err(WireError::Syntax("delete")),
         },
         "subscribe" => match args {
-            [secs, usecs, id] => Ok(Command::Subscribe {
+            [secs, usecs, id, ..] => Ok(Command::Subscribe {
                 throttle: parse_interval(secs, usecs, "subscribe")?,
                 id: parse_id(id, "subscribe")?,
             }),
@@ -324,7 +327,7 @@ pub fn parse_command(element: &[u8]) -> Result<Command, WireError> {
         },
         "muxfilter" => parse_muxfilter(args),
         "unsubscribe" => match args {
-            [id] => parse_id(id, "unsubscribe").map(Command::Unsubscribe),
+            [id, ..] => parse_id(id, "unsubscribe").map(Command::Unsubscribe),
             _ => Err(WireError::Syntax("unsubscribe")),
         },
         "statistics" | "isotpconf" | "sendpdu" | "fdsend" | "sendfd" => {
@@ -350,10 +353,13 @@ fn parse_send(args: &[&str]) -> Result<Frame, WireError> {
     parse_data_frame(id, dlc, bytes, CMD)
 }
 
-/// A DLC token: one decimal digit 0–8.
+/// A DLC token: a decimal number 0–8 (leading zeros allowed, as `%hhu` reads it).
 fn parse_dlc(dlc: &str, cmd: &'static str) -> Result<u8, WireError> {
-    match dlc.as_bytes() {
-        [d @ b'0'..=b'8'] => Ok(d - b'0'),
+    if dlc.is_empty() || dlc.len() > 3 || !dlc.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(WireError::Syntax(cmd));
+    }
+    match dlc.parse::<u8>() {
+        Ok(n) if n <= 8 => Ok(n),
         _ => Err(WireError::Syntax(cmd)),
     }
 }
@@ -647,7 +653,7 @@ mod tests {
             b"< send 123 2 1 >",
             b"< send 123 1 1 2 >",
             b"< send 123 1 100 >",
-            b"< send 1234 0 >",
+            b"< send 123456789 0 >",
             b"< send xyz 0 >",
             b"< send 123 -1 >",
             b"< send 123 1 g >",
@@ -661,6 +667,11 @@ mod tests {
         }
         assert!(matches!(
             parse_command(b"< send 800 0 >"),
+            Err(WireError::Id(_))
+        ));
+        // Four digits are a standard identifier, as the daemon reads them: too large here.
+        assert!(matches!(
+            parse_command(b"< send 1234 0 >"),
             Err(WireError::Id(_))
         ));
         assert!(matches!(
@@ -761,6 +772,22 @@ mod tests {
             parse_command(b"< unsubscribe 123 >"),
             Ok(Command::Unsubscribe(std(0x123)))
         );
+        // As the daemon reads them: what follows the arguments is ignored, an identifier of
+        // four to seven digits is a standard one, a DLC may have leading zeros.
+        assert_eq!(
+            parse_command(b"< unsubscribe 123 456 >"),
+            Ok(Command::Unsubscribe(std(0x123)))
+        );
+        assert_eq!(
+            parse_command(b"< update 0000123 08 1 2 3 4 5 6 7 8 >"),
+            Ok(Command::Update(
+                Frame::std(0x123, &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap()
+            ))
+        );
+        assert!(matches!(
+            parse_command(b"< delete 1234 >"),
+            Err(WireError::Id(_))
+        ));
         for bad in [
             &b"< add 1 0 123 2 11 >"[..],
             b"< add 1 1000000 123 0 >",
@@ -772,7 +799,6 @@ mod tests {
             b"< filter 0 0 123 9 >",
             b"< muxfilter 0 0 123 1 FF 00 00 00 00 00 00 00 >",
             b"< muxfilter 0 0 123 2 FF 00 00 00 00 00 00 00 33 >",
-            b"< unsubscribe 123 456 >",
         ] {
             assert!(
                 matches!(parse_command(bad), Err(WireError::Syntax(_))),
