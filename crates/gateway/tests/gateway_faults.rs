@@ -7,22 +7,16 @@ mod common;
 
 use std::io::Write;
 use std::net::Shutdown;
-use std::sync::Arc;
 use std::time::Duration;
 
 use cantwin_can::Frame;
 use cantwin_gateway::memory::MemoryBus;
 use cantwin_gateway::socketcand::Server;
 use cantwin_gateway::{BusConnector, BusPort, Limits};
-use common::{GUARD, Peer, ts};
+use common::{GUARD, Peer, socketcand_server, ts};
 
 fn server(bus: &MemoryBus, limits: Limits) -> Server {
-    Server::bind(
-        "127.0.0.1:0".parse().unwrap(),
-        Arc::new(bus.clone()),
-        limits,
-    )
-    .unwrap()
+    socketcand_server(bus, limits)
 }
 
 #[test]

@@ -6,22 +6,16 @@
 
 mod common;
 
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cantwin_can::Frame;
 use cantwin_gateway::memory::MemoryBus;
 use cantwin_gateway::socketcand::Server;
 use cantwin_gateway::{BusConnector, BusPort, Limits};
-use common::{GUARD, Peer, ts};
+use common::{GUARD, Peer, socketcand_server, ts};
 
 fn server(bus: &MemoryBus) -> Server {
-    Server::bind(
-        "127.0.0.1:0".parse().unwrap(),
-        Arc::new(bus.clone()),
-        Limits::default(),
-    )
-    .unwrap()
+    socketcand_server(bus, Limits::default())
 }
 
 /// A client with `vcan0` open, in broadcast-manager mode.

@@ -10,15 +10,10 @@ use cantwin_can::{Frame, Id};
 use cantwin_gateway::memory::MemoryBus;
 use cantwin_gateway::socketcand::Server;
 use cantwin_gateway::{BusConnector, BusPort, GatewayError, Limits};
-use common::{GUARD, Peer, ts};
+use common::{GUARD, Peer, socketcand_server, ts};
 
 fn server(bus: &MemoryBus) -> Server {
-    Server::bind(
-        "127.0.0.1:0".parse().unwrap(),
-        Arc::new(bus.clone()),
-        Limits::default(),
-    )
-    .unwrap()
+    socketcand_server(bus, Limits::default())
 }
 
 #[test]

@@ -3,7 +3,12 @@
 
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
+use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use cantwin_gateway::Limits;
+use cantwin_gateway::memory::MemoryBus;
+use cantwin_gateway::socketcand::Server;
 
 /// Upper bound on any wait in these tests: reached only when a test fails.
 pub const GUARD: Duration = Duration::from_secs(10);
@@ -11,6 +16,16 @@ pub const GUARD: Duration = Duration::from_secs(10);
 /// A fixed wall-clock timestamp: 2023-11-14T22:13:20.000250Z.
 pub fn ts() -> SystemTime {
     UNIX_EPOCH + Duration::new(1_700_000_000, 250_000)
+}
+
+/// A socketcand server on 127.0.0.1 (a free port) in front of `bus`.
+pub fn socketcand_server(bus: &MemoryBus, limits: Limits) -> Server {
+    Server::bind(
+        "127.0.0.1:0".parse().unwrap(),
+        Arc::new(bus.clone()),
+        limits,
+    )
+    .unwrap()
 }
 
 pub struct Peer {
