@@ -83,11 +83,20 @@ pub fn stuffed_region(frame: &Frame) -> StuffedRegion {
 pub fn stuffed_bit_stream(frame: &Frame) -> Vec<u8> {
     let region = stuffed_region(frame);
     let mut out = Vec::with_capacity(region.len as usize + 24);
+    stuff_bit_by_bit(region.bits, region.len, |bit, _| out.push(bit));
+    out
+}
+
+/// Bit stuffing (§10.5) of the first `len` bits of `bits`, one bit at a time, as the
+/// standard words it: count equal bits, and after the fifth insert the complement, which
+/// starts the next count at one. `emit` gets each bit of the stuffed stream and whether it is
+/// a stuff bit.
+fn stuff_bit_by_bit(bits: u128, len: u32, mut emit: impl FnMut(u8, bool)) {
     let mut run = 0u32;
-    let mut last = 2u8;
-    for i in 0..region.len {
-        let bit = ((region.bits >> (127 - i)) & 1) as u8;
-        out.push(bit);
+    let mut last = 2u8; // neither 0 nor 1
+    for i in 0..len {
+        let bit = ((bits >> (127 - i)) & 1) as u8;
+        emit(bit, false);
         if bit == last {
             run += 1;
         } else {
@@ -96,11 +105,10 @@ pub fn stuffed_bit_stream(frame: &Frame) -> Vec<u8> {
         }
         if run == 5 {
             last ^= 1;
-            out.push(last);
+            emit(last, true);
             run = 1;
         }
     }
-    out
 }
 
 /// Bits of a frame without stuff bits and without intermission.

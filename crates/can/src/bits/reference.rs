@@ -36,26 +36,11 @@ pub(super) fn stuffed_region(frame: &Frame) -> StuffedRegion {
     StuffedRegion { bits, len, crc }
 }
 
-/// Stuff bits in the first `len` bits of `bits`, one bit at a time: count equal bits, and
-/// after the fifth insert the complement, which starts the next count at one.
+/// Stuff bits in the first `len` bits of `bits`, one bit at a time (the parent module's
+/// walker, which also draws the stuffed bit stream).
 pub(super) fn count_stuff_bits(bits: u128, len: u32) -> u32 {
     let mut stuffed = 0;
-    let mut run = 0u32;
-    let mut last = 2u8; // neither 0 nor 1
-    for i in 0..len {
-        let bit = ((bits >> (127 - i)) & 1) as u8;
-        if bit == last {
-            run += 1;
-        } else {
-            last = bit;
-            run = 1;
-        }
-        if run == 5 {
-            stuffed += 1;
-            last ^= 1;
-            run = 1;
-        }
-    }
+    super::stuff_bit_by_bit(bits, len, |_, stuff| stuffed += u32::from(stuff));
     stuffed
 }
 
