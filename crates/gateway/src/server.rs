@@ -160,10 +160,8 @@ impl Link<'_> {
         // slow client: the port stops handing frames to this connection now (the next open
         // must not see frames of both).
         self.conn.work.notify_all();
-        if let Some(port) = &port {
-            port.deliver_to(Box::new(|_| {}));
-        }
         if let Some(port) = port {
+            port.deliver_to(Box::new(|_| {}));
             let deadline = Instant::now() + RECV_POLL * 2;
             while Arc::strong_count(&port) > 1 && Instant::now() < deadline {
                 thread::sleep(Duration::from_millis(1));
@@ -176,12 +174,7 @@ impl Link<'_> {
     /// selector are dropped.
     pub(crate) fn select(&mut self, selector: Option<Arc<dyn Selector>>) {
         let mut out = self.conn.out();
-        let same = match (&out.selector, &selector) {
-            (Some(a), Some(b)) => std::ptr::addr_eq(Arc::as_ptr(a), Arc::as_ptr(b)),
-            (None, None) => true,
-            _ => false,
-        };
-        if !same {
+        if out.selector.as_ref().map(selector_addr) != selector.as_ref().map(selector_addr) {
             out.queue.clear();
             out.selector = selector;
         }
@@ -289,6 +282,19 @@ enum Source {
     Kept(usize),
 }
 
+/// Append a frame as the stream writes it: its selector's way, else the protocol's.
+fn write_frame<P: Protocol>(
+    protocol: &P,
+    selector: Option<&Arc<dyn Selector>>,
+    rx: &Received,
+    out: &mut Vec<u8>,
+) -> bool {
+    match selector {
+        Some(selector) => selector.write(rx, out),
+        None => protocol.write_frame(rx, out),
+    }
+}
+
 /// A selector's address, to tell whether it is still the stream's.
 fn selector_addr(selector: &Arc<dyn Selector>) -> usize {
     Arc::as_ptr(selector).cast::<()>().addr()
@@ -330,12 +336,20 @@ impl ConnHandle {
         }
     }
 
-    /// Offer the client a frame it sent itself, as if the bus had delivered it (the stream's
-    /// selector decides).
-    pub(crate) fn loop_back(&self, rx: &Received) {
+    /// Offer the client a frame from the bus (the stream's selector decides).
+    pub(crate) fn offer_from_bus(&self, rx: &Received) {
         if let Some(conn) = self.conn.upgrade() {
             (self.deliver)(&conn, rx, Source::BusThread);
         }
+    }
+
+    /// Offer the client a frame it sent itself, stamped now, as if the bus had delivered it
+    /// (the kernel loops a socket's frames back to its broadcast manager).
+    pub(crate) fn loop_back(&self, frame: Frame) {
+        self.offer_from_bus(&Received {
+            frame,
+            timestamp: std::time::SystemTime::now(),
+        });
     }
 
     /// Queue a frame on the client's bus without waiting: a full transmit queue refuses it.
@@ -414,11 +428,18 @@ pub(crate) struct Conn {
     closed: AtomicBool,
 }
 
-fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+/// Lock, taking over a lock poisoned by a panic elsewhere (every holder leaves the state
+/// consistent).
+pub(crate) fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-fn wait_on<'a, T>(c: &Condvar, g: MutexGuard<'a, T>, timeout: Duration) -> MutexGuard<'a, T> {
+/// Wait on `c` for at most `timeout`, as [`relock`] takes over a poisoned lock.
+pub(crate) fn wait_on<'a, T>(
+    c: &Condvar,
+    g: MutexGuard<'a, T>,
+    timeout: Duration,
+) -> MutexGuard<'a, T> {
     c.wait_timeout(g, timeout)
         .unwrap_or_else(|e| e.into_inner())
         .0
@@ -480,11 +501,7 @@ impl Conn {
         if from != Source::Drained && out.can_write_now() && shared.direct.take() {
             let mut bytes = std::mem::take(&mut out.scratch);
             bytes.clear();
-            let written = match &out.selector {
-                Some(selector) => selector.write(rx, &mut bytes),
-                None => shared.protocol.write_frame(rx, &mut bytes),
-            };
-            if written {
+            if write_frame(&shared.protocol, out.selector.as_ref(), rx, &mut bytes) {
                 match send_now(&self.stream, &bytes) {
                     Ok(n) if n == bytes.len() => {}
                     Ok(n) => out.pending.extend_from_slice(&bytes[n..]),
@@ -560,10 +577,7 @@ impl Conn {
             out.busy = true;
             drop(out);
             for rx in batch.drain(..) {
-                match &selector {
-                    Some(selector) => selector.write(&rx, buf),
-                    None => protocol.write_frame(&rx, buf),
-                };
+                write_frame(protocol, selector.as_ref(), &rx, buf);
             }
             let written = (&self.stream).write_all(buf);
             out = self.out();
@@ -860,15 +874,17 @@ fn serve<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
     {
         return;
     }
+    let handle = ConnHandle::new(shared, conn);
     let writer = {
         let shared = Arc::clone(shared);
         let conn = Arc::clone(conn);
+        let handle = handle.clone();
         thread::Builder::new()
             .name("gateway-writer".into())
-            .spawn(move || write_loop(&shared, &conn))
+            .spawn(move || write_loop(&shared, &conn, &handle))
     };
     let Ok(writer) = writer else { return };
-    read_loop(shared, conn, &ConnHandle::new(shared, conn));
+    read_loop(shared, conn, &handle);
     conn.close();
     // The writer only returns; a panic in it would already have closed the connection.
     let _ = writer.join();
@@ -923,7 +939,7 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn, handle: &ConnHandle) 
     }
 }
 
-fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
+fn write_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn, handle: &ConnHandle) {
     let mut buf = Vec::with_capacity(4096);
     let mut batch = VecDeque::with_capacity(WRITE_BATCH);
     // The port this loop last asked to deliver on the bus's thread, and whether it does.
@@ -947,7 +963,10 @@ fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
             Some(delivers) => delivers,
             None => {
                 conn.out().delivered = false;
-                let delivers = port.deliver_to(sink(shared, conn));
+                // The bus owns the sink; the handle holds the connection weakly, so a closed
+                // connection is not kept alive by it.
+                let handle = handle.clone();
+                let delivers = port.deliver_to(Box::new(move |rx| handle.offer_from_bus(&rx)));
                 conn.out().delivered = delivers;
                 asked = Some((Arc::clone(&port), delivers));
                 delivers
@@ -969,18 +988,6 @@ fn write_loop<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) {
         }
     }
     conn.close();
-}
-
-/// What the bus's thread calls with each frame for this connection. It holds the connection
-/// weakly: the bus owns the sink, and a closed connection must not be kept alive by it.
-fn sink<P: Protocol>(shared: &Arc<Shared<P>>, conn: &Arc<Conn>) -> Box<dyn FnMut(Received) + Send> {
-    let shared = Arc::downgrade(shared);
-    let conn = Arc::downgrade(conn);
-    Box::new(move |rx: Received| {
-        if let (Some(shared), Some(conn)) = (shared.upgrade(), conn.upgrade()) {
-            conn.offer(&shared, &rx, Source::BusThread);
-        }
-    })
 }
 
 /// A delivering port: wait until there is something to write or to act on.

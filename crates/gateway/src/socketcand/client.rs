@@ -3,14 +3,15 @@
 
 use std::io::{self, ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpStream};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use cantwin_can::Frame;
 
 use super::wire::{self, Framed, Framer, ServerMessage};
 use crate::port::{BusConnector, BusPort, PortError, Received};
+use crate::server::relock;
 
 /// Why talking to a socketcand server failed.
 #[derive(Debug, thiserror::Error)]
@@ -136,10 +137,6 @@ pub struct Client {
     reader: Mutex<Reader>,
     server_errors: AtomicU64,
     last_error: Mutex<Option<String>>,
-}
-
-fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 impl Client {

@@ -2,16 +2,16 @@
 
 use std::io;
 use std::net::SocketAddr;
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread;
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Duration, Instant};
 
 use super::bcm::{Bcm, Due};
 use super::wire::{self, Command, Framed, Framer, WireError};
 use crate::GatewayError;
 use crate::port::{BusConnector, PortError, Received};
 use crate::server::{
-    ConnHandle, Limits, Link, Protocol, Selector, ServerStats, Session, TcpServer,
+    ConnHandle, Limits, Link, Protocol, Selector, ServerStats, Session, TcpServer, relock, wait_on,
 };
 
 /// socketcand's default TCP port.
@@ -141,10 +141,6 @@ struct BcmState {
     stop: bool,
 }
 
-fn relock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
 impl BcmEngine {
     fn lock(&self) -> MutexGuard<'_, BcmState> {
         relock(&self.state)
@@ -178,11 +174,7 @@ impl BcmEngine {
                 Some(t) => (t - now).min(IDLE_POLL),
                 None => IDLE_POLL,
             };
-            st = self
-                .changed
-                .wait_timeout(st, wait)
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
+            st = wait_on(&self.changed, st, wait);
         }
     }
 
@@ -205,10 +197,7 @@ impl BcmEngine {
                     // A full transmit queue loses the frame, as the kernel's broadcast manager
                     // loses one the device queue refuses; the job goes on.
                     if conn.send(frame).is_ok() {
-                        conn.loop_back(&Received {
-                            frame,
-                            timestamp: SystemTime::now(),
-                        });
+                        conn.loop_back(frame);
                     }
                 }
             }
@@ -370,10 +359,7 @@ impl ScSession {
                 Ok(()) => {
                     // The kernel loops a socket's frames back to its broadcast manager.
                     if state == State::Bcm && self.bcm.is_some() {
-                        link.handle().loop_back(&Received {
-                            frame,
-                            timestamp: SystemTime::now(),
-                        });
+                        link.handle().loop_back(frame);
                     }
                     Ok(())
                 }
