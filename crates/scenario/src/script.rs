@@ -939,6 +939,8 @@ pub struct CheckReport {
     pub error_frames: u64,
     /// Actions applied.
     pub actions: usize,
+    /// Every bus's events in bus order, by bus name: the run's capture.
+    pub events: Vec<(String, Vec<cantwin_bus::BusEvent>)>,
 }
 
 impl CheckReport {
@@ -1243,6 +1245,18 @@ pub fn check_with_progress(
             });
         }
     }
+    let events = taps
+        .iter()
+        .map(|(name, id, tap)| {
+            let events = built
+                .sim
+                .bus_mut(*id)
+                .and_then(|b| b.tap_mut::<Recorder>(*tap))
+                .map(|r| core::mem::take(&mut r.events))
+                .unwrap_or_default();
+            (name.clone(), events)
+        })
+        .collect();
     Ok(CheckReport {
         file: scenario.file.clone(),
         end,
@@ -1250,6 +1264,7 @@ pub fn check_with_progress(
         frames,
         error_frames,
         actions: script.actions.len(),
+        events,
     })
 }
 
