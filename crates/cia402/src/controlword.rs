@@ -1,7 +1,7 @@
-//! The controlword, 0x6040 (CiA 402-2 §6.1.1): the device control commands in bits 0–3 and
+//! The controlword, 0x6040 (CiA 402-2, object 6040h): the device control commands in bits 0–3 and
 //! 7, halt in bit 8, the operation-mode-specific bits 4–6 and 9.
 
-/// A device control command, the pattern of controlword bits 0–3 and 7 (CiA 402-2 §6.1.1,
+/// A device control command, the pattern of controlword bits 0–3 and 7 (CiA 402-2, object 6040h,
 /// table "command coding").
 ///
 /// Two patterns have two names in the standard, depending on the state they reach:
@@ -74,7 +74,7 @@ pub const ENABLE_OPERATION: u16 = 1 << 3;
 pub const FAULT_RESET: u16 = 1 << 7;
 /// Bit 8: halt.
 pub const HALT: u16 = 1 << 8;
-/// vl mode bit 4: ramp function generator enable (CiA 402-2 §vl, controlword).
+/// vl mode bit 4: ramp function generator enable (CiA 402-2, vl mode controlword).
 pub const VL_RFG_ENABLE: u16 = 1 << 4;
 /// vl mode bit 5: ramp function generator unlock.
 pub const VL_RFG_UNLOCK: u16 = 1 << 5;
@@ -137,7 +137,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia402_6_1_1_command_coding_covers_every_pattern() {
+    fn cia402_6040h_command_coding_covers_every_pattern() {
         // The x positions of the table do not matter.
         for cw in 0..=0xFFFFu16 {
             let c = Controlword(cw).command();
@@ -157,7 +157,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_6_1_1_other_bits() {
+    fn cia402_6040h_other_bits() {
         let cw = Controlword(0x8000 | HALT | VL_RFG_USE_REF | VL_RFG_ENABLE | 0x000F);
         assert!(cw.halt());
         assert_eq!(cw.mode_bits(), 0b101);

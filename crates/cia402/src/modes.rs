@@ -1,7 +1,7 @@
-//! Modes of operation (CiA 402-2 §6.3: 0x6060 modes of operation, 0x6061 modes of operation
+//! Modes of operation (CiA 402-2, objects 6060h and 6061h: 0x6060 modes of operation, 0x6061 modes of operation
 //! display) and the supported drive modes of 0x6502.
 
-/// An operating mode as 0x6060 and 0x6061 code it (CiA 402-2 §6.3.1, value definition).
+/// An operating mode as 0x6060 and 0x6061 code it (CiA 402-2, object 6060h, value definition).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Mode {
     /// Profile position mode (pp), 1.
@@ -70,7 +70,7 @@ impl Mode {
         })
     }
 
-    /// The bit of 0x6502 that says the drive supports this mode (CiA 402-2 §6.3.3: bit 0
+    /// The bit of 0x6502 that says the drive supports this mode (CiA 402-2, object 6502h: bit 0
     /// pp, 1 vl, 2 pv, 3 tq, 4 reserved, 5 hm, 6 ip, 7 csp, 8 csv, 9 cst).
     pub const fn supported_bit(self) -> u32 {
         let bit = match self {
@@ -103,7 +103,7 @@ impl Mode {
     }
 }
 
-/// The modes a drive supports: the value of 0x6502 (CiA 402-2 §6.3.3). Bits 16–31 are
+/// The modes a drive supports: the value of 0x6502 (CiA 402-2, object 6502h). Bits 16–31 are
 /// manufacturer-specific and kept as given.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Hash)]
 pub struct SupportedModes(pub u32);
@@ -152,7 +152,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia402_6_3_mode_codes_round_trip() {
+    fn cia402_6060h_mode_codes_round_trip() {
         for m in Mode::ALL {
             assert_eq!(Mode::from_code(m.code()), Some(m));
         }
@@ -162,7 +162,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_6_3_3_supported_drive_mode_bits() {
+    fn cia402_6502h_supported_drive_mode_bits() {
         assert_eq!(SupportedModes::VELOCITY.0, 0x0002);
         let servo = SupportedModes::of(&[
             Mode::ProfilePosition,

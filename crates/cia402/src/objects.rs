@@ -1,5 +1,5 @@
 //! The CiA 402 objects a drive has, chosen by an [`Objects`] description, with the
-//! profile's types, access and defaults (CiA 402-2 §6 and the vl clauses).
+//! profile's types, access and defaults (CiA 402-2, the device control objects and those of vl mode).
 //!
 //! | index | object | type, access | default |
 //! |---|---|---|---|
@@ -446,7 +446,7 @@ mod tests {
     use std::sync::Arc;
 
     #[test]
-    fn cia402_6_velocity_drive_defaults() {
+    fn cia402_objects_velocity_drive_defaults() {
         let desc = add_objects(OdBuilder::new(), &Objects::velocity_drive())
             .build()
             .unwrap();
@@ -483,7 +483,7 @@ mod tests {
     /// A DSP 402 V2.0 velocity drive with only the objects of its manual (the ADV200's
     /// chapter 2), spelled out object by object, is what the description builds.
     #[test]
-    fn cia402_6_a_dsp402_v2_velocity_drive_is_built_exactly() {
+    fn cia402_objects_a_dsp402_v2_velocity_drive_is_built_exactly() {
         let spec = Objects {
             naming: Naming::Dsp402V2,
             error_code: false,
@@ -617,7 +617,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_6_a_drive_without_vl_has_only_the_device_control_objects() {
+    fn cia402_objects_a_drive_without_vl_has_only_the_device_control_objects() {
         let spec = Objects {
             vl: None,
             error_code: false,

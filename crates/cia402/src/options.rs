@@ -1,4 +1,4 @@
-//! The option codes that say how the drive stops (CiA 402-2 §6.2: 0x605A quick stop,
+//! The option codes that say how the drive stops (CiA 402-2, objects 605Ah–605Eh: 0x605A quick stop,
 //! 0x605B shutdown, 0x605C disable operation, 0x605D halt, 0x605E fault reaction).
 
 use cantwin_canopen::od::ObjectDictionary;
@@ -39,7 +39,7 @@ impl StopRamp {
     }
 }
 
-/// 0x605A quick stop option code (CiA 402-2 §6.2.2): what QUICK STOP ACTIVE does and whether
+/// 0x605A quick stop option code (CiA 402-2, object 605Ah): what QUICK STOP ACTIVE does and whether
 /// the drive leaves it by itself (transition 12) or waits for "enable operation"
 /// (transition 16).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -96,7 +96,7 @@ impl QuickStopOption {
     }
 }
 
-/// 0x605B shutdown and 0x605C disable operation option codes (CiA 402-2 §6.2.3, §6.2.4):
+/// 0x605B shutdown and 0x605C disable operation option codes (CiA 402-2, objects 605Bh and 605Ch):
 /// what the drive does when it leaves OPERATION ENABLED by transition 8 or 5.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum DisableOption {
@@ -125,7 +125,7 @@ impl DisableOption {
     }
 }
 
-/// 0x605D halt option code (CiA 402-2 §6.2.5): how the drive stops while controlword bit 8
+/// 0x605D halt option code (CiA 402-2, object 605Dh): how the drive stops while controlword bit 8
 /// (halt) is set in OPERATION ENABLED; it stays in OPERATION ENABLED.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct HaltOption(pub StopRamp);
@@ -145,7 +145,7 @@ impl HaltOption {
     }
 }
 
-/// 0x605E fault reaction option code (CiA 402-2 §6.2.6): what FAULT REACTION ACTIVE does.
+/// 0x605E fault reaction option code (CiA 402-2, object 605Eh): what FAULT REACTION ACTIVE does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum FaultReactionOption {
     /// 0: disable the drive function (the motor is free to rotate).
@@ -241,7 +241,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia402_6_2_option_codes_round_trip() {
+    fn cia402_605xh_option_codes_round_trip() {
         for code in -2..=10 {
             if let Some(o) = QuickStopOption::from_code(code) {
                 assert_eq!(o.code(), code);

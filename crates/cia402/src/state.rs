@@ -1,4 +1,4 @@
-//! The power drive state machine (CiA 402-2 §5.3, device control: finite state automaton),
+//! The power drive state machine (CiA 402-2, device control: the PDS FSA, power drive system finite state automaton),
 //! sans-IO: the controlword and the drive's facts go in, the state and what the power stage
 //! is to do come out.
 //!
@@ -12,7 +12,7 @@
 //!                                                           QUICK STOP ACTIVE ─12→
 //! ```
 //!
-//! Rules this machine keeps, each from CiA 402-2 §5.3:
+//! Rules this machine keeps, each from the PDS FSA of CiA 402-2:
 //!
 //! * An evaluation takes at most one transition, except *switch on + enable operation*
 //!   (0xxx 1111) in READY TO SWITCH ON, which the command table defines as transitions 3
@@ -105,7 +105,7 @@ impl State {
     }
 
     /// Whether high voltage may be applied in the state (the states above SWITCH ON
-    /// DISABLED and the fault states; CiA 402-2 §5.3, state descriptions). A drive that
+    /// DISABLED and the fault states; the PDS FSA state descriptions). A drive that
     /// has its DC link up reports it in statusword bit 4.
     pub const fn voltage(self) -> bool {
         !matches!(self, State::NotReadyToSwitchOn | State::SwitchOnDisabled)
@@ -118,7 +118,7 @@ impl core::fmt::Display for State {
     }
 }
 
-/// Every transition CiA 402-2 §5.3 defines: `(number, from, to)`. Transition 13 ("fault")
+/// Every transition of the PDS FSA: `(number, from, to)`. Transition 13 ("fault")
 /// leaves every state but the two fault states and is listed once per state. Transition 0
 /// (start → NOT READY TO SWITCH ON) is [`PowerStateMachine::new`].
 pub const TRANSITIONS: [(u8, State, State); 21] = {
@@ -454,7 +454,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_5_3_start_takes_transitions_0_and_1() {
+    fn cia402_fsa_start_takes_transitions_0_and_1() {
         let mut m = PowerStateMachine::new();
         assert_eq!(m.state(), State::NotReadyToSwitchOn);
         let s = m.update(0x0006, Facts::default());
@@ -463,7 +463,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_5_3_switch_on_and_enable_operation_is_3_then_4() {
+    fn cia402_fsa_switch_on_and_enable_operation_is_3_then_4() {
         let mut m = at(&[0x0006]);
         let s = m.update(0x000F, Facts::default());
         assert_eq!(
@@ -475,7 +475,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_5_3_disable_operation_with_slow_down_keeps_the_drive_enabled_until_stopped() {
+    fn cia402_fsa_disable_operation_with_slow_down_keeps_the_drive_enabled_until_stopped() {
         let mut m = at(&[0x0006, 0x000F]);
         m.update(0x0007, Facts::default());
         assert_eq!(m.state(), State::SwitchedOn);
@@ -501,7 +501,7 @@ mod tests {
     }
 
     #[test]
-    fn cia402_5_3_halt_stops_in_operation_enabled() {
+    fn cia402_fsa_halt_stops_in_operation_enabled() {
         let mut m = at(&[0x0006, 0x000F]);
         m.update(0x010F, Facts::default());
         assert_eq!(m.state(), State::OperationEnabled);

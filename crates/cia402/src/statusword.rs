@@ -1,4 +1,4 @@
-//! The statusword, 0x6041 (CiA 402-2 §6.1.2): the power drive state in bits 0–3, 5 and 6,
+//! The statusword, 0x6041 (CiA 402-2, object 6041h): the power drive state in bits 0–3, 5 and 6,
 //! and the flags beside it.
 //!
 //! | state | bits 6, 5, 3–0 (x: not part of the state) | as encoded here |
@@ -97,7 +97,7 @@ impl Statusword {
     /// The state bits 0–3, 5 and 6 encode, `None` for a pattern of no state.
     pub const fn state(self) -> Option<State> {
         let sw = self.0;
-        // CiA 402-2 §6.1.2, table "state coding": the masks leave out the x positions.
+        // CiA 402-2, object 6041h, table "state coding": the masks leave out the x positions.
         Some(if sw & 0x4F == 0x00 {
             State::NotReadyToSwitchOn
         } else if sw & 0x4F == 0x40 {
@@ -159,7 +159,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia402_6_1_2_state_coding_is_unambiguous() {
+    fn cia402_6041h_state_coding_is_unambiguous() {
         // No statusword decodes as two states: each mask pattern is disjoint.
         for sw in 0..=0xFFFFu16 {
             let hits = State::ALL
