@@ -44,6 +44,7 @@ pub mod catalogue;
 pub mod coupler;
 pub mod diag;
 pub mod eds;
+pub mod full_island;
 
 /// A ready-made island for demonstrations: the modules of `scenarios/tm3-island.toml`
 /// (digital inputs and outputs, relays, analog inputs and outputs, temperature inputs, a
