@@ -879,8 +879,7 @@ impl Adv200 {
     }
 
     fn write_param(&mut self, p: u16, data: &[u8]) -> Result<(), ParamError> {
-        let v = ParamDb::decode(p, data)?;
-        bus_write(&mut self.params, p, v)
+        crate::fieldbus::write_bytes(&mut self.params, p, data)
     }
 
     fn card_events(&mut self, now: Instant) {
@@ -924,24 +923,6 @@ impl Adv200 {
             self.bus_fault(0xFFC6);
         }
     }
-}
-
-/// A parameter write from a fieldbus (SDO, DeviceNet explicit message): the motor data
-/// cannot change while the drive is enabled; naming `Dig Fieldbus S->Mn` as S2M channel n's
-/// `ipa` makes it an MDPLC channel (§1.3.3).
-pub(crate) fn bus_write(db: &mut ParamDb, p: u16, v: i64) -> Result<(), ParamError> {
-    if matches!(p, par::RATED_CURRENT | par::FULL_SCALE_SPEED) && db.value(par::ENABLE_STATE) != 0 {
-        return Err(ParamError::DeviceState);
-    }
-    db.check(p, v)?;
-    if let Some(n) = (1..=16u16).find(|n| par::s2m_ipa(*n) == p)
-        && v == i64::from(par::s2m_dig(n))
-    {
-        let f = Format::from_value(db.value(par::s2m_sys(n)));
-        let mdplc = if f.bits() == 32 { 7 } else { 6 };
-        let _ = db.force(par::s2m_sys(n), mdplc);
-    }
-    db.set(p, v)
 }
 
 impl Node for Adv200 {

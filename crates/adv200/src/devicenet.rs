@@ -27,6 +27,7 @@ use cantwin_can::Instant;
 use cantwin_devicenet::wire::{Request, status};
 use cantwin_devicenet::{Application, CipError, Identity, Reply, SlaveEvent};
 
+use crate::fieldbus;
 use crate::params::{ParamDb, ParamError, ParamType, def, par};
 use crate::pdc::{self, Pdc};
 
@@ -117,7 +118,7 @@ fn decode(data: &[u8], t: u8) -> Option<i64> {
 
 impl DnApp {
     fn write(&mut self, p: u16, v: i64) -> Result<(), ParamError> {
-        crate::card::bus_write(&mut self.params, p, v)
+        fieldbus::write(&mut self.params, p, v)
     }
 
     fn parameter_object(&mut self, req: &Request<'_>) -> Reply {
@@ -140,7 +141,7 @@ impl DnApp {
                 let Some((&1, value)) = req.data.split_first() else {
                     return Reply::Silent;
                 };
-                match ParamDb::decode(p, value).and_then(|v| self.write(p, v)) {
+                match fieldbus::write_bytes(&mut self.params, p, value) {
                     Ok(()) => Reply::Data(Vec::new()),
                     Err(_) => Reply::Silent,
                 }
@@ -177,7 +178,7 @@ impl DnApp {
         match req.service {
             0x32 if req.data.is_empty() => value(encode(v, own).unwrap_or_default()),
             0x32 => CipError::new(status::TOO_MUCH_DATA).into(),
-            0x33 => result(ParamDb::decode(p, req.data).and_then(|v| self.write(p, v))),
+            0x33 => result(fieldbus::write_bytes(&mut self.params, p, req.data)),
             0x34 => match req.data {
                 [t] => {
                     let t = if *t == db_t::VOID { own } else { *t };

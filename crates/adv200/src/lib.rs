@@ -4,6 +4,7 @@
 //! * [`drive`]: command sources, speed ramp, current, thermal model, I/O, alarms;
 //! * [`alarms`]: the alarm list and its EMCY codes (§1.5);
 //! * [`pdc`]: the Process Data Channel mapping rules (§1.3) and their Opt Bus Fault codes;
+//! * [`fieldbus`]: the one path by which either fieldbus writes a parameter;
 //! * [`ds402`]: the CiA 402 power state machine (chapter 2);
 //! * [`devicenet`]: the DeviceNet personality (chapter 3);
 //! * [`od`]: the card's object dictionary for the CANopen and DS402 personalities;
@@ -57,6 +58,7 @@ pub mod drive;
 pub mod ds402;
 pub mod eds;
 pub mod example;
+pub mod fieldbus;
 pub mod od;
 pub mod params;
 pub mod pdc;

@@ -524,17 +524,50 @@ fn build_catalog() -> Vec<ParamDef> {
     v
 }
 
-static CATALOG: LazyLock<Vec<ParamDef>> = LazyLock::new(build_catalog);
+/// Parameter numbers stay below this (the §1.4 SDO window 0x2000 + PAR ends at 0x5FFF).
+pub const PAR_LIMIT: u16 = 0x4000;
+
+/// No parameter at this number (in [`Catalog::slots`]).
+const NONE: u16 = u16::MAX;
+
+/// The definitions, and for every number below [`PAR_LIMIT`] the position of its
+/// definition: the drive's control task reads some sixty parameters every millisecond, so a
+/// parameter is found by one table look-up rather than a search.
+struct Catalog {
+    defs: Vec<ParamDef>,
+    slots: Vec<u16>,
+}
+
+fn index_catalog() -> Catalog {
+    let defs = build_catalog();
+    let mut slots = vec![NONE; usize::from(PAR_LIMIT)];
+    for (i, d) in defs.iter().enumerate() {
+        if let Some(s) = slots.get_mut(usize::from(d.par)) {
+            *s = i as u16;
+        }
+    }
+    Catalog { defs, slots }
+}
+
+static CATALOG: LazyLock<Catalog> = LazyLock::new(index_catalog);
 
 /// Every parameter of the drive, sorted by number.
 pub fn catalog() -> &'static [ParamDef] {
-    &CATALOG
+    &CATALOG.defs
+}
+
+/// The position of parameter `par` in [`catalog`].
+#[inline]
+fn slot_of(par: u16) -> Option<usize> {
+    match CATALOG.slots.get(usize::from(par)) {
+        Some(&s) if s != NONE => Some(usize::from(s)),
+        _ => None,
+    }
 }
 
 /// The definition of parameter `par`.
 pub fn def(par: u16) -> Option<&'static ParamDef> {
-    let c = catalog();
-    c.binary_search_by_key(&par, |d| d.par).ok().map(|i| &c[i])
+    slot_of(par).map(|i| &CATALOG.defs[i])
 }
 
 /// Why a parameter access failed; each maps to the CiA 301 abort code with the meaning of
@@ -599,18 +632,19 @@ impl ParamDb {
         }
     }
 
+    #[inline]
     fn slot(par: u16) -> Result<usize, ParamError> {
-        catalog()
-            .binary_search_by_key(&par, |d| d.par)
-            .map_err(|_| ParamError::Missing)
+        slot_of(par).ok_or(ParamError::Missing)
     }
 
     /// The value of `par`.
+    #[inline]
     pub fn get(&self, par: u16) -> Result<i64, ParamError> {
         Ok(self.values[Self::slot(par)?])
     }
 
     /// The value of `par`, 0 if it does not exist (a Null source).
+    #[inline]
     pub fn value(&self, par: u16) -> i64 {
         self.get(par).unwrap_or(0)
     }
@@ -648,9 +682,10 @@ impl ParamDb {
 
     /// Sets `par` as the drive itself does (monitors), without access or limit checks; the
     /// value is clamped to the type's range.
+    #[inline]
     pub fn force(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
         let i = Self::slot(par)?;
-        let (lo, hi) = catalog()[i].ty.range();
+        let (lo, hi) = CATALOG.defs[i].ty.range();
         self.values[i] = value.clamp(lo, hi);
         Ok(())
     }
@@ -692,7 +727,10 @@ mod tests {
         let c = catalog();
         assert!(c.windows(2).all(|w| w[0].par < w[1].par));
         assert!(c.iter().all(|d| d.min <= d.default && d.default <= d.max));
-        assert!(c.iter().all(|d| d.par <= 0x3FFF));
+        assert!(c.iter().all(|d| d.par < PAR_LIMIT));
+        assert!(c.iter().all(|d| def(d.par) == Some(d)));
+        assert_eq!(def(1), None);
+        assert_eq!(def(u16::MAX), None);
     }
 
     #[test]
