@@ -62,5 +62,6 @@ pub mod fieldbus;
 pub mod od;
 pub mod params;
 pub mod pdc;
+mod twin;
 
 pub use card::{Adv200, Adv200Config, Leds};

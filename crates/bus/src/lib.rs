@@ -73,7 +73,7 @@ pub use ids::{BusId, PortId};
 pub use paced::{
     ExternalConfig, ExternalPort, PacedConfig, PacedSimulation, Received, SimHandle, Sink, TimeMap,
 };
-pub use port::{AnyNode, PortConfig, PortStatus};
+pub use port::{AnyNode, BoxedNode, PortConfig, PortStatus};
 pub use queue::TxOrder;
 pub use rng::SplitMix64;
 pub use rx_queue::{RxClosed, RxQueue};

@@ -146,28 +146,10 @@ fn adv200_alarms() -> Vec<(u16, String)> {
     out
 }
 
-/// The power drive state a CiA 402 statusword encodes (CiA 402-2 statusword bits 0–3, 5
-/// and 6; IEC 61800-7-201 table of state coding).
+/// The power drive state a CiA 402 statusword encodes (statusword bits 0–3, 5 and 6), by
+/// the profile's own decoder, or "no defined state".
 pub fn cia402_state(sw: u16) -> &'static str {
-    if sw & 0x4F == 0x00 {
-        "not ready to switch on"
-    } else if sw & 0x4F == 0x40 {
-        "switch on disabled"
-    } else if sw & 0x6F == 0x21 {
-        "ready to switch on"
-    } else if sw & 0x6F == 0x23 {
-        "switched on"
-    } else if sw & 0x6F == 0x27 {
-        "operation enabled"
-    } else if sw & 0x6F == 0x07 {
-        "quick stop active"
-    } else if sw & 0x4F == 0x0F {
-        "fault reaction active"
-    } else if sw & 0x4F == 0x08 {
-        "fault"
-    } else {
-        "no defined state"
-    }
+    cantwin_cia402::Statusword(sw).state_name()
 }
 
 /// The fields of one PDO at its pre-defined COB-ID.
@@ -471,6 +453,8 @@ mod tests {
         assert_eq!(cia402_state(0x0217), "quick stop active");
         assert_eq!(cia402_state(0x021F), "fault reaction active");
         assert_eq!(cia402_state(0x0218), "fault");
+        assert_eq!(cia402_state(0x0001), "no defined state");
+        assert_eq!(cia402_state(0x0250), "switch on disabled");
     }
 
     #[test]
