@@ -311,3 +311,117 @@ fn values_live_in_one_arena_plus_growable_buffers() {
     assert_eq!(od.description().fixed_storage_len(), 6);
     assert!(od.heap_bytes() < 64);
 }
+
+/// A model that holds 0x2000 (speed reference) and 0x2002 (name) itself: the dictionary
+/// keeps no copy of them.
+#[derive(Default)]
+struct Model {
+    speed: i16,
+    name: Vec<u8>,
+    calls: Vec<&'static str>,
+}
+
+impl OdHooks for Model {
+    fn read(
+        &mut self,
+        _: &ObjectDictionary,
+        index: u16,
+        _: u8,
+        offset: usize,
+        buf: &mut [u8],
+    ) -> Option<Result<ReadInfo, AbortCode>> {
+        let v: Vec<u8> = match index {
+            0x2000 => self.speed.to_le_bytes().to_vec(),
+            0x2002 => self.name.clone(),
+            _ => return None,
+        };
+        let start = offset.min(v.len());
+        let n = buf.len().min(v.len() - start);
+        buf[..n].copy_from_slice(&v[start..start + n]);
+        Some(Ok(ReadInfo {
+            size: v.len(),
+            copied: n,
+        }))
+    }
+
+    fn validate(&mut self, _: &ObjectDictionary, _: u16, _: u8, _: &[u8]) -> Result<(), AbortCode> {
+        self.calls.push("validate");
+        Ok(())
+    }
+
+    fn write(
+        &mut self,
+        _: &mut ObjectDictionary,
+        index: u16,
+        _: u8,
+        data: &[u8],
+    ) -> Option<Result<(), AbortCode>> {
+        self.calls.push("write");
+        match index {
+            0x2000 => {
+                let v = i16::from_le_bytes([data[0], data[1]]);
+                // The model's own rule, answered from the write itself.
+                if v == 1234 {
+                    return Some(Err(AbortCode::DEVICE_STATE));
+                }
+                self.speed = v;
+                Some(Ok(()))
+            }
+            0x2002 => {
+                self.name = data.to_vec();
+                Some(Ok(()))
+            }
+            _ => None,
+        }
+    }
+
+    fn written(&mut self, _: &mut ObjectDictionary, _: u16, _: u8) {
+        self.calls.push("written");
+    }
+}
+
+#[test]
+fn cia301_7_2_4_3_3_write_hook_takes_an_expedited_download_after_the_checks() {
+    let mut od = drive_od();
+    let mut model = Model::default();
+    let mut a = Hooked::new(&mut od, &mut model);
+    // The dictionary's limits come first: the model is not asked.
+    assert_eq!(
+        a.write(0x2000, 0, &4000i16.to_le_bytes()),
+        Err(AbortCode::VALUE_TOO_HIGH)
+    );
+    assert_eq!(a.write(0x2000, 0, &1500i16.to_le_bytes()), Ok(()));
+    // The model refuses: no notification follows.
+    assert_eq!(
+        a.write(0x2000, 0, &1234i16.to_le_bytes()),
+        Err(AbortCode::DEVICE_STATE)
+    );
+    let mut buf = [0u8; 4];
+    assert_eq!(
+        a.read(0x2000, 0, 0, &mut buf),
+        Ok(ReadInfo { size: 2, copied: 2 })
+    );
+    assert_eq!(buf, [0xDC, 0x05, 0, 0]);
+    // The model holds the value; the stored copy stays at its default.
+    assert_eq!(od.get(0x2000, 0), Ok(Value::Integer16(0)));
+    assert_eq!(model.speed, 1500);
+    assert_eq!(
+        model.calls,
+        ["validate", "write", "written", "validate", "write"]
+    );
+}
+
+#[test]
+fn cia301_7_2_4_3_4_write_hook_takes_a_segmented_download_whole() {
+    let mut od = drive_od();
+    let mut model = Model::default();
+    let mut a = Hooked::new(&mut od, &mut model);
+    a.write_begin(0x2002, 0, None).unwrap();
+    a.write_segment(0x2002, 0, b"ADV").unwrap();
+    a.write_segment(0x2002, 0, b"200").unwrap();
+    assert_eq!(a.write_end(0x2002, 0), Ok(()));
+    assert_eq!(model.name, b"ADV200");
+    assert_eq!(od.get(0x2002, 0), Ok(Value::VisibleString(String::new())));
+    assert!(od.staged().is_empty());
+    assert_eq!(model.calls, ["validate", "write", "written"]);
+}

@@ -120,8 +120,15 @@ impl ObjectAccess for ObjectDictionary {
 
 /// Device code behind the objects an [`OdBuilder::hook`](super::OdBuilder::hook) range
 /// marks: validates writes before they land, learns of writes after they land, and may
-/// serve reads itself (a drive parameter computed from the model). The dictionary's own
-/// checks (existence, access, length, limits) run first.
+/// serve reads and take writes itself (a drive parameter held by the model, with no
+/// stored copy in the dictionary). The dictionary's own checks (existence, access,
+/// length, limits) run first.
+///
+/// A write of a hooked object goes, in this order, through the dictionary's checks
+/// ([`ObjectDictionary::check_download`]), [`OdHooks::validate`], [`OdHooks::write`]
+/// (or the stored value when it answers `None`) and [`OdHooks::written`]; whatever step
+/// refuses ends the write with its abort code and nothing after it runs. SDO downloads of
+/// every kind and RPDO data take this same path.
 pub trait OdHooks {
     /// Serves a read of a hooked object, or `None` to read the stored value.
     fn read(
@@ -163,7 +170,23 @@ pub trait OdHooks {
         Ok(())
     }
 
-    /// A write landed in the dictionary.
+    /// Takes a write of a hooked object that passed the dictionary's checks and
+    /// [`OdHooks::validate`]: `Some` when the hook took it (the device's model holds the
+    /// value and the dictionary keeps no copy; `Some(Err)` refuses it with that abort code),
+    /// `None` to store it in the dictionary as usual. Asked for application objects
+    /// (0x2000 and up): the communication objects are the stack's and always stored.
+    fn write(
+        &mut self,
+        od: &mut ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Option<Result<(), AbortCode>> {
+        let _ = (od, index, sub, data);
+        None
+    }
+
+    /// A write landed (stored in the dictionary, or taken by [`OdHooks::write`]).
     fn written(&mut self, od: &mut ObjectDictionary, index: u16, sub: u8) {
         let _ = (od, index, sub);
     }
@@ -242,7 +265,10 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
         }
         self.od.check_download(id, data)?;
         self.hooks.validate(self.od, index, sub, data)?;
-        self.od.set_raw(id, data)?;
+        match self.hooks.write(self.od, index, sub, data) {
+            Some(r) => r?,
+            None => self.od.set_raw(id, data)?,
+        }
         self.hooks.written(self.od, index, sub);
         Ok(())
     }
@@ -266,14 +292,23 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
     fn write_end(&mut self, index: u16, sub: u8) -> Result<(), AbortCode> {
         let id = self.od.locate(index, sub)?;
         self.od.stage_check(id)?;
-        let hooked = self.od.description().is_hooked(index);
-        if hooked {
-            self.hooks.validate(self.od, index, sub, self.od.staged())?;
+        if !self.od.description().is_hooked(index) {
+            return self.od.stage_commit(id);
         }
-        self.od.stage_commit(id)?;
-        if hooked {
-            self.hooks.written(self.od, index, sub);
+        self.hooks.validate(self.od, index, sub, self.od.staged())?;
+        // The hook may take the staged bytes; the buffer is lent to it and given back, so
+        // its allocation serves the next download.
+        let staged = core::mem::take(&mut self.od.staging);
+        let taken = self.hooks.write(self.od, index, sub, &staged);
+        self.od.staging = staged;
+        match taken {
+            Some(r) => {
+                self.od.stage_cancel();
+                r?;
+            }
+            None => self.od.stage_commit(id)?,
         }
+        self.hooks.written(self.od, index, sub);
         Ok(())
     }
 
