@@ -44,11 +44,13 @@ use cantwin_can::{
     BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Id, Instant, Outbox,
 };
 
+use cantwin_twin::{Context, Twin};
+
 use crate::error::BusError;
 use crate::fault::{FaultAction, FaultRule, FrameSelector};
 use crate::ids::{BusId, PortId};
 use crate::paced::TimeMap;
-use crate::port::{AnyNode, PortConfig, PortStatus};
+use crate::port::{AnyNode, BoxedNode, PortConfig, PortStatus, TwinAccess};
 use crate::queue::TxQueue;
 use crate::rng::SplitMix64;
 use crate::stats::{BuildIdHasher, BusStats, PortStats};
@@ -104,6 +106,8 @@ enum Source {
 
 struct Port {
     node: Option<Box<dyn AnyNode>>,
+    /// How to reach the node as a twin, when it is one.
+    twin: Option<TwinAccess>,
     config: PortConfig,
     queue: TxQueue,
     counters: ErrorCounters,
@@ -360,6 +364,26 @@ impl Bus {
 
     /// Attach an already boxed node.
     pub fn attach_boxed(&mut self, node: Box<dyn AnyNode>, config: PortConfig) -> PortId {
+        self.attach_with(node, None, config)
+    }
+
+    /// Attach a twin: front ends then reach it through [`Bus::twin`] without naming its
+    /// type.
+    pub fn attach_twin<N: AnyNode + Twin>(&mut self, node: N, config: PortConfig) -> PortId {
+        self.attach_node(BoxedNode::twin(node), config)
+    }
+
+    /// Attach a boxed node, a twin or not (see [`BoxedNode`]).
+    pub fn attach_node(&mut self, node: BoxedNode, config: PortConfig) -> PortId {
+        self.attach_with(node.node, node.twin, config)
+    }
+
+    fn attach_with(
+        &mut self,
+        node: Box<dyn AnyNode>,
+        twin: Option<TwinAccess>,
+        config: PortConfig,
+    ) -> PortId {
         let index = self.ports.len();
         let config = PortConfig {
             queue_depth: config.queue_depth.max(1),
@@ -367,6 +391,7 @@ impl Bus {
         };
         self.ports.push(Port {
             node: Some(node),
+            twin,
             config,
             queue: TxQueue::new(config.queue_depth, config.order),
             counters: ErrorCounters::new(),
@@ -402,6 +427,7 @@ impl Bus {
         p.queue.clear();
         p.deadline = None;
         p.babble = None;
+        p.twin = None;
         let node = p.node.take().ok_or(BusError::NoSuchPort(port))?;
         self.refresh(i);
         self.count_listeners();
@@ -444,6 +470,41 @@ impl Bus {
             .as_any_mut()
             .downcast_mut::<T>()?;
         let r = f(node, now, &mut self.outbox);
+        self.after_call(i);
+        Some(r)
+    }
+
+    /// The node on `port` as a [`Twin`], if it was attached as one.
+    pub fn twin(&self, port: PortId) -> Option<&dyn Twin> {
+        let i = self.index_of(port).ok()?;
+        let p = &self.ports[i];
+        p.twin?.get(p.node.as_deref()?)
+    }
+
+    /// The node on `port` as a mutable [`Twin`], if it was attached as one. As with
+    /// [`Bus::node_mut`], the bus asks the node for its next deadline again before it next
+    /// advances; frames the twin should send go through [`Bus::with_twin`].
+    pub fn twin_mut(&mut self, port: PortId) -> Option<&mut dyn Twin> {
+        let i = self.index_of(port).ok()?;
+        let access = self.ports[i].twin?;
+        self.dirty.push(i as u32);
+        self.mark_called(i);
+        access.get_mut(self.ports[i].node.as_deref_mut()?)
+    }
+
+    /// Run `f` on the twin on `port` (if it was attached as one) at [`Bus::now`] with a
+    /// [`Context`] whose frames are queued for transmission afterwards, as if the node had
+    /// been called by the bus.
+    pub fn with_twin<R>(
+        &mut self,
+        port: PortId,
+        f: impl FnOnce(&mut dyn Twin, &mut Context<'_>) -> R,
+    ) -> Option<R> {
+        let i = self.index_of(port).ok()?;
+        let access = self.ports[i].twin?;
+        let now = self.now;
+        let twin = access.get_mut(self.ports[i].node.as_deref_mut()?)?;
+        let r = f(twin, &mut Context::new(now, &mut self.outbox));
         self.after_call(i);
         Some(r)
     }

@@ -3,6 +3,7 @@
 use std::any::Any;
 
 use cantwin_can::{BitRate, ErrorCounters, Node};
+use cantwin_twin::Twin;
 
 use crate::queue::TxOrder;
 use crate::stats::PortStats;
@@ -100,6 +101,85 @@ impl<T: Node + Send + 'static> AnyNode for T {
     }
     fn into_any(self: Box<Self>) -> Box<dyn Any> {
         self
+    }
+}
+
+/// How the bus reaches the [`Twin`] behind a node whose concrete type it no longer knows:
+/// recorded, monomorphised, when the twin is attached ([`BoxedNode::twin`]).
+#[derive(Clone, Copy)]
+pub(crate) struct TwinAccess {
+    get: fn(&dyn AnyNode) -> Option<&dyn Twin>,
+    get_mut: fn(&mut dyn AnyNode) -> Option<&mut dyn Twin>,
+}
+
+fn twin_of<T: Twin + 'static>(node: &dyn AnyNode) -> Option<&dyn Twin> {
+    node.as_any().downcast_ref::<T>().map(|t| t as &dyn Twin)
+}
+
+fn twin_of_mut<T: Twin + 'static>(node: &mut dyn AnyNode) -> Option<&mut dyn Twin> {
+    node.as_any_mut()
+        .downcast_mut::<T>()
+        .map(|t| t as &mut dyn Twin)
+}
+
+impl TwinAccess {
+    pub(crate) fn of<T: Twin + 'static>() -> Self {
+        TwinAccess {
+            get: twin_of::<T>,
+            get_mut: twin_of_mut::<T>,
+        }
+    }
+
+    pub(crate) fn get<'a>(&self, node: &'a dyn AnyNode) -> Option<&'a dyn Twin> {
+        (self.get)(node)
+    }
+
+    pub(crate) fn get_mut<'a>(&self, node: &'a mut dyn AnyNode) -> Option<&'a mut dyn Twin> {
+        (self.get_mut)(node)
+    }
+}
+
+/// A boxed node ready to attach ([`crate::Bus::attach_node`]), which remembers whether it
+/// is a [`Twin`] so that front ends reach it as one ([`crate::Bus::twin`]) without naming
+/// its type.
+pub struct BoxedNode {
+    pub(crate) node: Box<dyn AnyNode>,
+    pub(crate) twin: Option<TwinAccess>,
+}
+
+impl BoxedNode {
+    /// A node that is not a twin (a master, a generator, a scripted test node).
+    pub fn plain<N: AnyNode>(node: N) -> Self {
+        BoxedNode {
+            node: Box::new(node),
+            twin: None,
+        }
+    }
+
+    /// A node that is a twin.
+    pub fn twin<N: AnyNode + Twin>(node: N) -> Self {
+        BoxedNode {
+            node: Box::new(node),
+            twin: Some(TwinAccess::of::<N>()),
+        }
+    }
+
+    /// Whether the node is a twin.
+    pub fn is_twin(&self) -> bool {
+        self.twin.is_some()
+    }
+
+    /// The node, if it is a `T` (for tests of what was built).
+    pub fn downcast_ref<T: 'static>(&self) -> Option<&T> {
+        self.node.as_any().downcast_ref::<T>()
+    }
+}
+
+impl core::fmt::Debug for BoxedNode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("BoxedNode")
+            .field("twin", &self.twin.is_some())
+            .finish_non_exhaustive()
     }
 }
 

@@ -1,6 +1,7 @@
 //! Several buses run together in one time line.
 
 use cantwin_can::{Duration, Frame, Instant};
+use cantwin_twin::{Context, Twin};
 
 use crate::bus::{Bus, BusConfig};
 use crate::error::BusError;
@@ -73,6 +74,26 @@ impl Simulation {
     /// The node on `port`, mutably, if it is a `T` (see [`Bus::node_mut`]).
     pub fn node_mut<T: 'static>(&mut self, port: PortId) -> Option<&mut T> {
         self.bus_mut(port.bus)?.node_mut(port)
+    }
+
+    /// The node on `port` as a [`Twin`], if it was attached as one (see [`Bus::twin`]).
+    pub fn twin(&self, port: PortId) -> Option<&dyn Twin> {
+        self.bus(port.bus)?.twin(port)
+    }
+
+    /// The node on `port` as a mutable [`Twin`] (see [`Bus::twin_mut`]).
+    pub fn twin_mut(&mut self, port: PortId) -> Option<&mut dyn Twin> {
+        self.bus_mut(port.bus)?.twin_mut(port)
+    }
+
+    /// Run `f` on the twin on `port` now, its frames queued afterwards (see
+    /// [`Bus::with_twin`]).
+    pub fn with_twin<R>(
+        &mut self,
+        port: PortId,
+        f: impl FnOnce(&mut dyn Twin, &mut Context<'_>) -> R,
+    ) -> Option<R> {
+        self.bus_mut(port.bus)?.with_twin(port, f)
     }
 
     /// Queue a frame on a port now (see [`Bus::transmit`]).

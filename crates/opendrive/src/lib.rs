@@ -128,6 +128,7 @@ pub mod messages;
 pub mod model;
 pub mod node;
 pub mod params;
+mod twin;
 
 pub use model::{Alarms, Commands, Drive, DriveData, Flash, FlashError, MotorData};
 pub use node::{FlashStorage, MESSAGE_0, MESSAGE_1, MESSAGE_2, OpenDrive, bit_rate_of_c48};

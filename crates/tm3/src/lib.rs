@@ -92,6 +92,7 @@ pub mod demo {
 }
 pub mod island;
 pub mod od;
+mod twin;
 
 pub use coupler::{CouplerConfig, Tm3Coupler};
 pub use island::Island;
