@@ -1,20 +1,10 @@
 //! Turning a scenario into a running simulation.
 
-use std::path::PathBuf;
-
 use cantwin_bus::{BusConfig, BusId, PortId, Simulation};
 
 use crate::error::{Located, ScenarioError};
 use crate::model::Scenario;
-use crate::registry::{Registry, Settings};
-
-/// What the host provides to devices being built.
-#[derive(Debug, Clone, Default)]
-pub struct BuildEnv {
-    /// Where devices keep what they store (CANopen 0x1010) between runs; `None` keeps it in
-    /// memory only.
-    pub state_dir: Option<PathBuf>,
-}
+use crate::registry::{BuildEnv, Registry, Settings};
 
 /// A device placed on a bus.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -105,8 +95,8 @@ impl Scenario {
                 },
                 message: format!("bus {:?} vanished while building", d.bus),
             })?;
-            let port = bus.attach_boxed(node, port_config);
-            let node_id = kind.canopen_node_id(&sim, port);
+            let port = bus.attach_node(node, port_config);
+            let node_id = sim.twin(port).and_then(|t| t.canopen_node_id());
             // Two slaves with one node-ID would answer the same SDO request and send on the
             // same COB-IDs (CiA 301 §7.3.2.1: the node-ID is unique within a network).
             if let Some(n) = node_id

@@ -21,7 +21,9 @@
 //! ```
 //!
 //! Device kinds are plug-ins ([`DeviceKind`]) looked up in a [`Registry`]; each kind reads its
-//! own keys from the device's table and reports unknown or bad keys with their line.
+//! own keys from the device's table and reports unknown or bad keys with their line, and
+//! builds the device. What a device is afterwards (its dictionary, signals, live values,
+//! internal faults) it tells as a [`cantwin_twin::Twin`], reached through the simulation.
 //!
 //! ```
 //! use cantwin_scenario::{Registry, Scenario};
@@ -45,14 +47,15 @@
 mod build;
 mod error;
 pub mod kinds;
-pub mod live;
 mod model;
 mod registry;
 pub mod script;
+mod spec;
 
-pub use build::{BuildEnv, Built, BuiltDevice};
+pub use build::{Built, BuiltDevice};
+pub use cantwin_twin::{LiveValue, Role};
 pub use error::{Located, ScenarioError};
-pub use live::{LiveValue, Role};
-pub use model::{BusSpec, DeviceSpec, Scenario};
-pub use registry::{DeviceKind, Registry, Settings};
+pub use model::Scenario;
+pub use registry::{BuildEnv, DeviceKind, Registry, Settings};
 pub use script::{CheckReport, Script, check, check_with_progress, validate};
+pub use spec::{BusSpec, DeviceSpec};

@@ -8,6 +8,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use crate::error::{Located, ScenarioError, line_of};
+use crate::spec::{BusSpec, DeviceSpec};
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -19,11 +20,11 @@ struct RawScenario {
     bus: Vec<Spanned<RawBus>>,
     #[serde(default)]
     device: Vec<Spanned<BTreeMap<String, Spanned<toml::Value>>>>,
-    check: Option<crate::script::RawCheck>,
+    check: Option<crate::script::parse::RawCheck>,
     #[serde(default)]
-    at: Vec<Spanned<crate::script::RawAt>>,
+    at: Vec<Spanned<crate::script::parse::RawAt>>,
     #[serde(default)]
-    expect: Vec<Spanned<crate::script::RawExpect>>,
+    expect: Vec<Spanned<crate::script::parse::RawExpect>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -31,34 +32,6 @@ struct RawScenario {
 struct RawBus {
     name: Spanned<String>,
     bit_rate: Spanned<String>,
-}
-
-/// A bus of the scenario.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct BusSpec {
-    /// Its name: the socketcand channel name and the capture's interface name.
-    pub name: String,
-    /// Its bit rate.
-    pub bit_rate: BitRate,
-    /// The line of its `[[bus]]` table.
-    pub line: usize,
-}
-
-/// A device of the scenario: the common keys, and the kind-specific ones left for its kind.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DeviceSpec {
-    /// Unique name.
-    pub name: String,
-    /// Its kind, looked up in the registry.
-    pub kind: String,
-    /// The bus it is on.
-    pub bus: String,
-    /// Index among the `[[device]]` tables, for key paths (`device[2].node_id`).
-    pub index: usize,
-    /// The line of its `[[device]]` table.
-    pub line: usize,
-    /// Kind-specific keys with their lines.
-    pub settings: BTreeMap<String, (toml::Value, usize)>,
 }
 
 /// A parsed, checked scenario.
@@ -78,7 +51,7 @@ pub struct Scenario {
     pub devices: Vec<DeviceSpec>,
     /// Timed stimuli and expectations (`[[at]]`, `[[expect]]`, `[check]`), run by
     /// `cantwin sim --check`.
-    pub script: crate::script::Script,
+    pub script: crate::script::parse::Script,
 }
 
 impl Scenario {
@@ -206,7 +179,7 @@ impl Scenario {
                 settings,
             });
         }
-        let script = crate::script::ScriptParser {
+        let script = crate::script::parse::ScriptParser {
             text,
             file: &file,
             buses: &buses,

@@ -3,13 +3,21 @@
 use std::cell::RefCell;
 use std::collections::BTreeSet;
 
-use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
+use std::path::PathBuf;
+
+use cantwin_bus::{BoxedNode, PortConfig};
 use serde::de::DeserializeOwned;
 
-use crate::build::BuildEnv;
 use crate::error::{Located, ScenarioError};
-use crate::live::LiveValue;
-use crate::model::{BusSpec, DeviceSpec};
+use crate::spec::{BusSpec, DeviceSpec};
+
+/// What the host provides to devices being built.
+#[derive(Debug, Clone, Default)]
+pub struct BuildEnv {
+    /// Where devices keep what they store (CANopen 0x1010) between runs; `None` keeps it in
+    /// memory only.
+    pub state_dir: Option<PathBuf>,
+}
 
 /// A kind of device a scenario can place on a bus.
 pub trait DeviceKind: Send + Sync {
@@ -18,85 +26,15 @@ pub trait DeviceKind: Send + Sync {
     /// One line for `cantwin scenario kinds` and error messages.
     fn summary(&self) -> &'static str;
     /// Build the node from the device's settings. Read every key through `settings`; keys
-    /// left unread are reported as unknown.
+    /// left unread are reported as unknown. A device that is a twin is boxed as one
+    /// ([`BoxedNode::twin`]): front ends and scripts reach it through the simulation
+    /// ([`Simulation::twin`](cantwin_bus::Simulation::twin)).
     fn build(
         &self,
         settings: &Settings<'_>,
         bus: &BusSpec,
         env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError>;
-
-    /// The little-endian bytes of object `index`/`sub` of the node this kind built on
-    /// `port`, for `[[expect]] value = …` in scenario scripts. `None` (the default) when the
-    /// kind has no object dictionary or not that object.
-    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
-        let _ = (sim, port, index, sub);
-        None
-    }
-
-    /// Give the node this kind built on `port` an internal defect named `fault` in the
-    /// kind's words (a fault with no cause on the bus, such as a card's internal error), or
-    /// repair it with `None`, for `action = "inject"` / `"repair"` in scenario scripts. The
-    /// default refuses: the kind has no internal faults.
-    fn inject(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        fault: Option<&str>,
-    ) -> Result<(), String> {
-        let _ = (sim, port, fault);
-        Err(format!(
-            "a {} device has no internal faults to inject",
-            self.name()
-        ))
-    }
-
-    /// The live values of the model of the node this kind built on `port` (measurements,
-    /// inputs, outputs), for dashboards. Empty (the default) when the kind shows none.
-    fn live_values(&self, sim: &Simulation, port: PortId) -> Vec<LiveValue> {
-        let _ = (sim, port);
-        Vec::new()
-    }
-
-    /// The CANopen node-ID (CiA 301 §7.3.2.1) of the node this kind built on `port`, for the
-    /// duplicate check of a bus and for telling a master's frames from a twin's. `None` (the
-    /// default) when the kind is not a CANopen slave.
-    fn canopen_node_id(&self, sim: &Simulation, port: PortId) -> Option<u8> {
-        let _ = (sim, port);
-        None
-    }
-
-    /// Sets the physical quantity `name` (an input, a load, a module pulled out) of the
-    /// node this kind built on `port` to `value`, now, for `[[at]] action = "set"`. The
-    /// error says why not, naming the signals the kind knows.
-    fn set_signal(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        name: &str,
-        value: &toml::Value,
-    ) -> Result<(), String> {
-        let _ = (sim, port, value);
-        Err(format!(
-            "a {} device has no signal {name:?} to set",
-            self.name()
-        ))
-    }
-
-    /// Reads the physical quantity `name` (an output, an alarm) of the node this kind built
-    /// on `port`, for `[[expect]] signal = …`.
-    fn read_signal(
-        &self,
-        sim: &Simulation,
-        port: PortId,
-        name: &str,
-    ) -> Result<toml::Value, String> {
-        let _ = (sim, port);
-        Err(format!(
-            "a {} device has no signal {name:?} to read",
-            self.name()
-        ))
-    }
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError>;
 }
 
 /// The device kinds a scenario may use.
@@ -105,22 +43,10 @@ pub struct Registry {
 }
 
 impl Registry {
-    /// An empty registry.
+    /// An empty registry ([`Registry::builtin`] has every kind built into cantwin).
+    #[allow(clippy::new_without_default)]
     pub fn new() -> Self {
         Registry { kinds: Vec::new() }
-    }
-
-    /// Every kind built into cantwin.
-    pub fn builtin() -> Self {
-        let mut r = Registry::new();
-        r.register(Box::new(crate::kinds::generator::Generator));
-        r.register(Box::new(crate::kinds::master::MasterKind));
-        r.register(Box::new(crate::kinds::cia301::Cia301::default()));
-        r.register(Box::new(crate::kinds::opendrive::OpenDriveKind));
-        r.register(Box::new(crate::kinds::adv200::Adv200Kind::default()));
-        r.register(Box::new(crate::kinds::tm3::Tm3Kind::default()));
-        r.register(Box::new(crate::kinds::eds::EdsKind));
-        r
     }
 
     /// Add a kind (a later kind with the same name replaces the earlier one).
@@ -140,12 +66,6 @@ impl Registry {
     /// All kinds, in registration order.
     pub fn kinds(&self) -> impl Iterator<Item = &dyn DeviceKind> {
         self.kinds.iter().map(|k| k.as_ref())
-    }
-}
-
-impl Default for Registry {
-    fn default() -> Self {
-        Registry::builtin()
     }
 }
 

@@ -76,14 +76,8 @@ impl Rig {
     }
 
     fn read_object(&self, name: &str, index: u16, sub: u8) -> Option<Vec<u8>> {
-        let kind = Registry::builtin();
-        let kind = kind.get("eds").unwrap();
-        kind.read_object(
-            &self.built.sim,
-            self.built.device(name).unwrap().port,
-            index,
-            sub,
-        )
+        let port = self.built.device(name).unwrap().port;
+        self.built.sim.twin(port)?.read_object(index, sub).ok()
     }
 }
 

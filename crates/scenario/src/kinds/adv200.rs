@@ -31,19 +31,15 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-use cantwin_adv200::alarms::CardFault;
 use cantwin_adv200::od::Descriptions;
 use cantwin_adv200::params::def;
 use cantwin_adv200::{Adv200, Adv200Config, example};
-use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
+use cantwin_bus::{BoxedNode, PortConfig};
 use serde::Deserialize;
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::kinds::common::{signal_bool, signal_f64, signal_indices};
-use crate::live::{LiveValue, Role};
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The `adv200` kind. Its drives build their dictionaries at every drive reset, from the
 /// descriptions the kind gives them all.
@@ -68,116 +64,12 @@ impl DeviceKind for Adv200Kind {
         "Gefran ADV200 drive with the EXP-CAN card: params by number, example, digital_inputs, analog_inputs, expedited_only"
     }
 
-    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
-        let node = sim.node::<Adv200>(port)?;
-        if (0x2000..=0x5FFF).contains(&index) && sub == 1 {
-            let (bytes, len) = node.params().encode(index - 0x2000).ok()?;
-            return Some(bytes[..len].to_vec());
-        }
-        node.device()?
-            .od()
-            .get(index, sub)
-            .ok()
-            .map(|v| v.to_le_bytes())
-    }
-
-    fn inject(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        fault: Option<&str>,
-    ) -> Result<(), String> {
-        let node = sim
-            .node_mut::<Adv200>(port)
-            .ok_or("the device is not an ADV200")?;
-        match fault {
-            Some(f) => node.inject_card_fault(f.parse::<CardFault>()?),
-            None => node.clear_card_faults(),
-        }
-        Ok(())
-    }
-
-    /// The motor speed (rpm) and current (A), the thermal load, digital inputs 1–8,
-    /// analog inputs 1–2 (±10 V) and digital outputs 1–4.
-    fn live_values(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Vec<LiveValue> {
-        let Some(node) = sim.node::<Adv200>(port) else {
-            return Vec::new();
-        };
-        let d = node.drive();
-        let mut v = vec![
-            LiveValue::measured("speed", d.speed(), "rpm"),
-            LiveValue::measured("current", d.current(), "A"),
-            LiveValue::measured("thermal", d.thermal() * 100.0, "%"),
-        ];
-        v.extend((1..=8).map(|k| {
-            LiveValue::digital(
-                format!("digital_input.{k}"),
-                d.digital_input(k),
-                Role::DigitalInput,
-            )
-        }));
-        v.extend((1..=2).map(|k| LiveValue {
-            name: format!("analog_input.{k}"),
-            value: d.analog_input(k),
-            unit: "V",
-            role: Role::AnalogInput {
-                min: -10.0,
-                max: 10.0,
-            },
-        }));
-        v.extend((1..=4).map(|k| {
-            LiveValue::digital(
-                format!("digital_output.{k}"),
-                node.digital_output(k),
-                Role::DigitalOutput,
-            )
-        }));
-        v
-    }
-
-    /// `digital_input.K` (K 1–8, true or false) and `analog_input.K` (K 1–2, volts within
-    /// ±10 V): the drive's terminals.
-    fn set_signal(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        name: &str,
-        value: &toml::Value,
-    ) -> Result<(), String> {
-        let node = sim
-            .node_mut::<Adv200>(port)
-            .ok_or_else(|| "the device is not an ADV200".to_string())?;
-        let terminal = |prefix: &str, max: u32| match signal_indices(name, prefix)?.as_slice() {
-            [k] if (1..=max).contains(k) => u8::try_from(*k).ok(),
-            _ => None,
-        };
-        if let Some(k) = terminal("digital_input", 8) {
-            node.set_digital_input(k, signal_bool(name, value)?);
-            Ok(())
-        } else if let Some(k) = terminal("analog_input", 2) {
-            let volts = signal_f64(name, value)?;
-            if !(-10.0..=10.0).contains(&volts) {
-                return Err(format!("{name} is -10–10 V, not {volts}"));
-            }
-            node.set_analog_input(k, volts);
-            Ok(())
-        } else {
-            Err(format!(
-                "an adv200 device has no signal {name:?} (signals: digital_input.1–8, analog_input.1–2)"
-            ))
-        }
-    }
-
     fn build(
         &self,
         s: &Settings<'_>,
         bus: &BusSpec,
         _env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let config = Adv200Config {
             expedited_only: s.get_or("expedited_only", true)?,
             bus_bit_rate: Some(bus.bit_rate.bits_per_second()),
@@ -234,7 +126,7 @@ impl DeviceKind for Adv200Kind {
         for (k, v) in analog.iter().enumerate() {
             node.set_analog_input(k as u8 + 1, *v);
         }
-        Ok((Box::new(node), PortConfig::default()))
+        Ok((BoxedNode::twin(node), PortConfig::default()))
     }
 }
 
@@ -367,54 +259,36 @@ mod tests {
 
     #[test]
     fn live_values_show_the_terminals_and_signals_set_them() {
-        use crate::registry::DeviceKind;
+        use cantwin_twin::SignalValue;
         let mut b = shipped("adv200-example.toml");
         let port = b.device("drive").unwrap().port;
-        let kind = super::Adv200Kind::default();
         let value = |b: &crate::Built, name: &str| {
-            kind.live_values(&b.sim, port)
+            b.sim
+                .twin(port)
+                .unwrap()
+                .live_values()
                 .into_iter()
                 .find(|v| v.name == name)
                 .map(|v| v.value)
+        };
+        let set = |b: &mut crate::Built, name: &str, v: SignalValue| {
+            b.sim
+                .with_twin(port, |t, cx| t.set_signal(&name.into(), &v, cx))
+                .unwrap()
+                .map_err(|e| e.to_string())
         };
         // The scenario wires digital input 4 and 2.5 V on analog input 2.
         assert_eq!(value(&b, "digital_input.4"), Some(1.0));
         assert_eq!(value(&b, "digital_input.2"), Some(0.0));
         assert!((value(&b, "analog_input.2").unwrap() - 2.5).abs() < 1e-3);
         assert!(value(&b, "speed").is_some() && value(&b, "current").is_some());
-        kind.set_signal(
-            &mut b.sim,
-            port,
-            "digital_input.2",
-            &toml::Value::Boolean(true),
-        )
-        .unwrap();
+        set(&mut b, "digital_input.2", SignalValue::Bool(true)).unwrap();
         assert_eq!(value(&b, "digital_input.2"), Some(1.0));
-        kind.set_signal(
-            &mut b.sim,
-            port,
-            "analog_input.1",
-            &toml::Value::Float(-4.0),
-        )
-        .unwrap();
+        set(&mut b, "analog_input.1", SignalValue::Real(-4.0)).unwrap();
         assert!((value(&b, "analog_input.1").unwrap() + 4.0).abs() < 1e-3);
-        let e = kind
-            .set_signal(
-                &mut b.sim,
-                port,
-                "analog_input.1",
-                &toml::Value::Float(12.0),
-            )
-            .unwrap_err();
+        let e = set(&mut b, "analog_input.1", SignalValue::Real(12.0)).unwrap_err();
         assert!(e.contains("-10–10 V"), "{e}");
-        let e = kind
-            .set_signal(
-                &mut b.sim,
-                port,
-                "digital_input.9",
-                &toml::Value::Boolean(true),
-            )
-            .unwrap_err();
+        let e = set(&mut b, "digital_input.9", SignalValue::Bool(true)).unwrap_err();
         assert!(e.contains("digital_input.1–8"), "{e}");
     }
 }

@@ -47,20 +47,20 @@
 //! out 0, so a stored non-zero heartbeat time wins, and a restore of the defaults (0x1011)
 //! brings back `heartbeat_ms`.
 
-use cantwin_bus::{AnyNode, PortConfig};
+use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_can::{ControllerEvent, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::ObjectAccess;
 use cantwin_canopen::device::{Device, Event};
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
+use cantwin_twin::{Context, ObjectError, Twin, write_through};
 use std::sync::{Arc, Mutex};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The DOMAIN object.
 pub const DOMAIN_INDEX: u16 = 0x2000;
@@ -219,6 +219,30 @@ impl Node for Cia301Node {
     }
 }
 
+/// The device's dictionary and node-ID; writes go through the device's own checks, and
+/// the node reacts to them at once (a code written to 0x2001 raises its EMCY).
+impl Twin for Cia301Node {
+    fn dictionary(&self) -> Option<&cantwin_canopen::od::ObjectDictionary> {
+        Some(self.device.od())
+    }
+
+    fn write_object(
+        &mut self,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        cx: &mut Context<'_>,
+    ) -> Result<(), ObjectError> {
+        let r = write_through(&mut self.device, index, sub, data);
+        self.after(cx.now, cx.out);
+        r
+    }
+
+    fn canopen_node_id(&self) -> Option<u8> {
+        Some(self.device.node_id())
+    }
+}
+
 /// The object dictionary of the kind, from its settings.
 #[derive(Debug, Clone, PartialEq, Eq)]
 struct Layout {
@@ -298,35 +322,12 @@ impl DeviceKind for Cia301 {
         "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs"
     }
 
-    fn canopen_node_id(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Option<u8> {
-        Some(sim.node::<Cia301Node>(port)?.device.node_id())
-    }
-
-    fn read_object(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-        index: u16,
-        sub: u8,
-    ) -> Option<Vec<u8>> {
-        let node = sim.node::<Cia301Node>(port)?;
-        node.device
-            .od()
-            .get(index, sub)
-            .ok()
-            .map(|v| v.to_le_bytes())
-    }
-
     fn build(
         &self,
         s: &Settings<'_>,
         _bus: &BusSpec,
         env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let node_id: u8 = s.require("node_id")?;
         check_node_id(s, node_id)?;
         let heartbeat_ms: u16 = s.get_or("heartbeat_ms", 0)?;
@@ -399,7 +400,7 @@ impl DeviceKind for Cia301 {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
         };
-        Ok((Box::new(node), port))
+        Ok((BoxedNode::twin(node), port))
     }
 }
 

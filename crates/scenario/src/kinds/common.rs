@@ -8,9 +8,8 @@ use cantwin_canopen::device::{Device, DeviceConfig};
 use cantwin_canopen::od::OdDescription;
 use cantwin_canopen::storage::FileStorage;
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::registry::Settings;
+use crate::registry::{BuildEnv, Settings};
 
 /// Refuses a `node_id` outside 1–127, the CANopen node-ID range (CiA 301 §7.3.2.1).
 pub(crate) fn check_node_id(s: &Settings<'_>, node_id: u8) -> Result<(), ScenarioError> {
@@ -61,35 +60,6 @@ pub(crate) fn canopen_device(
 }
 
 /// Helpers for the kinds' unit tests.
-/// A signal's value as a boolean.
-pub(crate) fn signal_bool(name: &str, v: &toml::Value) -> Result<bool, String> {
-    v.as_bool()
-        .ok_or_else(|| format!("signal {name:?} takes true or false, not {v}"))
-}
-
-/// A signal's value as a number (integer or float).
-pub(crate) fn signal_f64(name: &str, v: &toml::Value) -> Result<f64, String> {
-    match v {
-        toml::Value::Integer(i) => Ok(*i as f64),
-        toml::Value::Float(f) if f.is_finite() => Ok(*f),
-        _ => Err(format!("signal {name:?} takes a number, not {v}")),
-    }
-}
-
-/// A signal's value as an integer in `T`'s range.
-pub(crate) fn signal_int<T: TryFrom<i64>>(name: &str, v: &toml::Value) -> Result<T, String> {
-    v.as_integer()
-        .and_then(|i| T::try_from(i).ok())
-        .ok_or_else(|| format!("signal {name:?} takes an integer in range, not {v}"))
-}
-
-/// Splits `prefix.A.B…` into its numbers after `prefix`: `signal_indices("digital_output.2.0",
-/// "digital_output")` is `Some([2, 0])`.
-pub(crate) fn signal_indices(name: &str, prefix: &str) -> Option<Vec<u32>> {
-    let rest = name.strip_prefix(prefix)?.strip_prefix('.')?;
-    rest.split('.').map(|p| p.parse().ok()).collect()
-}
-
 #[cfg(test)]
 pub(crate) mod testing {
     use cantwin_bus::{BusId, Recorder, TapId};

@@ -30,15 +30,13 @@
 
 use std::path::{Path, PathBuf};
 
-use cantwin_bus::{AnyNode, PortConfig};
-use cantwin_canopen::device::Device;
+use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_eds::{EdsValue, parse_bytes, to_od};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The device's transmit queue: a full SDO upload block (127 segments, CiA 301
 /// §7.2.4.3.10) plus the frames other services queue meanwhile.
@@ -68,31 +66,12 @@ impl DeviceKind for EdsKind {
         "CiA 301 device from an EDS/DCF file: file, node_id, heartbeat_ms, sdo_timeout_ms"
     }
 
-    fn canopen_node_id(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Option<u8> {
-        Some(sim.node::<Device>(port)?.node_id())
-    }
-
-    fn read_object(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-        index: u16,
-        sub: u8,
-    ) -> Option<Vec<u8>> {
-        let device = sim.node::<Device>(port)?;
-        device.od().get(index, sub).ok().map(|v| v.to_le_bytes())
-    }
-
     fn build(
         &self,
         s: &Settings<'_>,
         _bus: &BusSpec,
         env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let file: String = s.require("file")?;
         let path = resolve(s.file(), &file);
         let bytes = std::fs::read(&path)
@@ -150,7 +129,7 @@ impl DeviceKind for EdsKind {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
         };
-        Ok((Box::new(device), port))
+        Ok((BoxedNode::twin(device), port))
     }
 }
 

@@ -7,13 +7,12 @@
 //! (seeded by `seed`, default the device index) or hex bytes such as `"DEADBEEF"`; `len`
 //! (0–8, default 8 for counter/random).
 
-use cantwin_bus::{AnyNode, PortConfig, SplitMix64};
+use cantwin_bus::{BoxedNode, PortConfig, SplitMix64};
 use cantwin_can::{Duration, Frame, Id, Instant, Node, Outbox};
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The generator kind.
 pub struct Generator;
@@ -106,7 +105,7 @@ impl DeviceKind for Generator {
         s: &Settings<'_>,
         _bus: &BusSpec,
         _env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let raw: u32 = s.require("id")?;
         let extended = s.get_or("extended", false)?;
         let id = if extended {
@@ -164,6 +163,6 @@ impl DeviceKind for Generator {
             sent: 0,
             next: None,
         };
-        Ok((Box::new(node), PortConfig::default()))
+        Ok((BoxedNode::plain(node), PortConfig::default()))
     }
 }

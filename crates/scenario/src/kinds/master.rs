@@ -22,17 +22,17 @@
 //! verified), 2 failed, 3 completed with wrong data; sub 1: attempts; sub 2: bytes
 //! transferred; sub 3: the last abort code.
 
-use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
+use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_can::{ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 use cantwin_canopen::master::sdo_client::{ClientConfig, Mode, SdoEvent};
 use cantwin_canopen::master::{Master, MasterConfig, MasterEvent, TransferId};
 use cantwin_canopen::sdo::wire::Mux;
+use cantwin_twin::{ObjectError, Twin};
 use serde::Deserialize;
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The first result object.
 pub const RESULTS_INDEX: u16 = 0x5000;
@@ -171,6 +171,14 @@ impl MasterNode {
     }
 }
 
+/// The master's results are its objects (see the module documentation); it has no
+/// dictionary otherwise.
+impl Twin for MasterNode {
+    fn read_object(&self, index: u16, sub: u8) -> Result<Vec<u8>, ObjectError> {
+        self.result(index, sub).ok_or(ObjectError::NoDictionary)
+    }
+}
+
 impl Node for MasterNode {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         self.master.on_power_up(now, out);
@@ -225,7 +233,7 @@ impl DeviceKind for MasterKind {
         s: &Settings<'_>,
         _bus: &BusSpec,
         _env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let raw: Vec<RawTransfer> = s.get_or("transfers", Vec::new())?;
         let timeout_ms: u64 = s.get_or("timeout_ms", 1000)?;
         if timeout_ms == 0 {
@@ -297,11 +305,10 @@ impl DeviceKind for MasterKind {
             master: Master::with_config(config),
             transfers,
         };
-        Ok((Box::new(node), PortConfig::default().with_queue_depth(64)))
-    }
-
-    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
-        sim.node::<MasterNode>(port)?.result(index, sub)
+        Ok((
+            BoxedNode::twin(node),
+            PortConfig::default().with_queue_depth(64),
+        ))
     }
 }
 

@@ -8,3 +8,35 @@ pub mod generator;
 pub mod master;
 pub mod opendrive;
 pub mod tm3;
+
+use crate::registry::{DeviceKind, Registry};
+
+/// Every kind built into cantwin, in the order `cantwin scenario kinds` lists them.
+fn builtin_kinds() -> Vec<Box<dyn DeviceKind>> {
+    vec![
+        Box::new(generator::Generator),
+        Box::new(master::MasterKind),
+        Box::new(cia301::Cia301::default()),
+        Box::new(opendrive::OpenDriveKind),
+        Box::new(adv200::Adv200Kind::default()),
+        Box::new(tm3::Tm3Kind::default()),
+        Box::new(eds::EdsKind),
+    ]
+}
+
+impl Registry {
+    /// Every kind built into cantwin.
+    pub fn builtin() -> Self {
+        let mut r = Registry::new();
+        for kind in builtin_kinds() {
+            r.register(kind);
+        }
+        r
+    }
+}
+
+impl Default for Registry {
+    fn default() -> Self {
+        Registry::builtin()
+    }
+}

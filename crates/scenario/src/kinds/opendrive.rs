@@ -22,7 +22,8 @@
 //!
 //! The bus must run at the bit rate of C48 (default 1 = 500 kbit/s).
 //!
-//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`):
+//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`), served by the
+//! drive as a twin:
 //!
 //! | signal | set | read | meaning |
 //! |---|---|---|---|
@@ -47,24 +48,17 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
+use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_can::Duration;
 use cantwin_opendrive::params::{self, ParId};
 use cantwin_opendrive::{DriveData, Flash, FlashStorage, MotorData, OpenDrive, bit_rate_of_c48};
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::kinds::common::{signal_bool, signal_f64, signal_indices};
-use crate::live::{LiveValue, Role};
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The OPEN DRIVE kind.
 pub struct OpenDriveKind;
-
-/// The largest terminal reference a dashboard may set: the drive clamps the reference to its
-/// maximum frequency (P21 scale) anyway; this only refuses nonsense.
-const REFERENCE_MAX_HZ: f64 = 500.0;
 
 /// The drive's flash in a file.
 struct FileFlash(PathBuf);
@@ -93,123 +87,13 @@ fn non_negative(s: &Settings<'_>, key: &str, default: f64) -> Result<f64, Scenar
     }
 }
 
-const SIGNALS: &str = "load_torque_pct, ambient_c, reference_hz, input.N, reset_alarms (set); load_torque_pct, ambient_c, input.N, output_hz, motor_hz, current_pct, running, alarms, heatsink_c, module_c, events_enabled (read)";
-
-fn unknown(name: &str) -> String {
-    format!("an opendrive device has no signal {name:?} (signals: {SIGNALS})")
-}
-
-/// `input.N` as N, 1–8.
-fn input_of(name: &str) -> Option<u8> {
-    match signal_indices(name, "input")?.as_slice() {
-        [n] if (1..=8).contains(n) => u8::try_from(*n).ok(),
-        _ => None,
-    }
-}
-
 impl DeviceKind for OpenDriveKind {
     fn name(&self) -> &'static str {
         "opendrive"
     }
 
-    fn set_signal(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        name: &str,
-        value: &toml::Value,
-    ) -> Result<(), String> {
-        let node = sim
-            .node_mut::<OpenDrive>(port)
-            .ok_or_else(|| "not an opendrive device".to_string())?;
-        let drive = node.drive_mut();
-        if let Some(n) = input_of(name) {
-            drive.set_input(n, signal_bool(name, value)?);
-            return Ok(());
-        }
-        match name {
-            "load_torque_pct" => drive.set_load_torque_pct(signal_f64(name, value)?),
-            "ambient_c" => drive.set_ambient_c(signal_f64(name, value)?),
-            "reference_hz" => drive.set_analog_reference_hz(signal_f64(name, value)?),
-            "reset_alarms" if signal_bool(name, value)? => drive.reset_alarms(),
-            "reset_alarms" => return Err("signal \"reset_alarms\" takes true".into()),
-            _ => return Err(unknown(name)),
-        }
-        Ok(())
-    }
-
-    fn read_signal(
-        &self,
-        sim: &Simulation,
-        port: PortId,
-        name: &str,
-    ) -> Result<toml::Value, String> {
-        use toml::Value::{Array, Boolean, Float, String as Text};
-        let node = sim
-            .node::<OpenDrive>(port)
-            .ok_or_else(|| "not an opendrive device".to_string())?;
-        let d = node.drive();
-        if let Some(n) = input_of(name) {
-            return Ok(Boolean(d.input(n)));
-        }
-        Ok(match name {
-            "load_torque_pct" => Float(d.load_torque_pct()),
-            "ambient_c" => Float(d.ambient_c()),
-            "output_hz" => Float(d.output_hz()),
-            "motor_hz" => Float(d.motor_hz()),
-            "current_pct" => Float(d.current_pct()),
-            "running" => Boolean(d.is_running()),
-            "alarms" => Array(
-                (0..16u8)
-                    .filter(|n| d.alarms().contains(*n))
-                    .map(|n| Text(format!("A{n}")))
-                    .collect(),
-            ),
-            "heatsink_c" => Float(d.heatsink_c()),
-            "module_c" => Float(d.module_c()),
-            "events_enabled" => Boolean(node.events_enabled()),
-            _ => return Err(unknown(name)),
-        })
-    }
-
     fn summary(&self) -> &'static str {
         "TDE MACNO OPEN DRIVE, application 003: CAL CMS messages 0-2 (P180-P187), V/f drive and motor"
-    }
-
-    /// The motor (speed as its frequency in Hz, current in % of its rated current), the
-    /// output frequency, DC bus, heatsink and I²t state, logic inputs 1–8 and the terminal
-    /// frequency reference.
-    fn live_values(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Vec<LiveValue> {
-        let Some(node) = sim.node::<OpenDrive>(port) else {
-            return Vec::new();
-        };
-        let d = node.drive();
-        let mut v = vec![
-            LiveValue::measured("speed", d.motor_hz(), "Hz"),
-            LiveValue::measured("current", d.current_pct(), "%"),
-            LiveValue::measured("output frequency", d.output_hz(), "Hz"),
-            LiveValue::measured("DC bus", d.dc_bus_v(), "V"),
-            LiveValue::measured("heatsink", d.heatsink_c(), "°C"),
-            LiveValue::measured("motor thermal", d.motor_thermal() * 100.0, "%"),
-        ];
-        v.extend(
-            (1..=8)
-                .map(|n| LiveValue::digital(format!("input.{n}"), d.input(n), Role::DigitalInput)),
-        );
-        v.push(LiveValue {
-            name: "reference_hz".into(),
-            value: d.analog_reference_hz(),
-            unit: "Hz",
-            role: Role::AnalogInput {
-                min: 0.0,
-                max: REFERENCE_MAX_HZ,
-            },
-        });
-        v
     }
 
     fn build(
@@ -217,7 +101,7 @@ impl DeviceKind for OpenDriveKind {
         s: &Settings<'_>,
         bus: &BusSpec,
         env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let defaults = MotorData::default();
         let motor = MotorData {
             rated_frequency_hz: positive(
@@ -325,7 +209,7 @@ impl DeviceKind for OpenDriveKind {
         drive.set_load_torque_pct(load);
         drive.set_ambient_c(ambient);
         drive.set_dip_s1(dip_s1);
-        Ok((Box::new(node), PortConfig::default()))
+        Ok((BoxedNode::twin(node), PortConfig::default()))
     }
 }
 
@@ -414,51 +298,37 @@ mod tests {
 
     #[test]
     fn signals_set_the_load_and_reset_read_outputs_and_alarms() {
-        use crate::registry::DeviceKind;
-        use toml::Value;
+        use cantwin_twin::SignalValue as Value;
         let mut built = built(&(DEVICE.to_string() + "inputs = [4]\nreference_hz = 20.0\n"));
         let port = built.device("drive").unwrap().port;
-        let kind = super::OpenDriveKind;
+        let read = |b: &crate::Built, name: &str| {
+            b.sim
+                .twin(port)
+                .unwrap()
+                .read_signal(&name.into())
+                .map_err(|e| e.to_string())
+        };
+        let set = |b: &mut crate::Built, name: &str, value: Value| {
+            b.sim
+                .with_twin(port, |t, cx| t.set_signal(&name.into(), &value, cx))
+                .unwrap()
+                .map_err(|e| e.to_string())
+        };
         built.sim.run_until(Instant::from_nanos(2_000_000_000));
-        assert_eq!(
-            kind.read_signal(&built.sim, port, "running"),
-            Ok(Value::Boolean(true))
-        );
-        assert_eq!(
-            kind.read_signal(&built.sim, port, "input.4"),
-            Ok(Value::Boolean(true))
-        );
+        assert_eq!(read(&built, "running"), Ok(Value::Bool(true)));
+        assert_eq!(read(&built, "input.4"), Ok(Value::Bool(true)));
         // A jammed load: overcurrent A2 at the next physics step.
-        kind.set_signal(
-            &mut built.sim,
-            port,
-            "load_torque_pct",
-            &Value::Float(500.0),
-        )
-        .unwrap();
+        set(&mut built, "load_torque_pct", Value::Real(500.0)).unwrap();
         built.sim.run_until(Instant::from_nanos(2_010_000_000));
         assert_eq!(
-            kind.read_signal(&built.sim, port, "alarms"),
-            Ok(Value::Array(vec![Value::String("A2".into())]))
+            read(&built, "alarms"),
+            Ok(Value::List(vec![Value::Text("A2".into())]))
         );
-        kind.set_signal(&mut built.sim, port, "reset_alarms", &Value::Boolean(true))
-            .unwrap();
-        assert_eq!(
-            kind.read_signal(&built.sim, port, "alarms"),
-            Ok(Value::Array(vec![]))
-        );
-        let e = kind
-            .set_signal(
-                &mut built.sim,
-                port,
-                "load_torque_pct",
-                &Value::Boolean(true),
-            )
-            .unwrap_err();
+        set(&mut built, "reset_alarms", Value::Bool(true)).unwrap();
+        assert_eq!(read(&built, "alarms"), Ok(Value::List(vec![])));
+        let e = set(&mut built, "load_torque_pct", Value::Bool(true)).unwrap_err();
         assert!(e.contains("takes a number"), "{e}");
-        let e = kind
-            .set_signal(&mut built.sim, port, "input.9", &Value::Boolean(true))
-            .unwrap_err();
+        let e = set(&mut built, "input.9", Value::Bool(true)).unwrap_err();
         assert!(e.contains("signals: load_torque_pct"), "{e}");
     }
 

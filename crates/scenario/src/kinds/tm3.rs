@@ -18,8 +18,8 @@
 //! dictionary description (each keeps its own values), so a scenario of many alike
 //! couplers builds it once.
 //!
-//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`); modules are
-//! numbered from 1, channels from 0:
+//! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`), served by the
+//! coupler as a twin; modules are numbered from 1, channels from 0:
 //!
 //! | signal | set | read | meaning |
 //! |---|---|---|---|
@@ -33,20 +33,16 @@
 //! | `failure_state` | — | bool | whether the outputs are at their safe positions |
 //! | `nmt_state` | — | string | `"pre-operational"`, `"operational"`, `"stopped"`, `"initialising"` |
 
-use cantwin_bus::{AnyNode, PortConfig, PortId, Simulation};
-use cantwin_canopen::nmt::State;
+use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_tm3::catalogue;
 use cantwin_tm3::coupler::{CouplerConfig, Fitted, Tm3Coupler};
 use cantwin_tm3::island::{Island, MAX_MODULES, ModuleSlot};
 use cantwin_tm3::od::IslandDescription;
 use std::sync::{Mutex, PoisonError};
 
-use crate::build::BuildEnv;
 use crate::error::ScenarioError;
-use crate::kinds::common::{signal_bool, signal_indices, signal_int};
-use crate::live::{LiveValue, Role};
-use crate::model::BusSpec;
-use crate::registry::{DeviceKind, Settings};
+use crate::registry::{BuildEnv, DeviceKind, Settings};
+use crate::spec::BusSpec;
 
 /// The TM3 coupler kind. It remembers the descriptions it built, to share them between
 /// couplers carrying the same modules.
@@ -85,195 +81,13 @@ fn positions(s: &Settings<'_>, key: &str, modules: usize) -> Result<Vec<usize>, 
     Ok(v)
 }
 
-const SIGNALS: &str = "module.M, digital_input.M.C, analog_input.M.C, internal_error, rotary_switch (set); digital_output.M.C, analog_output.M.C, failure_state, nmt_state (read)";
-
-/// `prefix.M.C` as (module, channel).
-fn module_channel(name: &str, prefix: &str) -> Option<(usize, u8)> {
-    match signal_indices(name, prefix)?.as_slice() {
-        [m, c] => Some((usize::try_from(*m).ok()?, u8::try_from(*c).ok()?)),
-        _ => None,
-    }
-}
-
-fn unknown(name: &str) -> String {
-    format!("a tm3 device has no signal {name:?} (signals: {SIGNALS})")
-}
-
 impl DeviceKind for Tm3Kind {
     fn name(&self) -> &'static str {
         "tm3"
     }
 
-    fn read_object(&self, sim: &Simulation, port: PortId, index: u16, sub: u8) -> Option<Vec<u8>> {
-        let c = sim.node::<Tm3Coupler>(port)?;
-        c.device()
-            .od()
-            .get(index, sub)
-            .ok()
-            .map(|v| v.to_le_bytes())
-    }
-
-    fn set_signal(
-        &self,
-        sim: &mut Simulation,
-        port: PortId,
-        name: &str,
-        value: &toml::Value,
-    ) -> Result<(), String> {
-        let bus = sim
-            .bus_mut(port.bus())
-            .ok_or_else(|| "the device's bus is gone".to_string())?;
-        let r = bus.with_node::<Tm3Coupler, _>(port, |c, now, out| -> Result<(), String> {
-            if let Some(m) = signal_indices(name, "module").and_then(|v| match v.as_slice() {
-                [m] => usize::try_from(*m).ok(),
-                _ => None,
-            }) {
-                let configured = m
-                    .checked_sub(1)
-                    .and_then(|i| c.config().island.modules().get(i))
-                    .map(|slot| slot.spec)
-                    .ok_or_else(|| format!("no module {m}"))?;
-                let what = match value.as_str() {
-                    Some("pulled") => Fitted::Empty,
-                    Some("fitted") => Fitted::Module(configured),
-                    Some("unresponsive") => Fitted::Unresponsive,
-                    _ => {
-                        return Err(format!(
-                            "signal {name:?} takes \"pulled\", \"fitted\" or \"unresponsive\", not {value}"
-                        ));
-                    }
-                };
-                return c.fit(m, what, now, out).map_err(|e| e.to_string());
-            }
-            if let Some((m, ch)) = module_channel(name, "digital_input") {
-                return c
-                    .set_digital_input(m, ch, signal_bool(name, value)?)
-                    .map_err(|e| e.to_string());
-            }
-            if let Some((m, ch)) = module_channel(name, "analog_input") {
-                return c
-                    .set_analog_input(m, ch, signal_int(name, value)?)
-                    .map_err(|e| e.to_string());
-            }
-            match name {
-                "internal_error" => {
-                    c.set_internal_error(signal_bool(name, value)?, now, out);
-                    Ok(())
-                }
-                "rotary_switch" => {
-                    let id: u8 = signal_int(name, value)?;
-                    if !(1..=127).contains(&id) {
-                        return Err(format!("signal {name:?} takes 1-127, not {id}"));
-                    }
-                    c.set_rotary_switch(id, now, out);
-                    Ok(())
-                }
-                _ => Err(unknown(name)),
-            }
-        });
-        r.ok_or_else(|| "not a tm3 coupler".to_string())?
-    }
-
-    fn read_signal(
-        &self,
-        sim: &Simulation,
-        port: PortId,
-        name: &str,
-    ) -> Result<toml::Value, String> {
-        let c = sim
-            .node::<Tm3Coupler>(port)
-            .ok_or_else(|| "not a tm3 coupler".to_string())?;
-        if let Some((m, ch)) = module_channel(name, "digital_output") {
-            return c
-                .digital_output(m, ch)
-                .map(toml::Value::Boolean)
-                .map_err(|e| e.to_string());
-        }
-        if let Some((m, ch)) = module_channel(name, "analog_output") {
-            return c
-                .analog_output(m, ch)
-                .map(|v| toml::Value::Integer(i64::from(v)))
-                .map_err(|e| e.to_string());
-        }
-        match name {
-            "failure_state" => Ok(toml::Value::Boolean(c.in_failure_state())),
-            "nmt_state" => Ok(toml::Value::String(
-                match c.state() {
-                    State::Initialising => "initialising",
-                    State::PreOperational => "pre-operational",
-                    State::Operational => "operational",
-                    State::Stopped => "stopped",
-                }
-                .to_string(),
-            )),
-            _ => Err(unknown(name)),
-        }
-    }
-
     fn summary(&self) -> &'static str {
         "Schneider TM3 CANopen bus coupler TM3BCCO with up to 14 TM3/TM2 I/O modules (CiA 401)"
-    }
-
-    /// Every channel of every configured module, named as the signals are
-    /// (`digital_input.M.C`, `digital_output.M.C`, `analog_input.M.C`, `analog_output.M.C`:
-    /// module 1-based as in the scenario, channel 0-based), analog values in raw 16-bit counts.
-    fn live_values(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Vec<LiveValue> {
-        let Some(c) = sim.node::<Tm3Coupler>(port) else {
-            return Vec::new();
-        };
-        let mut v = Vec::new();
-        for (k, slot) in c.config().island.modules().iter().enumerate() {
-            let m = k + 1;
-            let spec = slot.spec;
-            for ch in 0..spec.digital_inputs {
-                let on = c.digital_input(m, ch).unwrap_or(false);
-                v.push(LiveValue::digital(
-                    format!("digital_input.{m}.{ch}"),
-                    on,
-                    Role::DigitalInput,
-                ));
-            }
-            for ch in 0..spec.digital_outputs {
-                let on = c.digital_output(m, ch).unwrap_or(false);
-                v.push(LiveValue::digital(
-                    format!("digital_output.{m}.{ch}"),
-                    on,
-                    Role::DigitalOutput,
-                ));
-            }
-            for ch in 0..spec.analog_inputs {
-                v.push(LiveValue {
-                    name: format!("analog_input.{m}.{ch}"),
-                    value: f64::from(c.analog_input(m, ch).unwrap_or(0)),
-                    unit: "",
-                    role: Role::AnalogInput {
-                        min: f64::from(i16::MIN),
-                        max: f64::from(i16::MAX),
-                    },
-                });
-            }
-            for ch in 0..spec.analog_outputs {
-                v.push(LiveValue {
-                    name: format!("analog_output.{m}.{ch}"),
-                    value: f64::from(c.analog_output(m, ch).unwrap_or(0)),
-                    unit: "",
-                    role: Role::AnalogOutput,
-                });
-            }
-        }
-        v
-    }
-
-    fn canopen_node_id(
-        &self,
-        sim: &cantwin_bus::Simulation,
-        port: cantwin_bus::PortId,
-    ) -> Option<u8> {
-        Some(sim.node::<Tm3Coupler>(port)?.device().node_id())
     }
 
     fn build(
@@ -281,7 +95,7 @@ impl DeviceKind for Tm3Kind {
         s: &Settings<'_>,
         _bus: &BusSpec,
         _env: &BuildEnv,
-    ) -> Result<(Box<dyn AnyNode>, PortConfig), ScenarioError> {
+    ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let node_id: u8 = s.require("node_id")?;
         if !(1..=127).contains(&node_id) {
             return Err(s.error("node_id", "`node_id` must be 1-127"));
@@ -336,7 +150,7 @@ impl DeviceKind for Tm3Kind {
                 .set_analog_input(m, ch, v)
                 .map_err(|e| s.error("analog_inputs", e.to_string()))?;
         }
-        Ok((Box::new(coupler), PortConfig::default()))
+        Ok((BoxedNode::twin(coupler), PortConfig::default()))
     }
 }
 
@@ -408,35 +222,38 @@ mod tests {
         let mut built = build("node_id = 5\nmodules = [\"TM3DI8\", \"TM3DQ8R\"]\n").unwrap();
         let port = built.device("io").unwrap().port;
         built.sim.run_until(Instant::from_nanos(1_000_000));
-        let kind = Tm3Kind::default();
-        let v = |s: &str| toml::Value::String(s.into());
-        assert_eq!(
-            kind.read_signal(&built.sim, port, "nmt_state"),
-            Ok(v("pre-operational"))
-        );
-        kind.set_signal(&mut built.sim, port, "module.2", &v("pulled"))
-            .unwrap();
+        use cantwin_twin::SignalValue;
+        let v = |s: &str| SignalValue::Text(s.into());
+        let read = |b: &crate::Built, name: &str| {
+            b.sim
+                .twin(port)
+                .unwrap()
+                .read_signal(&name.into())
+                .map_err(|e| e.to_string())
+        };
+        let set = |b: &mut crate::Built, name: &str, value: SignalValue| {
+            b.sim
+                .with_twin(port, |t, cx| t.set_signal(&name.into(), &value, cx))
+                .unwrap()
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(read(&built, "nmt_state"), Ok(v("pre-operational")));
+        set(&mut built, "module.2", v("pulled")).unwrap();
         built.sim.run_until(Instant::from_nanos(2_000_000));
         let c = built.sim.node::<Tm3Coupler>(port).unwrap();
         // Module 2 runtime error (status 2, bits 2-3), bus status 2 (bits 30-31).
         assert_eq!(c.manufacturer_status(), 0x8000_0008);
         assert_eq!(
-            kind.read_signal(&built.sim, port, "digital_output.2.0"),
-            Ok(toml::Value::Boolean(false))
+            read(&built, "digital_output.2.0"),
+            Ok(SignalValue::Bool(false))
         );
-        let e = kind
-            .set_signal(&mut built.sim, port, "module.2", &v("gone"))
-            .unwrap_err();
+        let e = set(&mut built, "module.2", v("gone")).unwrap_err();
         assert!(e.contains("\"pulled\""), "{e}");
-        let e = kind
-            .set_signal(&mut built.sim, port, "module.9", &v("pulled"))
-            .unwrap_err();
+        let e = set(&mut built, "module.9", v("pulled")).unwrap_err();
         assert!(e.contains("no module 9"), "{e}");
-        let e = kind.read_signal(&built.sim, port, "speed").unwrap_err();
+        let e = read(&built, "speed").unwrap_err();
         assert!(e.contains("signals: module.M"), "{e}");
-        let e = kind
-            .read_signal(&built.sim, port, "digital_output.2.9")
-            .unwrap_err();
+        let e = read(&built, "digital_output.2.9").unwrap_err();
         assert!(e.contains("no channel 9"), "{e}");
     }
 
