@@ -142,6 +142,17 @@ pub struct VlObjects {
     pub quick_stop: Option<Ramp>,
 }
 
+impl VlObjects {
+    /// Only 0x6042–0x6044, which every vl drive has.
+    pub const MINIMAL: VlObjects = VlObjects {
+        min_max_amount: None,
+        min_max: None,
+        acceleration: None,
+        deceleration: None,
+        quick_stop: None,
+    };
+}
+
 impl Default for VlObjects {
     /// All of them, with the defaults of [`MinMaxAmount::default`], [`MinMax::default`] and
     /// [`Ramp::default`].
@@ -180,6 +191,24 @@ pub struct Objects {
 }
 
 impl Objects {
+    /// Only the objects every drive has: controlword, statusword (default 0x0240), modes of
+    /// operation and its display (default 0, no mode), no mode supported. A device states
+    /// what it has on top of this, `Objects { vl: Some(..), ..Objects::minimal() }`, and so
+    /// keeps exactly its dictionary when the profile grows optional objects.
+    pub fn minimal() -> Objects {
+        Objects {
+            naming: Naming::Cia402,
+            error_code: false,
+            statusword: Statusword::encode(State::SwitchOnDisabled, Default::default()).0 | REMOTE,
+            modes: SupportedModes::NONE,
+            supported_drive_modes: false,
+            mode: None,
+            mode_mappable: true,
+            option_codes: OptionCodeObjects::NONE,
+            vl: None,
+        }
+    }
+
     /// A velocity-mode drive with every object of the table and the profile's defaults:
     /// statusword SWITCH ON DISABLED with remote set (0x0240), modes of operation vl.
     pub fn velocity_drive() -> Objects {
@@ -486,20 +515,16 @@ mod tests {
     fn cia402_objects_a_dsp402_v2_velocity_drive_is_built_exactly() {
         let spec = Objects {
             naming: Naming::Dsp402V2,
-            error_code: false,
-            statusword: 0x0240,
             modes: SupportedModes::VELOCITY,
-            supported_drive_modes: false,
             mode: Some(Mode::Velocity),
             mode_mappable: false,
-            option_codes: OptionCodeObjects::NONE,
             vl: Some(VlObjects {
                 min_max_amount: Some(MinMaxAmount { min: 0, max: 8000 }),
-                min_max: None,
                 acceleration: Some(Ramp::new(1000, 1)),
                 deceleration: Some(Ramp::new(1000, 1)),
-                quick_stop: None,
+                ..VlObjects::MINIMAL
             }),
+            ..Objects::minimal()
         };
         let built = add_objects(OdBuilder::new(), &spec).build().unwrap();
 
@@ -618,16 +643,7 @@ mod tests {
 
     #[test]
     fn cia402_objects_a_drive_without_vl_has_only_the_device_control_objects() {
-        let spec = Objects {
-            vl: None,
-            error_code: false,
-            supported_drive_modes: false,
-            option_codes: OptionCodeObjects::NONE,
-            mode: None,
-            modes: SupportedModes::NONE,
-            ..Objects::velocity_drive()
-        };
-        let list = objects(&spec);
+        let list = objects(&Objects::minimal());
         let indices: Vec<u16> = list.iter().map(|o| o.index).collect();
         assert_eq!(indices, [0x6040, 0x6041, 0x6060, 0x6061]);
         assert_eq!(list[2].subs[0].1.low_limit, None);

@@ -2,15 +2,25 @@
 //! sans-IO: the controlword and the drive's facts go in, the state and what the power stage
 //! is to do come out.
 //!
-//! ```text
-//!  (0)→ NOT READY TO SWITCH ON ─1→ SWITCH ON DISABLED ⇄ 2/7 ⇄ READY TO SWITCH ON
-//!                                      ↑ 9, 10, 12, 15            ⇅ 3/6
-//!                                                              SWITCHED ON
-//!   any ─13→ FAULT REACTION ACTIVE ─14→ FAULT ─15→                ⇅ 4/5   (8: → READY)
-//!                                                           OPERATION ENABLED
-//!                                                                 ⇅ 11/16
-//!                                                           QUICK STOP ACTIVE ─12→
-//! ```
+//! | # | from → to | event |
+//! |---|---|---|
+//! | 0 | start → NOT READY TO SWITCH ON | power on ([`PowerStateMachine::new`]) |
+//! | 1 | NOT READY TO SWITCH ON → SWITCH ON DISABLED | initialised (the first evaluation) |
+//! | 2 | SWITCH ON DISABLED → READY TO SWITCH ON | shutdown |
+//! | 3 | READY TO SWITCH ON → SWITCHED ON | switch on |
+//! | 4 | SWITCHED ON → OPERATION ENABLED | enable operation |
+//! | 5 | OPERATION ENABLED → SWITCHED ON | disable operation (0x605C says how the drive stops) |
+//! | 6 | SWITCHED ON → READY TO SWITCH ON | shutdown |
+//! | 7 | READY TO SWITCH ON → SWITCH ON DISABLED | disable voltage, quick stop |
+//! | 8 | OPERATION ENABLED → READY TO SWITCH ON | shutdown (0x605B says how the drive stops) |
+//! | 9 | OPERATION ENABLED → SWITCH ON DISABLED | disable voltage |
+//! | 10 | SWITCHED ON → SWITCH ON DISABLED | disable voltage, quick stop |
+//! | 11 | OPERATION ENABLED → QUICK STOP ACTIVE | quick stop (0x605A says how) |
+//! | 12 | QUICK STOP ACTIVE → SWITCH ON DISABLED | quick stop complete with 0x605A 0–4; disable voltage |
+//! | 13 | any but the two below → FAULT REACTION ACTIVE | a fault (0x605E says the reaction) |
+//! | 14 | FAULT REACTION ACTIVE → FAULT | fault reaction complete |
+//! | 15 | FAULT → SWITCH ON DISABLED | fault reset: rising edge of bit 7, no fault present |
+//! | 16 | QUICK STOP ACTIVE → OPERATION ENABLED | enable operation with 0x605A 5–8 |
 //!
 //! Rules this machine keeps, each from the PDS FSA of CiA 402-2:
 //!
