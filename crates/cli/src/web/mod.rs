@@ -31,7 +31,8 @@ use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
 use cantwin_monitor::{Led, NetworkView};
 use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
-use cantwin_scenario::{BuiltDevice, Registry, Role, Scenario};
+use cantwin_scenario::{BuiltDevice, Role, Scenario};
+use cantwin_twin::{SignalId, SignalValue};
 use serde_json::{Value, json};
 
 pub use server::Server;
@@ -172,7 +173,6 @@ struct Scheduled {
 /// The simulation's side of the dashboard.
 pub struct Dashboard {
     scenario: Scenario,
-    registry: Registry,
     buses: Vec<(String, BusId)>,
     devices: Vec<DeviceState>,
     taps: Vec<(BusId, TapId)>,
@@ -237,7 +237,6 @@ impl Dashboard {
         let now = WallInstant::now();
         Dashboard {
             scenario: scenario.clone(),
-            registry: Registry::builtin(),
             buses: buses.to_vec(),
             devices,
             taps,
@@ -326,7 +325,6 @@ impl Dashboard {
                     sim,
                     &self.buses,
                     &devices,
-                    &self.registry,
                     &self.masters,
                     action,
                 )
@@ -404,14 +402,10 @@ impl Dashboard {
     /// input a number within its range.
     fn set_input(&mut self, handle: &SimHandle, device: &str, input: &str, value: f64) -> Outcome {
         let d = &self.devices[self.device(device)?];
-        let kind = self
-            .registry
-            .get(&d.info.kind)
-            .ok_or_else(|| Refusal::Failed(format!("unknown kind {}", d.info.kind)))?;
         let port = d.info.port;
         handle
             .with(|sim| {
-                let values = kind.live_values(sim, port);
+                let values = sim.twin(port).map(|t| t.live_values()).unwrap_or_default();
                 let inputs: Vec<&str> = values
                     .iter()
                     .filter(|v| v.role.is_input())
@@ -420,20 +414,20 @@ impl Dashboard {
                 let role = values.iter().find(|v| v.name == input).map(|v| v.role);
                 let signal = match role {
                     Some(Role::DigitalInput) if value == 0.0 || value == 1.0 => {
-                        toml::Value::Boolean(value == 1.0)
+                        SignalValue::Bool(value == 1.0)
                     }
                     Some(Role::DigitalInput) => {
                         return Err(format!("{input} is a digital input: 0 or 1, not {value}"));
                     }
                     // Whole numbers go as integers: raw counts (TM3) take nothing else, and
-                    // the kinds that take volts or hertz read integers as numbers too.
+                    // the twins that take volts or hertz read integers as numbers too.
                     Some(Role::AnalogInput { min, max })
                         if (min..=max).contains(&value) && value.fract() == 0.0 =>
                     {
-                        toml::Value::Integer(value as i64)
+                        SignalValue::Integer(value as i64)
                     }
                     Some(Role::AnalogInput { min, max }) if (min..=max).contains(&value) => {
-                        toml::Value::Float(value)
+                        SignalValue::Real(value)
                     }
                     Some(Role::AnalogInput { min, max }) => {
                         return Err(format!("{input} is {min}–{max}, not {value}"));
@@ -446,7 +440,9 @@ impl Dashboard {
                         ));
                     }
                 };
-                kind.set_signal(sim, port, input, &signal)
+                sim.with_twin(port, |t, cx| t.set_signal(&SignalId::new(input), &signal, cx))
+                    .ok_or_else(|| format!("{device} has no inputs"))?
+                    .map_err(|e| format!("{device}: {e}"))
             })
             .map_err(|e| Refusal::Failed(e.to_string()))?
             .map_err(Refusal::BadRequest)?;
@@ -700,7 +696,6 @@ impl Dashboard {
 
     fn snapshot(&mut self, handle: &SimHandle, wall: WallInstant) {
         let taps = self.taps.clone();
-        let registry = &self.registry;
         let devices = &self.devices;
         let grabbed = handle.with(|sim| {
             let now = sim.now();
@@ -729,17 +724,15 @@ impl Dashboard {
             let live: Vec<_> = devices
                 .iter()
                 .map(|d| {
-                    let kind = registry.get(&d.info.kind);
+                    let twin = sim.twin(d.info.port);
                     let status = sim
                         .bus(d.info.port.bus())
                         .and_then(|b| b.port_status(d.info.port).ok());
-                    let values = kind
-                        .map(|k| k.live_values(sim, d.info.port))
-                        .unwrap_or_default();
-                    let register = kind
-                        .and_then(|k| k.read_object(sim, d.info.port, 0x1001, 0))
+                    let values = twin.map(|t| t.live_values()).unwrap_or_default();
+                    let register = twin
+                        .and_then(|t| t.read_object(0x1001, 0).ok())
                         .and_then(|b| b.first().copied());
-                    let node_id = kind.and_then(|k| k.canopen_node_id(sim, d.info.port));
+                    let node_id = twin.and_then(|t| t.canopen_node_id());
                     (status, values, register, node_id)
                 })
                 .collect();
