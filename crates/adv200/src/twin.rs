@@ -68,6 +68,11 @@ impl Twin for Adv200 {
         ))
     }
 
+    /// The card's node-ID while it runs CANopen or DS402.
+    fn canopen_node_id(&self) -> Option<u8> {
+        self.device().map(|d| d.node_id())
+    }
+
     fn signals(&self) -> Vec<SignalDescription> {
         let mut v: Vec<SignalDescription> = (1..=DIGITAL_INPUTS)
             .map(|k| {

@@ -7,7 +7,8 @@ use cantwin_cal::{ClientEvent, CmsClient, Payload, Request};
 use cantwin_can::{Duration, Instant, Outbox};
 use cantwin_opendrive::messages::{self, Code, CommandByte, message0_write};
 use cantwin_opendrive::params::Params;
-use cantwin_opendrive::{MESSAGE_0, MESSAGE_1, OpenDrive};
+use cantwin_opendrive::{MESSAGE_0, MESSAGE_1};
+use cantwin_twin::{SignalId, SignalValue};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
 
 const SCENARIO: &str = r#"
@@ -45,9 +46,22 @@ pub(crate) fn request(
     Ok(())
 }
 
+/// Signal `name` of the drive on `port`.
+fn read(sim: &Simulation, port: PortId, name: &str) -> Result<SignalValue> {
+    sim.twin(port)
+        .context("the drive")?
+        .read_signal(&SignalId::new(name))
+        .map_err(|e| anyhow::anyhow!("{e}"))
+}
+
 fn drive_state(sim: &Simulation, port: PortId) -> Result<(f64, f64, bool)> {
-    let d = sim.node::<OpenDrive>(port).context("the drive")?.drive();
-    Ok((d.output_hz(), d.current_pct(), d.is_running()))
+    let number = |name: &str| -> Result<f64> {
+        read(sim, port, name)?
+            .as_f64()
+            .with_context(|| format!("the drive's {name} is not a number"))
+    };
+    let running = read(sim, port, "running")? == SignalValue::Bool(true);
+    Ok((number("output_hz")?, number("current_pct")?, running))
 }
 
 pub fn run() -> Result<()> {
@@ -126,18 +140,27 @@ pub fn run() -> Result<()> {
 
     println!("\nThe load rises to 150 % of the rated torque: the motor's I2t image heats up until");
     println!("the drive trips (A3) and notifies OVERLOAD; the motor coasts down:");
-    sim.node_mut::<OpenDrive>(drive)
-        .context("the drive")?
-        .drive_mut()
-        .set_load_torque_pct(150.0);
+    sim.with_twin(drive, |t, cx| {
+        t.set_signal(
+            &SignalId::new("load_torque_pct"),
+            &SignalValue::Real(150.0),
+            cx,
+        )
+    })
+    .context("the drive")?
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
     for step in 1..=6000 {
         if step % 500 == 0 {
             let (hz, current, _) = drive_state(&sim, drive)?;
+            // The live value is the thermal image in %.
             let thermal = sim
-                .node::<OpenDrive>(drive)
+                .twin(drive)
                 .context("the drive")?
-                .drive()
-                .motor_thermal();
+                .live_values()
+                .into_iter()
+                .find(|v| v.name == "motor thermal")
+                .map(|v| v.value / 100.0)
+                .context("the drive's motor thermal image")?;
             println!(
                 "  {:>12}  {:6.2} Hz  {:5.1} % current  motor thermal image {:3.0} %",
                 sim.now().to_string(),

@@ -2,13 +2,12 @@
 //! cantwin's CANopen master, in virtual time.
 
 use anyhow::{Context, Result};
-use cantwin_can::{Duration, Frame, Instant, Outbox};
+use cantwin_can::{Duration, Frame, Instant};
 use cantwin_canopen::master::{MasterEvent, Mode};
 use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::NmtCs;
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
-use cantwin_tm3::Tm3Coupler;
-use cantwin_tm3::coupler::Fitted;
+use cantwin_twin::{SignalId, SignalValue};
 
 use crate::canopen::emcy_meaning;
 use crate::demo_canopen::Net;
@@ -30,22 +29,17 @@ node_id = 3
 modules = ["TM3DI16", "TM3DQ16T", "TM3DM24R", "TM3AI4", "TM3AQ2", "TM3TI4", "TM2DDI8DT"]
 "#;
 
-fn coupler<R>(
+/// Sets signal `name` of the coupler on `port` to `value` now, as a script's `set` would.
+fn set_signal(
     net: &mut Net,
     port: cantwin_bus::PortId,
-    f: impl FnOnce(&mut Tm3Coupler, Instant, &mut Outbox) -> R,
-) -> Result<R> {
-    let now = net.sim.now();
-    let mut out = Outbox::new();
-    let c = net
-        .sim
-        .node_mut::<Tm3Coupler>(port)
-        .context("the coupler")?;
-    let r = f(c, now, &mut out);
-    for frame in out.drain() {
-        net.sim.transmit(port, frame)?;
-    }
-    Ok(r)
+    name: &str,
+    value: SignalValue,
+) -> Result<()> {
+    net.sim
+        .with_twin(port, |t, cx| t.set_signal(&SignalId::new(name), &value, cx))
+        .context("the coupler")?
+        .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
 fn emcys(net: &mut Net) -> Result<()> {
@@ -100,23 +94,22 @@ pub fn run() -> Result<()> {
     net.frames(2)?;
     let outputs: Vec<bool> = (0..4)
         .map(|ch| {
-            net.sim
-                .node::<Tm3Coupler>(island)
-                .map(|c| c.digital_output(2, ch).unwrap_or(false))
+            net.sim.twin(island).map(|c| {
+                c.read_signal(&SignalId::indexed("digital_output", &[2, ch]))
+                    .is_ok_and(|v| v == SignalValue::Bool(true))
+            })
         })
         .collect::<Option<_>>()
         .context("the coupler")?;
     println!("  {:>12}  module 2 outputs 0..3: {outputs:?}", "");
 
     println!("\nInput 3 of module 1 switches on: TPDO1 follows within the inhibit time:");
-    coupler(&mut net, island, |c, _, _| c.set_digital_input(1, 3, true))??;
+    set_signal(&mut net, island, "digital_input.1.3", SignalValue::Bool(true))?;
     net.sim.run_until(ms(40));
     net.frames(2)?;
 
     println!("\nModule 5 (TM3AQ2) is pulled out at runtime: EMCY, and 0x1002 shows it:");
-    coupler(&mut net, island, |c, now, out| {
-        c.fit(5, Fitted::Empty, now, out)
-    })??;
+    set_signal(&mut net, island, "module.5", SignalValue::from("pulled"))?;
     net.sim.run_until(ms(50));
     net.frames(3)?;
     emcys(&mut net)?;

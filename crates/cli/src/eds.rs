@@ -117,24 +117,12 @@ fn advice(eds: &Eds) -> Vec<String> {
     out
 }
 
-/// The object dictionary of a CANopen twin on `port`, whatever kind built it.
+/// The object dictionary of the twin on `port`, if it has one.
 fn twin_dictionary(
     sim: &cantwin_bus::Simulation,
     port: cantwin_bus::PortId,
 ) -> Option<&ObjectDictionary> {
-    if let Some(n) = sim.node::<cantwin_scenario::kinds::cia301::Cia301Node>(port) {
-        return Some(n.device().od());
-    }
-    if let Some(d) = sim.node::<cantwin_canopen::device::Device>(port) {
-        return Some(d.od());
-    }
-    if let Some(c) = sim.node::<cantwin_tm3::Tm3Coupler>(port) {
-        return Some(c.device().od());
-    }
-    if let Some(a) = sim.node::<cantwin_adv200::Adv200>(port) {
-        return a.device().map(|d| d.od());
-    }
-    None
+    sim.twin(port)?.dictionary()
 }
 
 fn export(scenario: &Path, device: &str) -> Result<String> {

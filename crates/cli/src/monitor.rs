@@ -7,15 +7,11 @@ use std::path::PathBuf;
 use std::time::{Duration as WallDuration, Instant as WallInstant};
 
 use anyhow::{Context, Result, bail};
-use cantwin_adv200::Adv200;
 use cantwin_bus::Simulation;
 use cantwin_can::{BitRate, Duration};
-use cantwin_canopen::device::Device;
 use cantwin_canopen::od::{ObjectDictionary, Value};
 use cantwin_monitor::{Config, DeviceKind, NetworkView};
-use cantwin_scenario::kinds::cia301::Cia301Node;
 use cantwin_scenario::{BuildEnv, Built, BuiltDevice, Registry, Scenario};
-use cantwin_tm3::Tm3Coupler;
 use ratatui::crossterm::event::{self, Event, KeyEventKind};
 
 use crate::connect::{Link, Target};
@@ -87,34 +83,16 @@ pub fn declared_nodes(built: &Built) -> Vec<Declared> {
 /// itself (so an ADV200 reads as its active personality), or `None` for a device that is
 /// not a CANopen node.
 pub fn declared_kind(sim: &Simulation, d: &BuiltDevice) -> Option<(u8, Option<DeviceKind>)> {
-    if let Some(n) = sim.node::<Cia301Node>(d.port) {
-        Some((n.device().node_id(), od_identity(n.device().od())))
-    } else if let Some(n) = sim.node::<Device>(d.port) {
-        Some((n.node_id(), od_identity(n.od())))
-    } else if let Some(n) = sim.node::<Tm3Coupler>(d.port) {
-        Some((n.device().node_id(), Some(DeviceKind::tm3())))
-    } else if let Some(n) = sim.node::<Adv200>(d.port) {
-        // The CiA 402 personality has a power drive state; the CANopen one the PDC
-        // words of the worked example.
-        n.device().map(|dev| {
-            let kind = if n.power_state().is_some() {
-                DeviceKind::adv200_ds402()
-            } else {
-                DeviceKind::adv200_example()
-            };
-            (dev.node_id(), Some(kind))
-        })
-    } else {
-        None
-    }
+    let twin = sim.twin(d.port)?;
+    // An ADV200 names its active personality in its dictionary: the CiA 402 one has
+    // profile 402 in 0x1000.
+    let od = twin.dictionary()?;
+    Some((twin.canopen_node_id()?, od_identity(od)))
 }
 
-/// The dictionary of a generic CANopen twin (`cia301` and `eds` kinds) on `port`.
+/// The dictionary of the CANopen twin on `port`.
 fn generic_od(built: &Built, port: cantwin_bus::PortId) -> Option<&ObjectDictionary> {
-    if let Some(n) = built.sim.node::<Cia301Node>(port) {
-        return Some(n.device().od());
-    }
-    built.sim.node::<Device>(port).map(Device::od)
+    built.sim.twin(port)?.dictionary()
 }
 
 /// The bus a scenario file's command means: `--bus`, else its only bus.
