@@ -3,6 +3,7 @@
 #![allow(clippy::unwrap_used, missing_docs)]
 
 use cantwin_can::{Frame, Instant, Outbox};
+use cantwin_canopen::device::NoHooks;
 use cantwin_canopen::od::{Access, DataType, ObjectDictionary, OdBuilder, SubObject};
 use cantwin_canopen::pdo::{PdoEngine, PdoObjects};
 use criterion::{Criterion, black_box, criterion_group, criterion_main};
@@ -54,14 +55,20 @@ fn sync_cycle(c: &mut Criterion) {
     ] {
         let (mut od, mut pdo) = node(rpdos, tpdos);
         let mut out = Outbox::new();
-        pdo.on_sync(None, Instant::ZERO, &mut od, &mut out);
+        pdo.on_sync(None, Instant::ZERO, &mut od, &mut NoHooks, &mut out);
         assert_eq!(out.len(), usize::from(tpdos));
         out.clear();
         let mut now = 0u64;
         c.bench_function(&format!("pdo/sync_cycle/{name}"), |b| {
             b.iter(|| {
                 now += 1_000_000;
-                pdo.on_sync(None, Instant::from_nanos(now), &mut od, &mut out);
+                pdo.on_sync(
+                    None,
+                    Instant::from_nanos(now),
+                    &mut od,
+                    &mut NoHooks,
+                    &mut out,
+                );
                 black_box(out.frames());
                 out.clear();
             })
@@ -75,7 +82,7 @@ fn rpdo_receive(c: &mut Criterion) {
     let frame = Frame::std(0x201, &[1, 2, 3, 4, 5, 6, 7, 8]).unwrap();
     c.bench_function("pdo/rpdo_receive_8_bytes", |b| {
         b.iter(|| {
-            black_box(pdo.on_frame(&frame, Instant::ZERO, &mut od, &mut out));
+            black_box(pdo.on_frame(&frame, Instant::ZERO, &mut od, &mut NoHooks, &mut out));
             while pdo.poll_event().is_some() {}
         })
     });

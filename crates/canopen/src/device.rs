@@ -596,7 +596,7 @@ pub struct Emcy<'a, H> {
     core: &'a mut Core<H>,
 }
 
-impl<H> Emcy<'_, H> {
+impl<H: OdHooks> Emcy<'_, H> {
     /// Raises error `code` with five manufacturer-specific bytes: recorded in 0x1001 and
     /// 0x1003 and sent as EMCY (subject to the inhibit time) at the next [`Node::on_tick`]
     /// if EMCY is allowed in the NMT state. Raising an active code again does nothing.
@@ -642,7 +642,7 @@ impl<H> Emcy<'_, H> {
     }
 }
 
-impl<H> Core<H> {
+impl<H: OdHooks> Core<H> {
     fn push_event(&mut self, e: Event) {
         if self.events.len() >= MAX_EVENTS {
             self.events.pop_front();
@@ -871,11 +871,11 @@ impl<H> Core<H> {
             out.push(frame);
             self.push_event(Event::Sync { counter });
             if let Some(p) = &mut self.pdo {
-                p.on_sync(counter, now, &mut self.od, out);
+                p.on_sync(counter, now, &mut self.od, &mut self.hooks, out);
             }
         }
         if let Some(p) = &mut self.pdo {
-            p.on_tick(now, &self.od, out);
+            p.on_tick(now, &self.od, &mut self.hooks, out);
         }
         self.pdo_events();
         self.send_emcys(now, out);
@@ -904,6 +904,9 @@ impl<H> Core<H> {
                     self.pdo_fault(rpdo, emcy);
                 }
                 PdoEvent::Timeout { rpdo } => self.pdo_fault(rpdo, crate::pdo::EMCY_RPDO_TIMEOUT),
+                // The application decides (CiA 301 leaves it open); the stack only passes
+                // the event on.
+                PdoEvent::Refused { .. } => {}
                 PdoEvent::Received { rpdo } => {
                     let long = too_long.take() == Some(rpdo);
                     self.pdo_faults.retain(|&(n, code)| {
@@ -988,7 +991,7 @@ impl<H> Core<H> {
                     Ok(counter) => {
                         self.push_event(Event::Sync { counter });
                         if let Some(p) = &mut self.pdo {
-                            p.on_sync(counter, now, &mut self.od, out);
+                            p.on_sync(counter, now, &mut self.od, &mut self.hooks, out);
                         }
                         self.pdo_events();
                     }
@@ -1391,7 +1394,7 @@ impl<H: OdHooks> Node for Device<H> {
                 && self.core.state == State::Operational
                 && let Some(p) = &mut self.core.pdo
             {
-                p.on_frame(frame, now, &mut self.core.od, out);
+                p.on_frame(frame, now, &mut self.core.od, &mut self.core.hooks, out);
                 self.core.pdo_events();
             }
         }

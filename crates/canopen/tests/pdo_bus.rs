@@ -7,6 +7,7 @@ mod pdo_harness;
 
 use cantwin_bus::{BusConfig, PortConfig, Recorder, Simulation};
 use cantwin_can::{BitRate, Frame, Instant, Node, Outbox};
+use cantwin_canopen::device::NoHooks;
 use cantwin_canopen::od::{ObjectDictionary, OdBuilder, Value};
 use cantwin_canopen::pdo::{PdoEngine, PdoObjects};
 use std::sync::Arc;
@@ -42,10 +43,11 @@ impl Device {
 impl Node for Device {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         self.pdo.set_operational(true, now);
-        self.pdo.on_tick(now, &self.od, out);
+        self.pdo.on_tick(now, &self.od, &mut NoHooks, out);
     }
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
-        self.pdo.on_frame(frame, now, &mut self.od, out);
+        self.pdo
+            .on_frame(frame, now, &mut self.od, &mut NoHooks, out);
     }
     fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
         while self.changes.last().is_some_and(|t| *t <= now) {
@@ -56,7 +58,7 @@ impl Node for Device {
                 .unwrap();
             self.pdo.mark_changed(0x6000, 0);
         }
-        self.pdo.on_tick(now, &self.od, out);
+        self.pdo.on_tick(now, &self.od, &mut NoHooks, out);
     }
     fn next_deadline(&self) -> Option<Instant> {
         let app = self.changes.last().copied();

@@ -6,6 +6,7 @@ mod pdo_harness;
 
 use cantwin_can::{Frame, Id, Instant};
 use cantwin_canopen::AbortCode;
+use cantwin_canopen::device::NoHooks;
 use cantwin_canopen::od::Value;
 use cantwin_canopen::pdo::{PdoEvent, PdoObjects};
 use pdo_harness::{Harness, ms, us};
@@ -567,7 +568,7 @@ fn cia301_7_5_2_36_an_invalid_stored_mapping_leaves_only_that_pdo_off() {
     assert!(pdo.tpdo_active(1));
     pdo.set_operational(true, Instant::ZERO);
     let mut out = cantwin_can::Outbox::new();
-    pdo.on_sync(None, ms(1), &mut od, &mut out);
+    pdo.on_sync(None, ms(1), &mut od, &mut NoHooks, &mut out);
     assert_eq!(out.frames(), [Frame::std(0x285, &[0]).unwrap()]);
     // It cannot be validated again until the mapping is repaired.
     let mut h = Harness {
@@ -624,7 +625,10 @@ fn cia301_7_2_2_4_synchronous_cyclic_and_acyclic_tpdos_ignore_rtr() {
         let mut h = tpdo1(ttype, &[IN16]);
         let rtr = Frame::remote(Id::standard(0x185).unwrap(), 2).unwrap();
         assert!(h.frame(rtr, ms(1)).is_empty());
-        assert!(h.pdo.on_frame(&rtr, ms(1), &mut h.od, &mut h.out));
+        assert!(
+            h.pdo
+                .on_frame(&rtr, ms(1), &mut h.od, &mut NoHooks, &mut h.out)
+        );
     }
 }
 
@@ -637,12 +641,21 @@ fn cia301_7_2_2_4_rpdo_on_a_29_bit_cob_id_and_foreign_frames() {
     // The 11-bit frame with the same number is not this PDO any more.
     let mut out = cantwin_can::Outbox::new();
     let std = Frame::std(0x205, &[9]).unwrap();
-    assert!(!h.pdo.on_frame(&std, ms(1), &mut h.od, &mut out));
+    assert!(
+        !h.pdo
+            .on_frame(&std, ms(1), &mut h.od, &mut NoHooks, &mut out)
+    );
     let ext = Frame::data(Id::extended(0x205).unwrap(), &[9]).unwrap();
     // A remote frame on an RPDO's identifier is no PDO data.
     let rtr = Frame::remote(Id::extended(0x205).unwrap(), 1).unwrap();
-    assert!(!h.pdo.on_frame(&rtr, ms(1), &mut h.od, &mut out));
-    assert!(h.pdo.on_frame(&ext, ms(2), &mut h.od, &mut out));
+    assert!(
+        !h.pdo
+            .on_frame(&rtr, ms(1), &mut h.od, &mut NoHooks, &mut out)
+    );
+    assert!(
+        h.pdo
+            .on_frame(&ext, ms(2), &mut h.od, &mut NoHooks, &mut out)
+    );
     assert!(out.is_empty());
     assert_eq!(h.od.get(0x6201, 0).unwrap(), Value::Unsigned8(9));
     assert_eq!(h.events(), [PdoEvent::Received { rpdo: 0 }]);

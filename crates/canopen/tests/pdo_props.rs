@@ -6,6 +6,7 @@
 mod pdo_harness;
 
 use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
+use cantwin_canopen::device::NoHooks;
 use cantwin_canopen::od::{Access, DataType, ObjectDictionary, OdBuilder, SubObject, Value};
 use cantwin_canopen::pdo::{Direction, MapEntry, PdoObjects, Plan};
 use pdo_harness::Harness;
@@ -51,17 +52,17 @@ proptest! {
         }
         let tx = Plan::build(src.description(), Direction::Tx, false, entries.iter().copied()).unwrap();
         let rx = Plan::build(dst.description(), Direction::Rx, false, entries.iter().copied()).unwrap();
-        let data = tx.pack(&src);
+        let data = tx.pack(&src, &mut NoHooks);
         // Bits beyond the mapped length are zero.
         let bits = tx.bits();
         let word = u64::from_le_bytes(data);
         prop_assert!(bits == 64 || word >> bits == 0);
-        rx.unpack(&data[..rx.len()], &mut dst);
+        rx.unpack(&data[..rx.len()], &mut dst, &mut NoHooks).unwrap();
         for (i, (b, v)) in fields.iter().enumerate() {
             let mask = if *b == 32 { u32::MAX } else { (1u32 << b) - 1 };
             prop_assert_eq!(dst.get_unsigned(0x2000 + i as u16, 0), Some(u64::from(v & mask)));
         }
-        prop_assert_eq!(rx.pack(&dst), data);
+        prop_assert_eq!(rx.pack(&dst, &mut NoHooks), data);
     }
 
     #[test]
@@ -81,7 +82,7 @@ proptest! {
         let mut sent: Vec<Instant> = Vec::new();
         let mut now = t0;
         let drive = |h: &mut Harness, now: Instant, sent: &mut Vec<Instant>| {
-            h.pdo.on_tick(now, &h.od, &mut h.out);
+            h.pdo.on_tick(now, &h.od, &mut NoHooks, &mut h.out);
             for _ in h.out.drain() {
                 sent.push(now);
             }
@@ -119,18 +120,18 @@ proptest! {
         for (op, a, b, data) in ops {
             now += Duration::from_micros(u64::from(a % 1000));
             match op {
-                0 => h.pdo.on_sync(Some(b as u8), now, &mut h.od, &mut out),
+                0 => h.pdo.on_sync(Some(b as u8), now, &mut h.od, &mut NoHooks, &mut out),
                 1 => {
                     let id = Id::standard(0x180 + (a % 0x400)).unwrap();
                     let f = Frame::data(id, &data).unwrap();
-                    h.pdo.on_frame(&f, now, &mut h.od, &mut out);
+                    h.pdo.on_frame(&f, now, &mut h.od, &mut NoHooks, &mut out);
                 }
                 2 => {
                     let id = Id::standard(0x180 + (a % 0x400)).unwrap();
                     let f = Frame::remote(id, (b % 9) as u8).unwrap();
-                    h.pdo.on_frame(&f, now, &mut h.od, &mut out);
+                    h.pdo.on_frame(&f, now, &mut h.od, &mut NoHooks, &mut out);
                 }
-                3 => h.pdo.on_tick(now, &h.od, &mut out),
+                3 => h.pdo.on_tick(now, &h.od, &mut NoHooks, &mut out),
                 4 => h.pdo.set_operational(b % 3 != 0, now),
                 5 => {
                     // Any download to any PDO parameter: refused or applied, never a panic.

@@ -10,7 +10,7 @@
 //! byte 0, the next one at the bit after the last bit of the previous, whatever their lengths.
 
 use crate::abort::AbortCode;
-use crate::od::{Access, DataType, EntryId, ObjectDictionary, OdDescription};
+use crate::od::{Access, DataType, EntryId, ObjectDictionary, OdDescription, OdHooks};
 
 /// The longest a PDO's data can be: 8 bytes (CiA 301 §7.2.2.1).
 pub const MAX_PDO_BITS: u32 = 64;
@@ -68,6 +68,27 @@ pub(crate) struct Step {
     target: Option<EntryId>,
     /// Length in bits (1..=64).
     bits: u8,
+    /// The mapped object's size in bytes (0 for a dummy entry).
+    size: u8,
+    /// The object is served by the device's hooks.
+    hooked: bool,
+    /// A write of it needs the dictionary's value check (BOOLEAN, limits).
+    checked: bool,
+    /// Index and sub-index, for the hooks.
+    index: u16,
+    sub: u8,
+}
+
+/// Why an RPDO's data were not applied: the first mapped entry refused, with the abort
+/// code an SDO download of the same bytes would get.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Refusal {
+    /// Index of the refused entry's object.
+    pub index: u16,
+    /// Its sub-index.
+    pub sub: u8,
+    /// The refusal.
+    pub code: AbortCode,
 }
 
 /// A checked mapping, ready to pack a TPDO or unpack an RPDO.
@@ -75,6 +96,11 @@ pub(crate) struct Step {
 pub struct Plan {
     steps: Vec<Step>,
     bits: u32,
+    /// Some entry is served by the device's hooks.
+    any_hooked: bool,
+    /// Unpacking needs more than copying bits into storage: a hooked or value-checked
+    /// entry, or two entries of one object.
+    screened: bool,
 }
 
 impl Plan {
@@ -113,49 +139,189 @@ impl Plan {
             if plan.bits > MAX_PDO_BITS {
                 return Err(AbortCode::PDO_LENGTH_EXCEEDED);
             }
+            let (size, hooked, checked) = match target {
+                Some(id) => {
+                    let d = desc.sub_object(id);
+                    let checked = d.data_type == DataType::Boolean
+                        || d.low_limit.is_some()
+                        || d.high_limit.is_some();
+                    let size = d.data_type.fixed_size().unwrap_or(0) as u8;
+                    (size, desc.is_hooked(e.index), checked)
+                }
+                None => (0, false, false),
+            };
+            let repeated = target.is_some() && plan.maps_opt(target);
+            plan.any_hooked |= hooked;
+            plan.screened |= hooked || checked || repeated;
             plan.steps.push(Step {
                 target,
                 bits: e.bits,
+                size,
+                hooked,
+                checked,
+                index: e.index,
+                sub: e.sub,
             });
         }
         Ok(plan)
     }
 
+    fn maps_opt(&self, target: Option<EntryId>) -> bool {
+        self.steps.iter().any(|s| s.target == target)
+    }
+
     /// Reads the mapped values and packs them into PDO data (the first [`Plan::len`]
-    /// bytes are meaningful, the rest are zero).
+    /// bytes are meaningful, the rest are zero). Objects the device's hooks serve are read
+    /// through [`OdHooks::read`], so a value held by the device's model is sent as it is
+    /// now; a hook that declines or fails leaves the stored value.
     #[inline]
-    pub fn pack(&self, od: &ObjectDictionary) -> [u8; 8] {
+    pub fn pack<H: OdHooks + ?Sized>(&self, od: &ObjectDictionary, hooks: &mut H) -> [u8; 8] {
         let mut acc = 0u64;
         let mut offset = 0u32;
+        if !self.any_hooked {
+            for s in &self.steps {
+                if let Some(id) = s.target {
+                    acc |= (le_u64(od.raw(id)) & mask(s.bits)) << offset;
+                }
+                offset += u32::from(s.bits);
+            }
+            return acc.to_le_bytes();
+        }
         for s in &self.steps {
             if let Some(id) = s.target {
-                acc |= (le_u64(od.raw(id)) & mask(s.bits)) << offset;
+                acc |= (current(s, id, od, hooks) & mask(s.bits)) << offset;
             }
             offset += u32::from(s.bits);
         }
         acc.to_le_bytes()
     }
 
-    /// Writes PDO data into the mapped values. `data` must hold at least [`Plan::len`]
+    /// Applies PDO data to the mapped objects. `data` must hold at least [`Plan::len`]
     /// bytes; bytes beyond are ignored. An entry shorter than its object replaces the
     /// object's low bits and keeps the others.
-    pub fn unpack(&self, data: &[u8], od: &mut ObjectDictionary) {
+    ///
+    /// Every entry is checked first, as an expedited SDO download of the bytes it would
+    /// write (the dictionary's value checks, then [`OdHooks::validate`] for hooked
+    /// objects); if one refuses, nothing is written and the first refusal is returned.
+    /// Then each entry is written ([`OdHooks::write`] for hooked application objects,
+    /// storage otherwise) and, in mapping order, [`OdHooks::written`] is called for the
+    /// hooked ones. A refusal by [`OdHooks::write`] itself comes after the checks, so the
+    /// other entries are still written (devices refuse in `validate`); the first such
+    /// refusal is returned and its entry gets no `written`.
+    pub fn unpack<H: OdHooks + ?Sized>(
+        &self,
+        data: &[u8],
+        od: &mut ObjectDictionary,
+        hooks: &mut H,
+    ) -> Result<(), Refusal> {
         let acc = le_u64(data);
+        if !self.screened {
+            // Plain stored values, each mapped once: nothing can refuse.
+            let mut offset = 0u32;
+            for s in &self.steps {
+                if let Some(id) = s.target {
+                    let m = mask(s.bits);
+                    let raw = od.raw(id);
+                    let size = raw.len().min(8);
+                    let new = (le_u64(raw) & !m) | ((acc >> offset) & m);
+                    // The plan only holds fixed-size values, so the length always matches
+                    // and `set_raw` cannot refuse it.
+                    let _ = od.set_raw(id, &new.to_le_bytes()[..size]);
+                }
+                offset += u32::from(s.bits);
+            }
+            return Ok(());
+        }
+        // The value each entry writes, checked before anything is written.
+        let mut values = [0u64; MAX_ENTRIES as usize];
         let mut offset = 0u32;
-        for s in &self.steps {
+        for (k, s) in self.steps.iter().enumerate() {
             if let Some(id) = s.target {
                 let m = mask(s.bits);
-                let raw = od.raw(id);
-                let size = raw.len().min(8);
-                let old = le_u64(raw);
+                let old = if m & mask(s.size * 8) == mask(s.size * 8) {
+                    0
+                } else if let Some(j) = self.steps[..k].iter().rposition(|p| p.target == s.target) {
+                    // An earlier entry of this PDO writes the same object: merge into it.
+                    values[j]
+                } else {
+                    current(s, id, od, hooks)
+                };
                 let new = (old & !m) | ((acc >> offset) & m);
-                // The plan only holds fixed-size values, so the length always matches and
-                // `set_raw` cannot refuse it.
-                let _ = od.set_raw(id, &new.to_le_bytes()[..size]);
+                values[k] = new;
+                let bytes = new.to_le_bytes();
+                let bytes = &bytes[..usize::from(s.size)];
+                let refused = |code| Refusal {
+                    index: s.index,
+                    sub: s.sub,
+                    code,
+                };
+                if s.checked {
+                    od.check_download(id, bytes).map_err(refused)?;
+                }
+                if s.hooked {
+                    hooks.validate(od, s.index, s.sub, bytes).map_err(refused)?;
+                }
             }
             offset += u32::from(s.bits);
         }
+        let mut first = Ok(());
+        let mut taken = [true; MAX_ENTRIES as usize];
+        for (k, s) in self.steps.iter().enumerate() {
+            let Some(id) = s.target else { continue };
+            let bytes = values[k].to_le_bytes();
+            let bytes = &bytes[..usize::from(s.size)];
+            // Communication objects are the stack's and always stored (see `OdHooks::write`).
+            let taken_by_hook = if s.hooked && s.index >= 0x2000 {
+                hooks.write(od, s.index, s.sub, bytes)
+            } else {
+                None
+            };
+            match taken_by_hook {
+                Some(Ok(())) => {}
+                Some(Err(code)) => {
+                    taken[k] = false;
+                    if first.is_ok() {
+                        first = Err(Refusal {
+                            index: s.index,
+                            sub: s.sub,
+                            code,
+                        });
+                    }
+                }
+                // Fixed-size values of the right length: storing cannot refuse.
+                None => {
+                    let _ = od.set_raw(id, bytes);
+                }
+            }
+        }
+        for (k, s) in self.steps.iter().enumerate() {
+            if s.hooked && taken[k] {
+                hooks.written(od, s.index, s.sub);
+            }
+        }
+        first
     }
+}
+
+/// The value of a mapped object as the device has it: through the read hook for a hooked
+/// object (the stored value if the hook declines or fails), from storage otherwise.
+#[inline]
+fn current<H: OdHooks + ?Sized>(
+    s: &Step,
+    id: EntryId,
+    od: &ObjectDictionary,
+    hooks: &mut H,
+) -> u64 {
+    if s.hooked {
+        let mut buf = [0u8; 8];
+        let size = usize::from(s.size).min(8);
+        if let Some(Ok(info)) = hooks.read(od, s.index, s.sub, 0, &mut buf[..size])
+            && info.copied == size
+        {
+            return u64::from_le_bytes(buf);
+        }
+    }
+    le_u64(od.raw(id))
 }
 
 /// Checks one mapping entry (CiA 301 §7.5.2.36 and §7.5.2.38) and locates its value:
@@ -218,6 +384,7 @@ fn le_u64(raw: &[u8]) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::device::NoHooks;
     use crate::od::{OdBuilder, SubObject, Value};
     use std::sync::Arc;
 
@@ -334,7 +501,10 @@ mod tests {
         )
         .unwrap();
         assert_eq!(plan.len(), 3);
-        assert_eq!(plan.pack(&od), [0x6D, 0x5E, 0x05, 0, 0, 0, 0, 0]);
+        assert_eq!(
+            plan.pack(&od, &mut NoHooks),
+            [0x6D, 0x5E, 0x05, 0, 0, 0, 0, 0]
+        );
     }
 
     #[test]
@@ -348,7 +518,7 @@ mod tests {
             [e(0x0005, 0, 4), e(0x2001, 0, 4), e(0x2000, 0, 8)],
         )
         .unwrap();
-        plan.unpack(&[0x7F, 0x12], &mut od);
+        plan.unpack(&[0x7F, 0x12], &mut od, &mut NoHooks).unwrap();
         assert_eq!(od.get(0x2001, 0).unwrap(), Value::Unsigned16(0xFF07));
         assert_eq!(od.get(0x2000, 0).unwrap(), Value::Unsigned8(0x12));
     }

@@ -27,6 +27,15 @@
 //! * **RPDO length** (§7.2.2.2): fewer bytes than mapped are not processed
 //!   ([`PdoEvent::LengthError`] with 0x8210); more bytes are processed (the mapped bytes
 //!   are used, the excess ignored) and reported with 0x8220.
+//! * **RPDO data go through the device's hooks** as an SDO download does (CiA 301
+//!   §7.2.2.2 leaves the use of received data to the application): every mapped entry is
+//!   checked first (the dictionary's value checks and [`OdHooks::validate`], with the
+//!   bytes an expedited download of that object would carry); if one refuses, none is
+//!   written and [`PdoEvent::Refused`] tells the device, which sends no EMCY for it and
+//!   does not count it as a reception. Otherwise the entries are written
+//!   ([`OdHooks::write`] or storage) and the hooks notified in mapping order
+//!   ([`Plan::unpack`]). TPDOs read hooked objects through [`OdHooks::read`]
+//!   ([`Plan::pack`]), so a value the device's model holds is sent fresh.
 //! * **RTR**: a remote frame on a TPDO's COB-ID with bit 30 clear is answered for types 252
 //!   (the data sampled at the last SYNC; nothing before the first SYNC), 253, 254 and 255
 //!   (current data, subject to the inhibit time). Synchronous cyclic and acyclic TPDOs
@@ -42,6 +51,7 @@
 //! ```
 //! use std::sync::Arc;
 //! use cantwin_can::{Duration, Frame, Instant, Outbox};
+//! use cantwin_canopen::device::NoHooks;
 //! use cantwin_canopen::od::{Access, DataType, ObjectDictionary, OdBuilder, SubObject, Value};
 //! use cantwin_canopen::pdo::{PdoEngine, PdoObjects};
 //!
@@ -57,14 +67,14 @@
 //! let mut pdo = PdoEngine::new(&od).unwrap();
 //! let mut out = Outbox::new();
 //! pdo.set_operational(true, Instant::ZERO);
-//! pdo.on_sync(None, Instant::from_nanos(1_000_000), &mut od, &mut out);
+//! pdo.on_sync(None, Instant::from_nanos(1_000_000), &mut od, &mut NoHooks, &mut out);
 //! assert_eq!(out.frames(), [Frame::std(0x185, &[0xEF, 0xBE]).unwrap()]);
 //! ```
 
 mod map;
 mod objects;
 
-pub use map::{Direction, MAX_ENTRIES, MAX_PDO_BITS, MapEntry, Plan, check_entry};
+pub use map::{Direction, MAX_ENTRIES, MAX_PDO_BITS, MapEntry, Plan, Refusal, check_entry};
 pub use objects::PdoObjects;
 
 use crate::abort::AbortCode;
@@ -171,13 +181,26 @@ pub enum PdoEvent {
         /// Slot number.
         rpdo: u16,
     },
+    /// An RPDO of the right length carried a value a mapped object refuses (the abort
+    /// code an SDO download of the same bytes would get): none of its data were written.
+    /// CiA 301 leaves the reaction to the application; the stack sends no EMCY.
+    Refused {
+        /// Slot number.
+        rpdo: u16,
+        /// The refused entry's object.
+        index: u16,
+        /// Its sub-index.
+        sub: u8,
+        /// Why.
+        code: AbortCode,
+    },
 }
 
 impl PdoEvent {
     /// The EMCY error code the device raises for this event, if any.
     pub const fn emcy_code(&self) -> Option<u16> {
         match self {
-            PdoEvent::Received { .. } => None,
+            PdoEvent::Received { .. } | PdoEvent::Refused { .. } => None,
             PdoEvent::LengthError { emcy, .. } => Some(*emcy),
             PdoEvent::Timeout { .. } => Some(EMCY_RPDO_TIMEOUT),
         }
@@ -283,6 +306,20 @@ fn push_event(events: &mut VecDeque<PdoEvent>, e: PdoEvent) {
         events.pop_front();
     }
     events.push_back(e);
+}
+
+/// The event for RPDO slot `n` whose data were applied, or refused by an entry.
+fn received(n: usize, result: Result<(), Refusal>) -> PdoEvent {
+    let rpdo = n as u16;
+    match result {
+        Ok(()) => PdoEvent::Received { rpdo },
+        Err(Refusal { index, sub, code }) => PdoEvent::Refused {
+            rpdo,
+            index,
+            sub,
+            code,
+        },
+    }
 }
 
 fn key(id: Id) -> u32 {
@@ -649,17 +686,18 @@ impl PdoEngine {
 
     /// Packs a TPDO (or takes the data sampled for it) and queues it.
     #[inline]
-    fn transmit(
+    fn transmit<H: OdHooks + ?Sized>(
         t: &mut Tpdo,
         data: Option<[u8; 8]>,
         od: &ObjectDictionary,
+        hooks: &mut H,
         now: Instant,
         out: &mut Outbox,
     ) {
         let (Some(id), Some(plan)) = (t.id, t.plan.as_ref()) else {
             return;
         };
-        let bytes = data.unwrap_or_else(|| plan.pack(od));
+        let bytes = data.unwrap_or_else(|| plan.pack(od, hooks));
         if let Ok(f) = Frame::data(id, &bytes[..plan.len()]) {
             out.push(f);
         }
@@ -673,11 +711,12 @@ impl PdoEngine {
     /// A SYNC with its counter (if 0x1019 makes SYNCs carry one) at `now`: synchronous
     /// RPDO data received since the last SYNC are written to the dictionary, then
     /// synchronous TPDOs are sampled and sent (CiA 301 §7.2.2.4, §7.2.5).
-    pub fn on_sync(
+    pub fn on_sync<H: OdHooks + ?Sized>(
         &mut self,
         counter: Option<u8>,
         now: Instant,
         od: &mut ObjectDictionary,
+        hooks: &mut H,
         out: &mut Outbox,
     ) {
         if !self.operational {
@@ -687,8 +726,8 @@ impl PdoEngine {
             let n = usize::from(self.sync_rx_pending[i]);
             let r = &mut self.rpdos[n];
             if let (Some(data), Some(plan)) = (r.buffered.take(), r.plan.as_ref()) {
-                plan.unpack(&data, od);
-                push_event(&mut self.events, PdoEvent::Received { rpdo: n as u16 });
+                let e = received(n, plan.unpack(&data, od, hooks));
+                push_event(&mut self.events, e);
             }
         }
         self.sync_rx_pending.clear();
@@ -697,7 +736,7 @@ impl PdoEngine {
             match t.ttype {
                 0 => {
                     if t.event {
-                        Self::transmit(t, None, od, now, out);
+                        Self::transmit(t, None, od, hooks, now, out);
                     }
                 }
                 1..=240 => {
@@ -710,7 +749,7 @@ impl PdoEngine {
                             Some(_) => {
                                 t.wait_start = false;
                                 t.sync_left = t.ttype;
-                                Self::transmit(t, None, od, now, out);
+                                Self::transmit(t, None, od, hooks, now, out);
                                 continue;
                             }
                             None => t.wait_start = false,
@@ -719,13 +758,13 @@ impl PdoEngine {
                     t.sync_left = t.sync_left.saturating_sub(1);
                     if t.sync_left == 0 {
                         t.sync_left = t.ttype;
-                        Self::transmit(t, None, od, now, out);
+                        Self::transmit(t, None, od, hooks, now, out);
                     }
                 }
                 _ => {
                     // 252: sample now, send on request.
                     if let Some(plan) = &t.plan {
-                        t.sampled = Some(plan.pack(od));
+                        t.sampled = Some(plan.pack(od, hooks));
                     }
                 }
             }
@@ -735,11 +774,12 @@ impl PdoEngine {
     /// A frame from the bus. RPDO data are checked for length and written to the
     /// dictionary (types 254/255) or kept for the next SYNC (types 0..=240); a remote
     /// frame on a TPDO is answered. Returns whether the frame was one of this engine's PDOs.
-    pub fn on_frame(
+    pub fn on_frame<H: OdHooks + ?Sized>(
         &mut self,
         frame: &Frame,
         now: Instant,
         od: &mut ObjectDictionary,
+        hooks: &mut H,
         out: &mut Outbox,
     ) -> bool {
         if frame.is_remote() {
@@ -756,12 +796,12 @@ impl PdoEngine {
             match t.ttype {
                 252 => {
                     if let Some(data) = t.sampled {
-                        Self::transmit(t, Some(data), od, now, out);
+                        Self::transmit(t, Some(data), od, hooks, now, out);
                     }
                 }
                 253..=255 => {
                     if now >= t.inhibit_until {
-                        Self::transmit(t, None, od, now, out);
+                        Self::transmit(t, None, od, hooks, now, out);
                     } else {
                         t.event = true;
                     }
@@ -796,15 +836,16 @@ impl PdoEngine {
         if !r.deadline.is_zero() {
             r.due = Some(now + r.deadline);
         }
-        if r.ttype <= 240 {
+        let applied = if r.ttype <= 240 {
             let mut data = [0u8; 8];
             data[..len].copy_from_slice(frame.data_bytes());
             if r.buffered.replace(data).is_none() {
                 self.sync_rx_pending.push(n as u16);
             }
+            None
         } else {
-            plan.unpack(frame.data_bytes(), od);
-        }
+            Some(plan.unpack(frame.data_bytes(), od, hooks))
+        };
         if len > mapped {
             push_event(
                 &mut self.events,
@@ -815,15 +856,21 @@ impl PdoEngine {
                 },
             );
         }
-        if self.rpdos[n].ttype > 240 {
-            push_event(&mut self.events, PdoEvent::Received { rpdo: n as u16 });
+        if let Some(result) = applied {
+            push_event(&mut self.events, received(n, result));
         }
         true
     }
 
     /// Timers: event-driven TPDOs whose event or event timer is due and whose inhibit time
     /// is over are sent; expired RPDO deadlines are reported.
-    pub fn on_tick(&mut self, now: Instant, od: &ObjectDictionary, out: &mut Outbox) {
+    pub fn on_tick<H: OdHooks + ?Sized>(
+        &mut self,
+        now: Instant,
+        od: &ObjectDictionary,
+        hooks: &mut H,
+        out: &mut Outbox,
+    ) {
         if !self.operational {
             return;
         }
@@ -834,7 +881,7 @@ impl PdoEngine {
                 t.event = t.is_event_driven();
             }
             if t.event && now >= t.inhibit_until {
-                Self::transmit(t, None, od, now, out);
+                Self::transmit(t, None, od, hooks, now, out);
             }
         }
         for i in 0..self.timed_rx.len() {

@@ -3,6 +3,7 @@
 
 use cantwin_can::{Frame, Instant, Outbox};
 use cantwin_canopen::AbortCode;
+use cantwin_canopen::device::NoHooks;
 use cantwin_canopen::od::{
     Access, DataType, Hooked, ObjectAccess, ObjectDictionary, OdBuilder, SubObject,
 };
@@ -80,23 +81,25 @@ impl Harness {
     /// Operational at `now`, with the frames queued at that instant drained.
     pub fn operational(mut self, now: Instant) -> Self {
         self.pdo.set_operational(true, now);
-        self.pdo.on_tick(now, &self.od, &mut self.out);
+        self.pdo.on_tick(now, &self.od, &mut NoHooks, &mut self.out);
         self.out.clear();
         self
     }
 
     pub fn sync(&mut self, counter: Option<u8>, now: Instant) -> Vec<String> {
-        self.pdo.on_sync(counter, now, &mut self.od, &mut self.out);
+        self.pdo
+            .on_sync(counter, now, &mut self.od, &mut NoHooks, &mut self.out);
         self.take()
     }
 
     pub fn tick(&mut self, now: Instant) -> Vec<String> {
-        self.pdo.on_tick(now, &self.od, &mut self.out);
+        self.pdo.on_tick(now, &self.od, &mut NoHooks, &mut self.out);
         self.take()
     }
 
     pub fn frame(&mut self, f: Frame, now: Instant) -> Vec<String> {
-        self.pdo.on_frame(&f, now, &mut self.od, &mut self.out);
+        self.pdo
+            .on_frame(&f, now, &mut self.od, &mut NoHooks, &mut self.out);
         self.take()
     }
 
@@ -151,7 +154,7 @@ impl Harness {
             if d > until {
                 break;
             }
-            self.pdo.on_tick(d, &self.od, &mut self.out);
+            self.pdo.on_tick(d, &self.od, &mut NoHooks, &mut self.out);
             for f in self.out.drain() {
                 trace.push(format!("{} {}", d.as_nanos(), f));
             }
