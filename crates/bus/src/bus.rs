@@ -49,12 +49,12 @@ use cantwin_twin::{Context, Twin};
 use crate::error::BusError;
 use crate::fault::{FaultAction, FaultRule, FrameSelector};
 use crate::ids::{BusId, PortId};
-use crate::paced::TimeMap;
 use crate::port::{AnyNode, BoxedNode, PortConfig, PortStatus, TwinAccess};
 use crate::queue::TxQueue;
 use crate::rng::SplitMix64;
 use crate::stats::{BuildIdHasher, BusStats, PortStats};
 use crate::tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord};
+use crate::time_map::TimeMap;
 
 /// How a bus is set up.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -65,20 +65,20 @@ mod rx_queue;
 mod sim;
 mod stats;
 mod tap;
+mod time_map;
 
 pub use bus::{Bus, BusConfig, TapId};
 pub use error::BusError;
 pub use fault::{FaultAction, FaultRule, FrameSelector};
 pub use ids::{BusId, PortId};
-pub use paced::{
-    ExternalConfig, ExternalPort, PacedConfig, PacedSimulation, Received, SimHandle, Sink, TimeMap,
-};
+pub use paced::{ExternalConfig, ExternalPort, PacedConfig, PacedSimulation, SimHandle, Sink};
 pub use port::{AnyNode, BoxedNode, PortConfig, PortStatus};
 pub use queue::TxOrder;
 pub use rng::SplitMix64;
-pub use rx_queue::{RxClosed, RxQueue};
+pub use rx_queue::{Received, RxClosed, RxQueue};
 pub use sim::Simulation;
 pub use stats::{BusStats, IdStats, PortStats};
 pub use tap::{
     AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FnTap, FrameRecord, Recorder, Tap,
 };
+pub use time_map::TimeMap;

@@ -8,7 +8,14 @@ use std::collections::VecDeque;
 use std::sync::{Condvar, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::paced::Received;
+/// A frame an external port received, with the bus time it completed (end of EOF).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Received {
+    /// The frame.
+    pub frame: cantwin_can::Frame,
+    /// When it completed.
+    pub at: cantwin_can::Instant,
+}
 
 /// The most frames allocated up front: a large capacity is a limit, not a promise to fill it.
 const PREALLOCATE: usize = 4096;

@@ -6,8 +6,8 @@ use cantwin_twin::{Context, Twin};
 use crate::bus::{Bus, BusConfig};
 use crate::error::BusError;
 use crate::ids::{BusId, PortId};
-use crate::paced::TimeMap;
 use crate::port::{AnyNode, PortConfig};
+use crate::time_map::TimeMap;
 
 /// A set of buses sharing one clock, run in virtual time: [`Simulation::run_until`] jumps
 /// from one event to the next, whatever bus it is on. Events at the same instant on

@@ -7,7 +7,7 @@ use std::any::Any;
 use cantwin_can::{BitRate, ControllerEvent, Frame, Instant};
 
 use crate::ids::{BusId, PortId};
-use crate::paced::TimeMap;
+use crate::time_map::TimeMap;
 
 /// Why a transmission ended in an error frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
