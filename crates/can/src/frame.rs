@@ -122,12 +122,6 @@ impl Frame {
     pub const fn arbitration_key(&self) -> u32 {
         self.id.arbitration_key(self.remote)
     }
-
-    /// The bits this frame occupies on the bus: the stuffed bit stream from SOF to the end of
-    /// EOF plus 3 bits of intermission (see [`crate::bits`]).
-    pub fn bit_length(&self) -> u32 {
-        crate::bits::frame_bits(self)
-    }
 }
 
 impl fmt::Debug for Frame {

@@ -131,6 +131,14 @@ pub fn frame_bits(frame: &Frame) -> u32 {
     region.len + count_stuff_bits(region.bits, region.len) + TAIL_BITS + INTERMISSION_BITS
 }
 
+impl Frame {
+    /// The bits this frame occupies on the bus: the stuffed bit stream from SOF to the end of
+    /// EOF plus 3 bits of intermission (see [`crate::bits`]).
+    pub fn bit_length(&self) -> u32 {
+        frame_bits(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
