@@ -6,9 +6,8 @@
 //! `0x600 | client msg ID << 6 | client` and produces on `0x600 | server msg ID << 6 |
 //! server`; the server picks a message ID (0–4) no other of its connections uses.
 
+use crate::objects::CipError;
 use crate::objects::connection::{ConnKind, Connection};
-use crate::objects::{Application, CipError};
-use crate::slave::{Slave, SlaveConfig};
 use crate::wire::{
     self, BodyFormat, DnId, ExplicitFrame, Header, MacId, UcmmOpen, UcmmOpenReply, group3, service,
     status,
@@ -22,8 +21,24 @@ pub const CONNECTION_MSG_IDS: core::ops::RangeInclusive<u8> = 0..=4;
 /// group 3.
 pub const INITIAL_COMM_GROUP3: u8 = 0x33;
 
+/// What the UCMM of a server needs from its configuration: a copy of the slave's limits.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Limits {
+    /// The server's own MAC ID.
+    pub mac: MacId,
+    /// Explicit connections the UCMM may open at once.
+    pub connections: usize,
+    /// First Connection instance ID used for UCMM connections.
+    pub first_instance: u16,
+    /// Largest explicit message body in either direction.
+    pub max_explicit: u16,
+    /// Expected packet rate of a new explicit connection in ms.
+    pub explicit_epr_ms: u16,
+}
+
+/// The server's limits and the UCMM connections it has open.
 pub(crate) struct Parts<'a> {
-    pub config: &'a SlaveConfig,
+    pub config: Limits,
     pub conns: &'a mut Vec<Connection>,
 }
 
@@ -47,7 +62,7 @@ fn open(p: &mut Parts<'_>, client: MacId, o: UcmmOpen, now: Instant) -> Result<V
     if p.conns.iter().any(|c| c.consumed_id == consumed) {
         return Err(CipError::new(status::OBJECT_STATE_CONFLICT));
     }
-    if p.conns.len() >= p.config.ucmm_connections {
+    if p.conns.len() >= p.config.connections {
         return Err(CipError::new(status::RESOURCE_UNAVAILABLE));
     }
     let own = p.config.mac;
@@ -60,7 +75,7 @@ fn open(p: &mut Parts<'_>, client: MacId, o: UcmmOpen, now: Instant) -> Result<V
         .clone()
         .find(|&m| !used(m))
         .ok_or(CipError::new(status::RESOURCE_UNAVAILABLE))?;
-    let instance = (p.config.ucmm_first_instance..=u16::MAX)
+    let instance = (p.config.first_instance..=u16::MAX)
         .find(|&i| p.conns.iter().all(|c| c.instance != i))
         .ok_or(CipError::new(status::RESOURCE_UNAVAILABLE))?;
     let format = actual_format(o.format);
@@ -110,8 +125,8 @@ fn close(p: &mut Parts<'_>, client: MacId, data: &[u8]) -> Result<Vec<u8>, CipEr
 }
 
 /// A frame on the UCMM request identifier from `client`; returns the response.
-pub(crate) fn on_request<A: Application>(
-    slave: &mut Slave<A>,
+pub(crate) fn on_request(
+    mut p: Parts<'_>,
     client: MacId,
     data: &[u8],
     now: Instant,
@@ -119,7 +134,6 @@ pub(crate) fn on_request<A: Application>(
     let Ok(ExplicitFrame::Whole { header, body }) = ExplicitFrame::decode(data) else {
         return None;
     };
-    let mut p = slave.ucmm_parts();
     let own = p.config.mac;
     // The header of a group 3 request carries the destination: another server's request.
     if header.mac != own {

@@ -416,7 +416,7 @@ impl<A: Application> Slave<A> {
                 msg: group3::UNCONNECTED_REQUEST,
                 mac: client,
             } => {
-                let r = ucmm::on_request(self, client, data, now);
+                let r = ucmm::on_request(self.ucmm_parts(), client, data, now);
                 if let Some(f) = r {
                     out.push(f);
                 }
@@ -438,7 +438,13 @@ impl<A: Application> Slave<A> {
 impl<A> Slave<A> {
     pub(crate) fn ucmm_parts(&mut self) -> ucmm::Parts<'_> {
         ucmm::Parts {
-            config: &self.config,
+            config: ucmm::Limits {
+                mac: self.config.mac,
+                connections: self.config.ucmm_connections,
+                first_instance: self.config.ucmm_first_instance,
+                max_explicit: self.config.max_explicit,
+                explicit_epr_ms: self.config.explicit_epr_ms,
+            },
             conns: &mut self.ucmm,
         }
     }
