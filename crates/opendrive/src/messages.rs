@@ -2,11 +2,22 @@
 //! what a CAL master puts into [`cantwin_cal::CmsClient`] requests and reads out of its
 //! confirmations and notifications.
 
-use cantwin_cal::{ClientObject, CmsClient, Mux};
+use cantwin_cal::{ClientObject, CmsClient, CobPair, Mux, ObjectKind, ServerObject};
 
-use crate::model::Commands;
-use crate::node::cms_objects;
-use crate::params::ParId;
+use crate::params::{P180, P181, P183, P184, P186, P187, ParId};
+
+/// The command bits of message 0 (manual §3.1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Commands {
+    /// "riferimento Remote": the CAN reference is the frequency reference.
+    pub reference_remote: bool,
+    /// "comando Remote": start and reverse come from CAN.
+    pub command_remote: bool,
+    /// "CAN-Start" (logic function 100).
+    pub can_start: bool,
+    /// "CAN-Reverse" (logic function 112): rotation to the left.
+    pub can_reverse: bool,
+}
 
 /// A two-bit code of message 0's command byte (manual §3.1, "Tabella codice comando").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -233,6 +244,28 @@ pub fn error_text(code: u16) -> &'static str {
         2 => "value not allowed",
         _ => "unknown error code",
     }
+}
+
+/// The CMS objects of the three messages with the COB-IDs of P180–P187.
+pub fn cms_objects(p: impl Fn(ParId) -> i32) -> Result<[ServerObject; 3], cantwin_cal::CobIdError> {
+    let pair = |rx, tx| {
+        let raw = |id| u16::try_from(p(id)).unwrap_or(u16::MAX);
+        CobPair::new(raw(rx), raw(tx))
+    };
+    Ok([
+        ServerObject {
+            kind: ObjectKind::BasicVariable,
+            cobs: pair(P180, P181)?,
+        },
+        ServerObject {
+            kind: ObjectKind::ControlledEvent,
+            cobs: pair(P183, P184)?,
+        },
+        ServerObject {
+            kind: ObjectKind::MultiplexedVariable,
+            cobs: pair(P186, P187)?,
+        },
+    ])
 }
 
 /// A CAL master for a drive whose COB-IDs are given by `param` (P180–P187), objects in the

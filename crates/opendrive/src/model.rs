@@ -7,6 +7,7 @@
 
 use cantwin_can::{Duration, Instant};
 
+pub use crate::messages::Commands;
 use crate::messages::{Code, CommandByte};
 use crate::params::{self, C32, C35, C40, C47, C50, C52, P21, P22, P23, P24, P61, P63, P68};
 use crate::params::{P66, P70, P72, P73, P94, ParId, ParamError, Params};
@@ -150,19 +151,6 @@ impl Alarms {
         }
         b
     }
-}
-
-/// The command bits of message 0 (manual §3.1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct Commands {
-    /// "riferimento Remote": the CAN reference is the frequency reference.
-    pub reference_remote: bool,
-    /// "comando Remote": start and reverse come from CAN.
-    pub command_remote: bool,
-    /// "CAN-Start" (logic function 100).
-    pub can_start: bool,
-    /// "CAN-Reverse" (logic function 112): rotation to the left.
-    pub can_reverse: bool,
 }
 
 /// Logic input function 100 + code: start ("Marcia").

@@ -1,13 +1,12 @@
 //! The drive on the CAN bus: the model behind a CAL CMS server with the three messages of
 //! application 003 (manual §3).
 
-use cantwin_cal::{
-    Application, CmsServer, CobPair, Mux, ObjectIndex, ObjectKind, Payload, ServerObject,
-};
+use cantwin_cal::{Application, CmsServer, Mux, ObjectIndex, Payload};
 use cantwin_can::{BitRate, Duration, Frame, Id, Instant, Node, Outbox};
 
+pub use crate::messages::cms_objects;
 use crate::model::{Alarms, Drive, DriveData, ERR_UNDEFINED, Flash, MotorData};
-use crate::params::{C48, P180, P181, P183, P184, P186, P187, ParId, ParamError};
+use crate::params::{C48, ParId, ParamError};
 
 /// Message 0: commands and frequency reference (Read/Write basic variable).
 pub const MESSAGE_0: ObjectIndex = ObjectIndex(0);
@@ -32,28 +31,6 @@ pub fn bit_rate_of_c48(c48: i32) -> Option<BitRate> {
         7 => BitRate::R10K,
         _ => return None,
     })
-}
-
-/// The CMS objects of the three messages with the COB-IDs of P180–P187.
-pub fn cms_objects(p: impl Fn(ParId) -> i32) -> Result<[ServerObject; 3], cantwin_cal::CobIdError> {
-    let pair = |rx, tx| {
-        let raw = |id| u16::try_from(p(id)).unwrap_or(u16::MAX);
-        CobPair::new(raw(rx), raw(tx))
-    };
-    Ok([
-        ServerObject {
-            kind: ObjectKind::BasicVariable,
-            cobs: pair(P180, P181)?,
-        },
-        ServerObject {
-            kind: ObjectKind::ControlledEvent,
-            cobs: pair(P183, P184)?,
-        },
-        ServerObject {
-            kind: ObjectKind::MultiplexedVariable,
-            cobs: pair(P186, P187)?,
-        },
-    ])
 }
 
 /// Where the drive's flash goes between runs (a file, for `--state-dir`).
