@@ -73,7 +73,7 @@ use crate::od::{
     Hooked, ObjectAccess, ObjectDictionary, OdDescription, OdHooks, ReadInfo, TimeOfDay, Value,
 };
 use crate::pdo::{PdoEngine, PdoEvent};
-use crate::sdo::SdoServer;
+use crate::sdo::{SdoCapabilities, SdoServer};
 use crate::storage::{self, Group, Storage, StorageError};
 use crate::sync::SyncService;
 use crate::time::TimeService;
@@ -124,11 +124,15 @@ pub struct DeviceConfig {
     /// the device reacts to, and [`Node::on_frame`] skips any other frame at once. Without
     /// it every frame goes through the whole stack (same behaviour, more work).
     pub acceptance_filter: bool,
+    /// The services the SDO servers offer, and what they answer to the others
+    /// ([`SdoCapabilities`]; [`SdoCapabilities::EXPEDITED_ONLY`] for a CiA 301
+    /// minimum-capability device).
+    pub sdo: SdoCapabilities,
 }
 
 impl DeviceConfig {
-    /// A device with node-ID `node_id`, a 1 s SDO timeout, able to produce SYNC and TIME,
-    /// filtering received frames by its COB-IDs.
+    /// A device with node-ID `node_id`, a 1 s SDO timeout, every SDO service, able to
+    /// produce SYNC and TIME, filtering received frames by its COB-IDs.
     pub const fn new(node_id: u8) -> Self {
         DeviceConfig {
             node_id,
@@ -136,6 +140,7 @@ impl DeviceConfig {
             sync_producer: true,
             time_producer: true,
             acceptance_filter: true,
+            sdo: SdoCapabilities::FULL,
         }
     }
 }
@@ -498,6 +503,7 @@ impl<H: OdHooks> Device<H> {
                 self.core.accept_stale = true;
             }
             server.set_timeout(self.core.config.sdo_timeout);
+            server.set_capabilities(self.core.config.sdo);
         }
     }
 

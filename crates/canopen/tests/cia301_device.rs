@@ -11,6 +11,7 @@ use cantwin_canopen::device::{DeviceConfig, Event};
 use cantwin_canopen::nmt::State;
 use cantwin_canopen::objects::Cia301Options;
 use cantwin_canopen::od::{TimeOfDay, Value};
+use cantwin_canopen::sdo::SdoCapabilities;
 use cantwin_canopen::wire;
 use device_harness::*;
 
@@ -848,5 +849,31 @@ fn cia301_7_2_4_3_3_expedited_download_without_size_through_the_device_takes_the
     assert_eq!(
         h.take(),
         at_ms(&[(1, "585#6017100000000000"), (2, "585#4B17100064000000")])
+    );
+}
+
+#[test]
+fn cia301_7_2_4_1_minimum_capability_device_offers_expedited_sdo_only() {
+    let config = DeviceConfig {
+        sdo: SdoCapabilities::EXPEDITED_ONLY,
+        ..DeviceConfig::new(5)
+    };
+    let mut h = Harness::with_device(device_with_config(&options(), config));
+    h.power_up(ms(0));
+    h.take();
+    // Initiate segmented download of 0x1017, block upload of 0x1008, upload segment.
+    h.rx(ms(1), "605#2117100002000000");
+    h.rx(ms(2), "605#A40810007F000000");
+    h.rx(ms(3), "605#6000000000000000");
+    // Expedited download of 0x1017 works.
+    h.rx(ms(4), "605#2B171000E8030000");
+    assert_eq!(
+        h.take(),
+        at_ms(&[
+            (1, "585#8017100001000405"),
+            (2, "585#8008100001000405"),
+            (3, "585#8000000001000405"),
+            (4, "585#6017100000000000"),
+        ])
     );
 }

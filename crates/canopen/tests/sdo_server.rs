@@ -7,8 +7,8 @@ use cantwin_can::{Duration, Id, Instant, Outbox};
 use cantwin_canopen::od::{
     Access, DataType, Hooked, ObjectDictionary, OdBuilder, OdHooks, ReadInfo, SubObject, Value,
 };
-use cantwin_canopen::sdo::SdoServer;
 use cantwin_canopen::sdo::crc::Crc16;
+use cantwin_canopen::sdo::{SdoCapabilities, SdoServer};
 use cantwin_canopen::{AbortCode, ObjectAccess};
 use sdo_harness::*;
 use std::sync::Arc;
@@ -762,4 +762,73 @@ fn cia301_7_4_8_1_node_id_relative_defaults() {
 #[test]
 fn cia301_7_2_4_3_16_crc_is_ccitt_with_initial_value_zero() {
     assert_eq!(Crc16::of(b"123456789"), 0x31C3);
+}
+
+// ---- §7.2.4.1 server capabilities: a minimum-capability device ----
+
+fn expedited_only() -> Harness {
+    let mut h = Harness::new();
+    h.server.set_capabilities(SdoCapabilities::EXPEDITED_ONLY);
+    h
+}
+
+#[test]
+fn cia301_7_2_4_1_expedited_only_server_refuses_segments_with_index_zero() {
+    let mut h = expedited_only();
+    // Download segment (ccs 0) and upload segment (ccs 3) follow no initiate.
+    assert_eq!(
+        h.one([0x00, 0x17, 0x10, 0x00, 1, 2, 3, 4]),
+        abort(0, 0, AbortCode::INVALID_COMMAND)
+    );
+    assert_eq!(
+        h.one([0x60, 0x17, 0x10, 0x00, 0, 0, 0, 0]),
+        abort(0, 0, AbortCode::INVALID_COMMAND)
+    );
+    assert!(h.server.is_idle());
+}
+
+#[test]
+fn cia301_7_2_4_1_expedited_only_server_refuses_block_requests_with_their_bytes() {
+    let mut h = expedited_only();
+    // Block upload initiate (ccs 5) and block download initiate (ccs 6).
+    assert_eq!(
+        h.one([0xA4, 0x08, 0x10, 0x00, 0x7F, 0, 0, 0]),
+        abort(0x1008, 0, AbortCode::INVALID_COMMAND)
+    );
+    assert_eq!(
+        h.one([0xC6, 0x03, 0x20, 0x00, 0x10, 0, 0, 0]),
+        abort(0x2003, 0, AbortCode::INVALID_COMMAND)
+    );
+    // Any other block command echoes bytes 1–3 as index and sub-index.
+    assert_eq!(
+        h.one([0xA2, 0x05, 0x7F, 0x01, 0, 0, 0, 0]),
+        abort(0x7F05, 1, AbortCode::INVALID_COMMAND)
+    );
+    assert!(h.server.is_idle());
+    assert_eq!(h.server.next_deadline(), None);
+}
+
+#[test]
+fn cia301_7_2_4_1_expedited_only_server_refuses_segmented_initiates() {
+    let mut h = expedited_only();
+    // Initiate download with e = 0 (segmented), size indicated.
+    assert_eq!(
+        h.one([0x21, 0x03, 0x20, 0x00, 0x10, 0, 0, 0]),
+        abort(0x2003, 0, AbortCode::INVALID_COMMAND)
+    );
+    // An upload of a value longer than 4 bytes cannot be expedited.
+    assert_eq!(
+        h.one([0x40, 0x08, 0x10, 0x00, 0, 0, 0, 0]),
+        abort(0x1008, 0, AbortCode::LENGTH_TOO_HIGH)
+    );
+    // Expedited transfers work as before.
+    assert_eq!(
+        h.one([0x2F, 0x00, 0x20, 0x00, 42, 0, 0, 0]),
+        [0x60, 0x00, 0x20, 0, 0, 0, 0, 0]
+    );
+    assert_eq!(
+        h.one([0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0]),
+        [0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00]
+    );
+    assert!(h.server.is_idle());
 }

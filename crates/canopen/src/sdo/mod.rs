@@ -8,4 +8,4 @@ pub mod crc;
 pub mod server;
 pub mod wire;
 
-pub use server::SdoServer;
+pub use server::{SdoCapabilities, SdoServer};

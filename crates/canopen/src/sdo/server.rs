@@ -38,6 +38,110 @@ use crate::abort::AbortCode;
 use crate::od::ObjectAccess;
 use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
 
+/// The SDO services a server offers (CiA 301 §7.2.4.1: expedited transfer is the
+/// minimum; segmented and block transfer are optional, and a minimum-capability device
+/// such as a drive's fieldbus card offers expedited transfer only).
+///
+/// What a server without a service answers is chosen here, in one place, and each refusal
+/// comes before the request is served (before the dictionary is asked):
+///
+/// * without segmented transfer, a download or upload segment (ccs 0 or 3) is aborted with
+///   0x05040001 and index 0, sub-index 0 (as any segment that follows no initiate); an
+///   initiate download without the expedited bit (e = 0) with 0x05040001 and the
+///   request's index and sub-index; an upload of a value longer than 4 bytes with
+///   0x06070012 (length too high) and the request's index and sub-index;
+/// * without block transfer, every block request (ccs 5 or 6) is aborted with 0x05040001
+///   and bytes 1–3 of the request as index and sub-index.
+///
+/// ```
+/// use cantwin_can::{Frame, Id, Instant, Outbox};
+/// use cantwin_canopen::od::{ObjectDictionary, OdBuilder};
+/// use cantwin_canopen::sdo::{SdoCapabilities, SdoServer};
+/// use std::sync::Arc;
+///
+/// # fn main() -> Result<(), Box<dyn std::error::Error>> {
+/// let mut od = ObjectDictionary::new(Arc::new(OdBuilder::new().build()?), 5);
+/// let mut server = SdoServer::for_node(5);
+/// server.set_capabilities(SdoCapabilities::EXPEDITED_ONLY);
+/// let mut out = Outbox::new();
+/// // A block upload of 0x1008:00 is refused: ccs 5 is not offered.
+/// let request = Frame::data_array(Id::standard(0x605)?, [0xA4, 0x08, 0x10, 0x00, 0x7F, 0, 0, 0]);
+/// server.on_frame(&request, Instant::ZERO, &mut od, &mut out);
+/// assert_eq!(
+///     out.frames(),
+///     [Frame::data_array(Id::standard(0x585)?, [0x80, 0x08, 0x10, 0x00, 0x01, 0x00, 0x04, 0x05])]
+/// );
+/// # Ok(())
+/// # }
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SdoCapabilities {
+    /// Segmented download and upload (CiA 301 §7.2.4.3.4–8).
+    pub segmented: bool,
+    /// Block download and upload (CiA 301 §7.2.4.3.9–16).
+    pub block: bool,
+}
+
+impl SdoCapabilities {
+    /// Every transfer CiA 301 defines.
+    pub const FULL: SdoCapabilities = SdoCapabilities {
+        segmented: true,
+        block: true,
+    };
+
+    /// Expedited transfers only (a CiA 301 minimum-capability device).
+    pub const EXPEDITED_ONLY: SdoCapabilities = SdoCapabilities {
+        segmented: false,
+        block: false,
+    };
+
+    /// The abort a request gets before it is served (see the type's documentation), with
+    /// the multiplexer the abort frame carries; `None` if the request is offered. `b` is
+    /// the request frame, `req` its decoding.
+    #[inline]
+    pub fn refusal(&self, b: &[u8; 8], req: &Request) -> Option<(Mux, AbortCode)> {
+        let block = matches!(
+            req,
+            Request::BlockDownloadInitiate { .. }
+                | Request::BlockDownloadEnd { .. }
+                | Request::BlockUploadInitiate { .. }
+                | Request::BlockUploadStart
+                | Request::BlockUploadAck { .. }
+                | Request::BlockUploadEnd
+        );
+        let mux = Mux::of_frame(b);
+        if !self.segmented {
+            match req {
+                Request::DownloadSegment { .. } | Request::UploadSegment { .. } => {
+                    return Some((Mux::default(), AbortCode::INVALID_COMMAND));
+                }
+                Request::InitiateDownload {
+                    init: Initiate::Segmented { .. },
+                    ..
+                } => return Some((mux, AbortCode::INVALID_COMMAND)),
+                _ => {}
+            }
+        }
+        if !self.block && block {
+            return Some((mux, AbortCode::INVALID_COMMAND));
+        }
+        None
+    }
+
+    /// The abort an upload of a value of `size` bytes gets: a server without segmented
+    /// transfer can only send up to 4 bytes (0x06070012).
+    #[inline]
+    pub fn upload_refusal(&self, size: usize) -> Option<AbortCode> {
+        (!self.segmented && size > 4).then_some(AbortCode::LENGTH_TOO_HIGH)
+    }
+}
+
+impl Default for SdoCapabilities {
+    fn default() -> Self {
+        SdoCapabilities::FULL
+    }
+}
+
 /// The default SDO timeout.
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(1);
 
@@ -136,6 +240,7 @@ pub struct SdoServer {
     tx: Option<Id>,
     timeout: Duration,
     block_size: u8,
+    caps: SdoCapabilities,
     state: State,
     mux: Mux,
     deadline: Option<Instant>,
@@ -153,6 +258,7 @@ impl SdoServer {
             tx: Some(tx),
             timeout: DEFAULT_TIMEOUT,
             block_size: MAX_BLOCK_SIZE,
+            caps: SdoCapabilities::FULL,
             state: State::Idle,
             mux: Mux::default(),
             deadline: None,
@@ -212,6 +318,16 @@ impl SdoServer {
     /// Sets the block size the server offers for block downloads (clamped to 1..=127).
     pub fn set_block_size(&mut self, blksize: u8) {
         self.block_size = blksize.clamp(1, MAX_BLOCK_SIZE);
+    }
+
+    /// Sets the services the server offers (default [`SdoCapabilities::FULL`]).
+    pub fn set_capabilities(&mut self, caps: SdoCapabilities) {
+        self.caps = caps;
+    }
+
+    /// The services the server offers.
+    pub fn capabilities(&self) -> SdoCapabilities {
+        self.caps
     }
 
     /// Whether no transfer is in progress.
@@ -286,30 +402,6 @@ impl SdoServer {
             self.block_segment(BlockSegment::decode(b), tx, access, out);
             return;
         }
-        if b[0] == 0x40 && self.state == State::Idle {
-            // Fast path for the most frequent request, initiate upload (§7.2.4.3.6): the
-            // same as the general path below, without building the typed request.
-            self.mux = Mux::new(u16::from_le_bytes([b[1], b[2]]), b[3]);
-            match self.start_upload(self.mux, tx, access, out) {
-                Err(code) => self.abort(code, access, out),
-                Ok(()) if self.state != State::Idle => {
-                    self.deadline = now.checked_add(self.timeout);
-                }
-                Ok(()) => {}
-            }
-            return;
-        }
-        if b[0] & 0xE3 == 0x23 && self.state == State::Idle {
-            // Fast path for an expedited download with size indicated (§7.2.4.3.3):
-            // ccs = 1, e = 1, s = 1, n unused bytes.
-            self.mux = Mux::new(u16::from_le_bytes([b[1], b[2]]), b[3]);
-            let len = 4 - usize::from((b[0] >> 2) & 0x03);
-            match access.write(self.mux.index, self.mux.sub, &b[4..4 + len]) {
-                Ok(()) => Self::send(out, tx, Response::InitiateDownload { mux: self.mux }),
-                Err(code) => self.abort(code, access, out),
-            }
-            return;
-        }
         let req = match Request::decode(b) {
             Ok(r) => r,
             Err(_) => {
@@ -320,13 +412,26 @@ impl SdoServer {
                 return;
             }
         };
-        if let Request::Abort { .. } = req {
+        if self.caps != SdoCapabilities::FULL
+            && let Some((mux, code)) = self.caps.refusal(b, &req)
+        {
             self.cancel(access);
+            self.mux = mux;
+            self.abort(code, access, out);
             return;
         }
-        self.deadline = now.checked_add(self.timeout);
         let result = match self.state {
-            State::Idle => self.initiate(req, tx, access, out),
+            State::Idle => match req {
+                // The most frequent requests first (initiate upload §7.2.4.3.6, expedited
+                // download §7.2.4.3.3): served without a transfer state.
+                Request::InitiateUpload { mux } => {
+                    self.mux = mux;
+                    self.start_upload(mux, tx, access, out)
+                }
+                Request::Abort { .. } => return self.cancel(access),
+                _ => self.initiate(req, tx, access, out),
+            },
+            _ if matches!(req, Request::Abort { .. }) => return self.cancel(access),
             State::Download { .. } => self.download_segment(req, tx, access, out),
             State::Upload { .. } => self.upload_segment(req, tx, access, out),
             State::BlockDownload { .. } => self.block_download_end(req, tx, access, out),
@@ -343,10 +448,11 @@ impl SdoServer {
                 _ => Err(AbortCode::INVALID_COMMAND),
             },
         };
-        if let Err(code) = result {
-            self.abort(code, access, out);
-        } else if self.state == State::Idle {
-            self.deadline = None;
+        match result {
+            Err(code) => self.abort(code, access, out),
+            // A transfer in progress waits at most the SDO timeout for the next request.
+            Ok(()) if self.state != State::Idle => self.deadline = now.checked_add(self.timeout),
+            Ok(()) => self.deadline = None,
         }
     }
 
@@ -504,6 +610,9 @@ impl SdoServer {
             let word = u64::from(head) | u64::from(u32::from_le_bytes(data)) << 32;
             out.push(Frame::data_array(tx, word.to_le_bytes()));
             return Ok(());
+        }
+        if let Some(code) = self.caps.upload_refusal(info.size) {
+            return Err(code);
         }
         let size = u32::try_from(info.size).map_err(|_| AbortCode::LENGTH_TOO_HIGH)?;
         self.state = State::Upload {

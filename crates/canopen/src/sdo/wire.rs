@@ -23,6 +23,14 @@ impl Mux {
         Mux { index, sub }
     }
 
+    /// Bytes 1–3 of a frame read as a multiplexer, whatever its command: what they carry
+    /// in initiate and abort frames. A server answering a request it refuses before
+    /// serving it (see [`super::server::SdoCapabilities`]) echoes them.
+    #[inline]
+    pub fn of_frame(b: &[u8; 8]) -> Self {
+        Self::decode(b)
+    }
+
     #[inline]
     fn decode(b: &[u8; 8]) -> Self {
         Mux {
