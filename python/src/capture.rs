@@ -8,7 +8,7 @@ use cantwin_capture::{CaptureWriter, Format};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::sim::{Shared, err};
+use crate::core::{Shared, err};
 
 /// A writer shared by the taps of the buses it records; `None` once closed.
 pub(crate) type SharedWriter = Arc<Mutex<Option<Box<dyn CaptureWriter + Send>>>>;

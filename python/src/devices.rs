@@ -1,103 +1,79 @@
 //! Reading and writing devices: object dictionaries and the models behind them.
 //!
-//! The scenario's kinds answer reads of their objects ([`DeviceKind::read_object`]); the
-//! rest is reached through the node types the kinds build (the ADV200 drive, the TM3
-//! coupler, the OpenDrive, the CiA 301 and EDS devices).
+//! Every device is reached as the [`Twin`] the simulation hands out for its port: its
+//! dictionary, its signals (terminals are found by their role and channel in the twin's
+//! signal descriptions), its live values, faults, parameters and model summary.
 
-use cantwin_adv200::Adv200;
-use cantwin_adv200::alarms::Alarm;
-use cantwin_bus::{Bus, PortId};
-use cantwin_canopen::AbortCode;
-use cantwin_canopen::device::Device;
-use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
-use cantwin_opendrive::{OpenDrive, ParId};
-use cantwin_scenario::kinds::cia301::Cia301Node;
-use cantwin_tm3::Tm3Coupler;
+use cantwin_bus::PortId;
+use cantwin_scenario::BuiltDevice;
+use cantwin_twin::{
+    Context, Direction, Fault, FaultError, FaultKind, ObjectError, ParameterError, ParameterKey,
+    Role, SignalDescription, SignalError, SignalId, SignalValue, Twin, ValueKind,
+};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::sim::{Core, err};
-
-fn abort(device: &str, index: u16, sub: u8, code: AbortCode) -> PyErr {
-    err(format!(
-        "{device}: object 0x{index:04X} sub {sub}: abort {code}"
-    ))
-}
+use crate::core::{Core, err};
 
 fn unsupported(device: &str, kind: &str, what: &str) -> PyErr {
     PyTypeError::new_err(format!("{device} is a {kind} device, which has no {what}"))
 }
 
-/// The dictionary of the CANopen device behind `port`, whatever kind built it.
-fn od_of(bus: &Bus, port: PortId) -> Option<&ObjectDictionary> {
-    if let Some(n) = bus.node::<Cia301Node>(port) {
-        return Some(n.device().od());
+/// "a" or "an" before a kind's name.
+fn article(kind: &str) -> &'static str {
+    if kind.starts_with(['a', 'e', 'i', 'o', 'u']) {
+        "an"
+    } else {
+        "a"
     }
-    if let Some(d) = bus.node::<Device>(port) {
-        return Some(d.od());
+}
+
+/// Run `f` on the twin of `device` now (`None` when the device is not a twin).
+fn with_twin<R>(
+    core: &mut Core,
+    device: &str,
+    f: impl FnOnce(&mut dyn Twin, &mut Context<'_>) -> R,
+) -> PyResult<(BuiltDevice, Option<R>)> {
+    let d = core.device(device)?;
+    let port = d.port;
+    let r = core.with_sim(|sim| sim.with_twin(port, f))?;
+    Ok((d, r))
+}
+
+/// Run `f` on the twin of `device` without changing it.
+fn read_twin<R>(
+    core: &mut Core,
+    device: &str,
+    f: impl FnOnce(&dyn Twin) -> R,
+) -> PyResult<(BuiltDevice, Option<R>)> {
+    let d = core.device(device)?;
+    let port: PortId = d.port;
+    let r = core.with_sim(|sim| sim.twin(port).map(f))?;
+    Ok((d, r))
+}
+
+fn object_error(
+    device: &str,
+    d: &BuiltDevice,
+    index: u16,
+    sub: u8,
+    e: ObjectError,
+    what: &str,
+) -> PyErr {
+    match e {
+        ObjectError::NoDictionary => unsupported(device, &d.kind, what),
+        ObjectError::Abort(code) => err(format!(
+            "{device}: object 0x{index:04X} sub {sub}: abort {code}"
+        )),
+        ObjectError::Refused(why) => PyTypeError::new_err(format!("{device}: {why}")),
     }
-    if let Some(c) = bus.node::<Tm3Coupler>(port) {
-        return Some(c.device().od());
-    }
-    if let Some(a) = bus.node::<Adv200>(port) {
-        return a.device().map(|d| d.od());
-    }
-    None
 }
 
 pub(crate) fn read_object(core: &mut Core, device: &str, index: u16, sub: u8) -> PyResult<Vec<u8>> {
-    let d = core.device(device)?;
-    let registry = &core.registry;
-    let port = d.port;
-    let result = match &mut core.mode {
-        crate::sim::Mode::Virtual(sim) => read_in(sim, registry, &d.kind, port, index, sub),
-        crate::sim::Mode::Paced(p) => p
-            .handle()
-            .with(|sim| read_in(sim, registry, &d.kind, port, index, sub))
-            .map_err(|e| err(e.to_string()))?,
-    };
-    match result {
-        Read::Bytes(b) => Ok(b),
-        Read::Abort(code) => Err(abort(device, index, sub, code)),
-        Read::NoDictionary => Err(unsupported(device, &d.kind, "object dictionary")),
-    }
-}
-
-enum Read {
-    Bytes(Vec<u8>),
-    Abort(AbortCode),
-    NoDictionary,
-}
-
-fn read_in(
-    sim: &cantwin_bus::Simulation,
-    registry: &cantwin_scenario::Registry,
-    kind: &str,
-    port: PortId,
-    index: u16,
-    sub: u8,
-) -> Read {
-    if let Some(b) = registry
-        .get(kind)
-        .and_then(|k| k.read_object(sim, port, index, sub))
-    {
-        return Read::Bytes(b);
-    }
-    match sim.bus(port.bus()).and_then(|b| od_of(b, port)) {
-        Some(od) => match od.get(index, sub) {
-            Ok(v) => Read::Bytes(v.to_le_bytes()),
-            Err(code) => Read::Abort(code),
-        },
-        None => Read::NoDictionary,
-    }
-}
-
-/// Decode `data` as the type of `index`/`sub` in `od`.
-fn value_for(od: &ObjectDictionary, index: u16, sub: u8, data: &[u8]) -> Result<Value, AbortCode> {
-    let id = od.locate(index, sub)?;
-    let ty = od.sub_object(id).data_type;
-    Value::from_le_bytes(ty, data).map_err(|_| AbortCode::TYPE_MISMATCH)
+    let (d, r) = read_twin(core, device, |t| t.read_object(index, sub))?;
+    r.unwrap_or(Err(ObjectError::NoDictionary))
+        .map_err(|e| object_error(device, &d, index, sub, e, "object dictionary"))
 }
 
 pub(crate) fn write_object(
@@ -107,63 +83,96 @@ pub(crate) fn write_object(
     sub: u8,
     data: &[u8],
 ) -> PyResult<()> {
-    let d = core.device(device)?;
-    let port = d.port;
-    let data = data.to_vec();
-    let r = core.with_sim(move |sim| {
-        let bus = sim.bus_mut(port.bus())?;
-        fn set<H: OdHooks>(
-            dev: &mut Device<H>,
-            index: u16,
-            sub: u8,
-            data: &[u8],
-        ) -> Result<(), AbortCode> {
-            let v = value_for(dev.od(), index, sub, data)?;
-            dev.set_value(index, sub, &v)
-        }
-        if bus.node::<Cia301Node>(port).is_some() {
-            return bus.with_node::<Cia301Node, _>(port, |n, _, _| {
-                set(n.device_mut(), index, sub, &data)
-            });
-        }
-        if bus.node::<Device>(port).is_some() {
-            return bus.with_node::<Device, _>(port, |n, _, _| set(n, index, sub, &data));
-        }
-        if bus.node::<Tm3Coupler>(port).is_some() {
-            return bus.with_node::<Tm3Coupler, _>(port, |n, _, _| {
-                set(n.device_mut(), index, sub, &data)
-            });
-        }
-        None
-    })?;
-    match r {
-        Some(Ok(())) => Ok(()),
-        Some(Err(code)) => Err(abort(device, index, sub, code)),
-        None if d.kind == "adv200" => Err(PyTypeError::new_err(format!(
-            "{device}: the ADV200's objects are its parameters: use set_param"
-        ))),
-        None => Err(unsupported(device, &d.kind, "writable object dictionary")),
-    }
+    let (d, r) = with_twin(core, device, |t, cx| t.write_object(index, sub, data, cx))?;
+    r.unwrap_or(Err(ObjectError::NoDictionary))
+        .map_err(|e| object_error(device, &d, index, sub, e, "writable object dictionary"))
 }
 
-/// Run `f` on the node of `device` if it is a `T`.
-fn with_node<T: 'static, R>(
+/// The terminal of `device` in `role` (`what` names them in errors) at `channel`, on
+/// `module` when the device has expansion modules.
+fn terminal(
     core: &mut Core,
     device: &str,
+    role: fn(Role) -> bool,
     what: &str,
-    f: impl FnOnce(&mut T) -> R,
-) -> PyResult<R> {
-    let d = core.device(device)?;
-    let port = d.port;
-    core.with_sim(|sim| {
-        sim.bus_mut(port.bus())
-            .and_then(|b| b.with_node::<T, _>(port, |n, _, _| f(n)))
-    })?
-    .ok_or_else(|| unsupported(device, &d.kind, what))
+    module: Option<usize>,
+    channel: u8,
+) -> PyResult<SignalDescription> {
+    let (d, signals) = read_twin(core, device, |t| t.signals())?;
+    let terminals: Vec<SignalDescription> = signals
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|s| s.role.is_some_and(role) && s.terminal.is_some())
+        .collect();
+    if terminals.is_empty() {
+        return Err(unsupported(device, &d.kind, what));
+    }
+    let modular = terminals
+        .iter()
+        .any(|s| s.terminal.is_some_and(|t| t.module.is_some()));
+    let module = match (module, modular) {
+        (Some(_), false) => {
+            return Err(PyValueError::new_err(format!(
+                "{device} has no expansion modules"
+            )));
+        }
+        (None, true) => {
+            return Err(PyValueError::new_err(format!(
+                "{device}: its {what} are on expansion modules: give module="
+            )));
+        }
+        (m, _) => m.and_then(|m| u32::try_from(m).ok()),
+    };
+    let on_module: Vec<&SignalDescription> = terminals
+        .iter()
+        .filter(|s| s.terminal.is_some_and(|t| t.module == module))
+        .collect();
+    if let Some(s) = on_module
+        .iter()
+        .find(|s| s.terminal.is_some_and(|t| t.channel == u32::from(channel)))
+    {
+        return Ok((*s).clone());
+    }
+    let channels: Vec<u32> = on_module
+        .iter()
+        .filter_map(|s| s.terminal.map(|t| t.channel))
+        .collect();
+    let place = module
+        .map(|m| format!(" on module {m}"))
+        .unwrap_or_default();
+    Err(PyValueError::new_err(
+        match (channels.iter().min(), channels.iter().max()) {
+            (Some(lo), Some(hi)) => {
+                format!("{device} has {what} {lo}-{hi}{place}, not {channel}")
+            }
+            _ => format!("{device} has no {what}{place}"),
+        },
+    ))
 }
 
-fn channel_error(e: impl std::fmt::Display) -> PyErr {
-    PyValueError::new_err(e.to_string())
+/// A signal error as the scripts word it: a signal the device lacks is named with its kind.
+fn signal_error(device: &str, d: &BuiltDevice, e: &SignalError) -> PyErr {
+    let message = match e {
+        SignalError::Unknown { .. } => {
+            format!("{} {} device has {e}", article(&d.kind), d.kind)
+        }
+        other => other.to_string(),
+    };
+    PyValueError::new_err(format!("{device}: {message}"))
+}
+
+/// Sets `signal` of `device` to `value` now.
+fn set(core: &mut Core, device: &str, signal: &SignalId, value: SignalValue) -> PyResult<()> {
+    let (d, r) = with_twin(core, device, |t, cx| t.set_signal(signal, &value, cx))?;
+    r.unwrap_or_else(|| Err(SignalError::unknown(signal, Direction::Set, "")))
+        .map_err(|e| signal_error(device, &d, &e))
+}
+
+/// Reads `signal` of `device`.
+fn get(core: &mut Core, device: &str, signal: &SignalId) -> PyResult<SignalValue> {
+    let (d, r) = read_twin(core, device, |t| t.read_signal(signal))?;
+    r.unwrap_or_else(|| Err(SignalError::unknown(signal, Direction::Read, "")))
+        .map_err(|e| signal_error(device, &d, &e))
 }
 
 pub(crate) fn set_digital_input(
@@ -173,40 +182,9 @@ pub(crate) fn set_digital_input(
     on: bool,
     module: Option<usize>,
 ) -> PyResult<()> {
-    let kind = core.device(device)?.kind;
-    match (kind.as_str(), module) {
-        ("adv200", None) => {
-            if !(1..=8).contains(&channel) {
-                return Err(PyValueError::new_err(format!(
-                    "the ADV200 has digital inputs 1-8, not {channel}"
-                )));
-            }
-            with_node::<Adv200, _>(core, device, "digital inputs", |n| {
-                n.set_digital_input(channel, on)
-            })
-        }
-        ("opendrive", None) => {
-            if !(1..=8).contains(&channel) {
-                return Err(PyValueError::new_err(format!(
-                    "the OpenDrive has digital inputs 1-8, not {channel}"
-                )));
-            }
-            with_node::<OpenDrive, _>(core, device, "digital inputs", |n| {
-                n.drive_mut().set_input(channel, on)
-            })
-        }
-        ("tm3", Some(m)) => with_node::<Tm3Coupler, _>(core, device, "digital inputs", |n| {
-            n.set_digital_input(m, channel, on)
-        })?
-        .map_err(channel_error),
-        ("tm3", None) => Err(PyValueError::new_err(
-            "a TM3 input is on an expansion module: give module=",
-        )),
-        (_, Some(_)) => Err(PyValueError::new_err(format!(
-            "{device} has no expansion modules"
-        ))),
-        (k, None) => Err(unsupported(device, k, "digital inputs")),
-    }
+    let is = |r: Role| r == Role::DigitalInput;
+    let s = terminal(core, device, is, "digital inputs", module, channel)?;
+    set(core, device, &s.id, SignalValue::Bool(on))
 }
 
 pub(crate) fn set_analog_input(
@@ -216,38 +194,22 @@ pub(crate) fn set_analog_input(
     value: f64,
     module: Option<usize>,
 ) -> PyResult<()> {
-    let kind = core.device(device)?.kind;
-    match (kind.as_str(), module) {
-        ("adv200", None) => {
-            if !(1..=2).contains(&channel) || !(-10.0..=10.0).contains(&value) {
-                return Err(PyValueError::new_err(
-                    "the ADV200 has analog inputs 1-2, in -10..=10 V",
-                ));
+    let is = |r: Role| matches!(r, Role::AnalogInput { .. });
+    let s = terminal(core, device, is, "analog inputs", module, channel)?;
+    let value = match s.set {
+        // Raw counts take whole numbers only.
+        Some(ValueKind::Integer { min, max }) => {
+            if value.fract() != 0.0 || !(min as f64..=max as f64).contains(&value) {
+                return Err(PyValueError::new_err(format!(
+                    "{device}: {} is a raw integer in {min}..={max}, not {value}",
+                    s.id
+                )));
             }
-            with_node::<Adv200, _>(core, device, "analog inputs", |n| {
-                n.set_analog_input(channel, value)
-            })
+            SignalValue::Integer(value as i64)
         }
-        ("tm3", Some(m)) => {
-            if value.fract() != 0.0 || !(f64::from(i16::MIN)..=f64::from(i16::MAX)).contains(&value)
-            {
-                return Err(PyValueError::new_err(
-                    "a TM3 analog input is a raw 16-bit integer",
-                ));
-            }
-            with_node::<Tm3Coupler, _>(core, device, "analog inputs", |n| {
-                n.set_analog_input(m, channel, value as i16)
-            })?
-            .map_err(channel_error)
-        }
-        ("tm3", None) => Err(PyValueError::new_err(
-            "a TM3 input is on an expansion module: give module=",
-        )),
-        (_, Some(_)) => Err(PyValueError::new_err(format!(
-            "{device} has no expansion modules"
-        ))),
-        (k, None) => Err(unsupported(device, k, "analog inputs")),
-    }
+        _ => SignalValue::Real(value),
+    };
+    set(core, device, &s.id, value)
 }
 
 pub(crate) fn digital_output(
@@ -256,29 +218,11 @@ pub(crate) fn digital_output(
     channel: u8,
     module: Option<usize>,
 ) -> PyResult<bool> {
-    let kind = core.device(device)?.kind;
-    match (kind.as_str(), module) {
-        ("adv200", None) => {
-            if !(1..=4).contains(&channel) {
-                return Err(PyValueError::new_err(format!(
-                    "the ADV200 has digital outputs 1-4, not {channel}"
-                )));
-            }
-            with_node::<Adv200, _>(core, device, "digital outputs", |n| {
-                n.digital_output(channel)
-            })
-        }
-        ("tm3", Some(m)) => with_node::<Tm3Coupler, _>(core, device, "digital outputs", |n| {
-            n.digital_output(m, channel)
-        })?
-        .map_err(channel_error),
-        ("tm3", None) => Err(PyValueError::new_err(
-            "a TM3 output is on an expansion module: give module=",
-        )),
-        (_, Some(_)) => Err(PyValueError::new_err(format!(
-            "{device} has no expansion modules"
-        ))),
-        (k, None) => Err(unsupported(device, k, "digital outputs")),
+    let is = |r: Role| r == Role::DigitalOutput;
+    let s = terminal(core, device, is, "digital outputs", module, channel)?;
+    match get(core, device, &s.id)? {
+        SignalValue::Bool(b) => Ok(b),
+        other => Err(err(format!("{device}: {} is {other}, not on or off", s.id))),
     }
 }
 
@@ -288,10 +232,37 @@ pub(crate) fn analog_output(
     module: usize,
     channel: u8,
 ) -> PyResult<i16> {
-    with_node::<Tm3Coupler, _>(core, device, "analog outputs", |n| {
-        n.analog_output(module, channel)
-    })?
-    .map_err(channel_error)
+    let is = |r: Role| r == Role::AnalogOutput;
+    let s = terminal(core, device, is, "analog outputs", Some(module), channel)?;
+    match get(core, device, &s.id)? {
+        SignalValue::Integer(v) => i16::try_from(v).map_err(|_| {
+            err(format!(
+                "{device}: {} = {v} is not a raw 16-bit value",
+                s.id
+            ))
+        }),
+        other => Err(err(format!(
+            "{device}: {} is {other}, not raw counts",
+            s.id
+        ))),
+    }
+}
+
+/// A signal's value in Python.
+fn to_py<'py>(py: Python<'py>, value: &SignalValue) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match value {
+        SignalValue::Bool(b) => pyo3::types::PyBool::new(py, *b).to_owned().into_any(),
+        SignalValue::Integer(i) => i.into_pyobject(py)?.into_any(),
+        SignalValue::Real(f) => f.into_pyobject(py)?.into_any(),
+        SignalValue::Text(s) => s.into_pyobject(py)?.into_any(),
+        SignalValue::List(a) => {
+            let items = a
+                .iter()
+                .map(|v| to_py(py, v))
+                .collect::<PyResult<Vec<_>>>()?;
+            pyo3::types::PyList::new(py, items)?.into_any()
+        }
+    })
 }
 
 pub(crate) fn drive<'py>(
@@ -299,44 +270,23 @@ pub(crate) fn drive<'py>(
     core: &mut Core,
     device: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let kind = core.device(device)?.kind;
-    let d = PyDict::new(py);
-    match kind.as_str() {
-        "adv200" => {
-            let (speed, current, thermal, alarms, nmt, power, faults) =
-                with_node::<Adv200, _>(core, device, "drive model", |n| {
-                    let drive = n.drive();
-                    (
-                        drive.speed(),
-                        drive.current(),
-                        drive.thermal(),
-                        drive.alarms().iter().map(|a| a.name()).collect::<Vec<_>>(),
-                        n.nmt_state().map(|s| format!("{s:?}")),
-                        n.power_state().map(|s| format!("{s:?}")),
-                        n.opt_bus_faults(),
-                    )
-                })?;
-            d.set_item("speed_rpm", speed)?;
-            d.set_item("current_a", current)?;
-            d.set_item("thermal", thermal)?;
-            d.set_item("alarms", alarms)?;
-            d.set_item("nmt_state", nmt)?;
-            d.set_item("power_state", power)?;
-            d.set_item("opt_bus_faults", faults)?;
-        }
-        "opendrive" => {
-            let inputs = with_node::<OpenDrive, _>(core, device, "drive model", |n| {
-                (1..=8).map(|k| n.drive().input(k)).collect::<Vec<bool>>()
-            })?;
-            d.set_item("inputs", inputs)?;
-        }
-        k => return Err(unsupported(device, k, "drive model")),
+    let (d, summary) = read_twin(core, device, |t| t.summary())?;
+    let summary = summary.unwrap_or_default();
+    if summary.is_empty() {
+        return Err(unsupported(device, &d.kind, "drive model"));
     }
-    Ok(d)
+    let dict = PyDict::new(py);
+    for entry in summary {
+        match &entry.value {
+            Some(v) => dict.set_item(entry.name, to_py(py, v)?)?,
+            None => dict.set_item(entry.name, py.None())?,
+        }
+    }
+    Ok(dict)
 }
 
-/// A parameter key from Python: an ADV200 `PAR` number, or an OpenDrive name (`"P61"`,
-/// `"C48"`).
+/// A parameter key from Python: a number (an ADV200 `PAR`) or a name (an OpenDrive `"P61"`,
+/// `"C48"`); the device says which it takes.
 #[derive(FromPyObject)]
 pub(crate) enum ParKey {
     /// A number.
@@ -346,138 +296,64 @@ pub(crate) enum ParKey {
 }
 
 impl ParKey {
-    fn number(&self) -> PyResult<u16> {
+    fn key(&self) -> ParameterKey {
         match self {
-            ParKey::Number(n) => Ok(*n),
-            ParKey::Name(s) => s
-                .trim()
-                .parse()
-                .map_err(|_| PyValueError::new_err(format!("{s:?} is not a parameter number"))),
+            ParKey::Number(n) => ParameterKey::Number(*n),
+            ParKey::Name(s) => ParameterKey::Name(s.clone()),
         }
     }
+}
 
-    fn opendrive(&self) -> PyResult<ParId> {
-        match self {
-            ParKey::Name(s) => s.trim().parse().map_err(|_| {
-                PyValueError::new_err(format!("{s:?} is not an OpenDrive parameter (P61, C48, …)"))
-            }),
-            ParKey::Number(n) => Err(PyValueError::new_err(format!(
-                "OpenDrive parameters are named with their class: \"P{n}\" or \"C{n}\""
-            ))),
-        }
+fn parameter_error(device: &str, d: &BuiltDevice, e: ParameterError, what: &str) -> PyErr {
+    match e {
+        ParameterError::None => unsupported(device, &d.kind, what),
+        ParameterError::BadKey(m) | ParameterError::Refused(m) => PyValueError::new_err(m),
     }
 }
 
 pub(crate) fn param(core: &mut Core, device: &str, key: &ParKey) -> PyResult<i64> {
-    let kind = core.device(device)?.kind;
-    match kind.as_str() {
-        "adv200" => {
-            let number = key.number()?;
-            with_node::<Adv200, _>(core, device, "parameters", |n| n.param(number))?
-                .map_err(|e| PyValueError::new_err(format!("PAR {number}: {e}")))
-        }
-        "opendrive" => {
-            let id = key.opendrive()?;
-            with_node::<OpenDrive, _>(core, device, "parameters", |n| {
-                i64::from(n.drive().param(id))
-            })
-        }
-        k => Err(unsupported(device, k, "parameters")),
-    }
+    let key = key.key();
+    let (d, r) = read_twin(core, device, |t| t.parameter(&key))?;
+    r.unwrap_or(Err(ParameterError::None))
+        .map_err(|e| parameter_error(device, &d, e, "parameters"))
 }
 
 pub(crate) fn set_param(core: &mut Core, device: &str, key: &ParKey, value: i64) -> PyResult<()> {
-    let kind = core.device(device)?.kind;
-    match kind.as_str() {
-        "adv200" => {
-            let number = key.number()?;
-            with_node::<Adv200, _>(core, device, "parameters", |n| n.set_param(number, value))?
-                .map_err(|e| PyValueError::new_err(format!("PAR {number} = {value}: {e}")))
-        }
-        "opendrive" => {
-            let id = key.opendrive()?;
-            let v = i32::try_from(value)
-                .map_err(|_| PyValueError::new_err(format!("{value} does not fit a parameter")))?;
-            with_node::<OpenDrive, _>(core, device, "parameters", |n| {
-                n.drive_mut().set_param(id, v)
-            })?
-            .map_err(|e| PyValueError::new_err(format!("{id} = {value}: {e}")))
-        }
-        k => Err(unsupported(device, k, "keypad parameters")),
-    }
+    let key = key.key();
+    let (d, r) = with_twin(core, device, |t, cx| t.set_parameter(&key, value, cx))?;
+    r.unwrap_or(Err(ParameterError::None))
+        .map_err(|e| parameter_error(device, &d, e, "keypad parameters"))
 }
 
 pub(crate) fn raise_alarm(core: &mut Core, device: &str, alarm: &str) -> PyResult<()> {
-    let kind = core.device(device)?.kind;
-    match kind.as_str() {
-        "adv200" => {
-            let a = Alarm::from_name(alarm).ok_or_else(|| {
-                let names: Vec<String> = Alarm::all().into_iter().map(Alarm::name).collect();
-                PyValueError::new_err(format!(
-                    "the ADV200 has no alarm {alarm:?} (alarms: {})",
-                    names.join(", ")
-                ))
-            })?;
-            with_node::<Adv200, _>(core, device, "alarms", |n| n.raise_alarm(a))
-        }
-        k => Err(unsupported(device, k, "alarms")),
+    let fault = Fault::alarm(alarm);
+    let (d, r) = with_twin(core, device, |t, cx| t.inject(&fault, cx))?;
+    match r.unwrap_or(Err(FaultError::None {
+        kind: FaultKind::Alarm,
+    })) {
+        Ok(()) => Ok(()),
+        Err(FaultError::None { .. }) => Err(unsupported(device, &d.kind, "alarms")),
+        Err(e) => Err(PyValueError::new_err(e.to_string())),
     }
 }
 
-/// A Python value as the TOML value a scenario script would give.
-fn to_toml(value: &Bound<'_, PyAny>) -> PyResult<toml::Value> {
+/// A Python value as the signal value a scenario script would give.
+fn to_signal(value: &Bound<'_, PyAny>) -> PyResult<SignalValue> {
     if let Ok(b) = value.extract::<bool>() {
-        return Ok(toml::Value::Boolean(b));
+        return Ok(SignalValue::Bool(b));
     }
     if let Ok(i) = value.extract::<i64>() {
-        return Ok(toml::Value::Integer(i));
+        return Ok(SignalValue::Integer(i));
     }
     if let Ok(f) = value.extract::<f64>() {
-        return Ok(toml::Value::Float(f));
+        return Ok(SignalValue::Real(f));
     }
     if let Ok(s) = value.extract::<String>() {
-        return Ok(toml::Value::String(s));
+        return Ok(SignalValue::Text(s));
     }
     Err(PyTypeError::new_err(
         "a signal value is a bool, an int, a float or a str",
     ))
-}
-
-fn to_py<'py>(py: Python<'py>, value: &toml::Value) -> PyResult<Bound<'py, PyAny>> {
-    Ok(match value {
-        toml::Value::Boolean(b) => pyo3::types::PyBool::new(py, *b).to_owned().into_any(),
-        toml::Value::Integer(i) => i.into_pyobject(py)?.into_any(),
-        toml::Value::Float(f) => f.into_pyobject(py)?.into_any(),
-        toml::Value::String(s) => s.into_pyobject(py)?.into_any(),
-        toml::Value::Array(a) => {
-            let items = a
-                .iter()
-                .map(|v| to_py(py, v))
-                .collect::<PyResult<Vec<_>>>()?;
-            pyo3::types::PyList::new(py, items)?.into_any()
-        }
-        other => other.to_string().into_pyobject(py)?.into_any(),
-    })
-}
-
-/// Run `f` with the kind of `device`, its port and the simulation.
-fn with_kind<R>(
-    core: &mut Core,
-    device: &str,
-    f: impl FnOnce(&dyn cantwin_scenario::DeviceKind, &mut cantwin_bus::Simulation, PortId) -> R,
-) -> PyResult<R> {
-    let d = core.device(device)?;
-    let Core { mode, registry, .. } = core;
-    let kind = registry
-        .get(&d.kind)
-        .ok_or_else(|| err(format!("{device}: unknown kind {:?}", d.kind)))?;
-    match mode {
-        crate::sim::Mode::Virtual(sim) => Ok(f(kind, sim, d.port)),
-        crate::sim::Mode::Paced(p) => p
-            .handle()
-            .with(|sim| f(kind, sim, d.port))
-            .map_err(|e| err(e.to_string())),
-    }
 }
 
 pub(crate) fn set_signal(
@@ -486,11 +362,8 @@ pub(crate) fn set_signal(
     name: &str,
     value: &Bound<'_, PyAny>,
 ) -> PyResult<()> {
-    let value = to_toml(value)?;
-    with_kind(core, device, |k, sim, port| {
-        k.set_signal(sim, port, name, &value)
-    })?
-    .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))
+    let value = to_signal(value)?;
+    set(core, device, &SignalId::new(name), value)
 }
 
 pub(crate) fn read_signal<'py>(
@@ -499,8 +372,7 @@ pub(crate) fn read_signal<'py>(
     device: &str,
     name: &str,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let v = with_kind(core, device, |k, sim, port| k.read_signal(sim, port, name))?
-        .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))?;
+    let v = get(core, device, &SignalId::new(name))?;
     to_py(py, &v)
 }
 
@@ -509,15 +381,28 @@ pub(crate) fn live_values<'py>(
     core: &mut Core,
     device: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let values = with_kind(core, device, |k, sim, port| k.live_values(sim, port))?;
+    let (_, values) = read_twin(core, device, |t| t.live_values())?;
     let d = PyDict::new(py);
-    for v in values {
+    for v in values.unwrap_or_default() {
         d.set_item(v.name, v.value)?;
     }
     Ok(d)
 }
 
 pub(crate) fn inject(core: &mut Core, device: &str, fault: Option<&str>) -> PyResult<()> {
-    with_kind(core, device, |k, sim, port| k.inject(sim, port, fault))?
-        .map_err(|e| PyValueError::new_err(format!("{device}: {e}")))
+    let (d, r) = with_twin(core, device, |t, cx| match fault {
+        Some(f) => t.inject(&Fault::internal(f), cx),
+        None => t.repair(FaultKind::Internal, cx),
+    })?;
+    match r.unwrap_or(Err(FaultError::None {
+        kind: FaultKind::Internal,
+    })) {
+        Ok(()) => Ok(()),
+        Err(e @ FaultError::None { .. }) => Err(PyValueError::new_err(format!(
+            "{device}: {} {} device has {e}",
+            article(&d.kind),
+            d.kind
+        ))),
+        Err(e) => Err(PyValueError::new_err(format!("{device}: {e}"))),
+    }
 }

@@ -21,7 +21,7 @@ use cantwin_can::{Duration, ExtendedId, Frame, Id, Instant, Node, Outbox, Standa
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::sim::{Delivery, Mode, Shared, err, secs};
+use crate::core::{Delivery, Mode, Shared, err, secs};
 
 /// How far past the last frame handed to Python the simulation runs freely: frames that
 /// follow within this much bus time (the segments of an SDO block, a PDO burst) come as

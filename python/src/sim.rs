@@ -1,142 +1,18 @@
 //! `cantwin.Simulation`: a scenario built into a simulation, in virtual or paced time.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, AtomicU64};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+use std::sync::{Arc, Condvar, Mutex};
 
-use cantwin_bus::{
-    BusId, FaultRule, FrameSelector, PacedConfig, PacedSimulation, PortId, Simulation as BusSim,
-};
-use cantwin_can::{BitRate, Duration, ErrorState};
-use cantwin_scenario::{BuildEnv, BuiltDevice, Registry, Scenario};
-use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyKeyError, PyValueError};
+use cantwin_bus::{FaultRule, FrameSelector, PacedConfig, PacedSimulation, Simulation as BusSim};
+use cantwin_can::{BitRate, ErrorState};
+use cantwin_scenario::{BuildEnv, Registry, Scenario};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::capture::Capture;
+use crate::core::{Core, Delivery, Mode, Shared, err, secs};
 use crate::port::Port;
-
-create_exception!(
-    cantwin,
-    CantwinError,
-    PyException,
-    "A scenario that cannot be loaded, a device or object that does not answer, a stopped simulation."
-);
-
-/// Where the simulation runs.
-pub(crate) enum Mode {
-    /// Virtual time: only `advance` and waiting receivers move it.
-    Virtual(BusSim),
-    /// Paced to the wall clock on its own thread.
-    Paced(PacedSimulation),
-}
-
-/// Frames handed to Python ports and not yet answered: the reaction rule of virtual time.
-#[derive(Default)]
-pub(crate) struct Delivery {
-    /// A frame reached a Python port since Python last sent one.
-    pub pending: AtomicBool,
-    /// The bus time (ns) of that frame.
-    pub at: AtomicU64,
-}
-
-/// The state of one simulation.
-pub(crate) struct Core {
-    pub mode: Mode,
-    pub buses: Vec<(String, BusId)>,
-    pub devices: Vec<BuiltDevice>,
-    pub registry: Registry,
-    /// How long (wall clock) a receiver in virtual time lets other Python threads answer a
-    /// frame before it lets the simulation run past it.
-    pub reaction_time: std::time::Duration,
-}
-
-/// What the simulation's objects share: the core and a condition variable signalled when
-/// Python sends a frame or the simulation changes mode.
-pub(crate) struct Shared {
-    pub core: Mutex<Core>,
-    pub changed: Condvar,
-    pub delivery: Arc<Delivery>,
-}
-
-impl Shared {
-    pub fn lock(&self) -> MutexGuard<'_, Core> {
-        self.core.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-}
-
-pub(crate) fn err(message: impl Into<String>) -> PyErr {
-    CantwinError::new_err(message.into())
-}
-
-pub(crate) fn secs(seconds: f64) -> PyResult<Duration> {
-    if !seconds.is_finite() || seconds < 0.0 {
-        return Err(PyValueError::new_err(format!(
-            "a time must be a finite number of seconds >= 0, not {seconds}"
-        )));
-    }
-    Ok(Duration::from_secs_f64(seconds))
-}
-
-impl Core {
-    /// Run `f` on the simulation (in paced mode, brought up to the wall clock first).
-    pub fn with_sim<R>(&mut self, f: impl FnOnce(&mut BusSim) -> R) -> PyResult<R> {
-        match &mut self.mode {
-            Mode::Virtual(sim) => Ok(f(sim)),
-            Mode::Paced(p) => p.handle().with(f).map_err(|e| err(e.to_string())),
-        }
-    }
-
-    pub fn bus_id(&self, name: &str) -> PyResult<BusId> {
-        self.buses
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, id)| *id)
-            .ok_or_else(|| {
-                let names: Vec<&str> = self.buses.iter().map(|(n, _)| n.as_str()).collect();
-                PyKeyError::new_err(format!(
-                    "no bus named {name:?} (buses: {})",
-                    names.join(", ")
-                ))
-            })
-    }
-
-    pub fn device(&self, name: &str) -> PyResult<BuiltDevice> {
-        self.devices
-            .iter()
-            .find(|d| d.name == name)
-            .cloned()
-            .ok_or_else(|| {
-                let names: Vec<&str> = self.devices.iter().map(|d| d.name.as_str()).collect();
-                PyKeyError::new_err(format!(
-                    "no device named {name:?} (devices: {})",
-                    names.join(", ")
-                ))
-            })
-    }
-
-    fn bus_name(&self, id: BusId) -> String {
-        self.buses
-            .iter()
-            .find(|(_, b)| *b == id)
-            .map(|(n, _)| n.clone())
-            .unwrap_or_default()
-    }
-
-    /// Apply `f` to the bus of a device's port.
-    pub fn on_port(
-        &mut self,
-        device: &str,
-        f: impl FnOnce(&mut cantwin_bus::Bus, PortId) -> Result<(), cantwin_bus::BusError>,
-    ) -> PyResult<()> {
-        let port = self.device(device)?.port;
-        self.with_sim(|sim| match sim.bus_mut(port.bus()) {
-            Some(bus) => f(bus, port).map_err(|e| err(e.to_string())),
-            None => Err(err("the device's bus is gone")),
-        })?
-    }
-}
 
 /// A scenario built into a simulation.
 ///
@@ -165,7 +41,6 @@ fn build(
         mode: Mode::Virtual(built.sim),
         buses: built.buses,
         devices: built.devices,
-        registry,
         reaction_time,
     };
     Ok(Simulation {

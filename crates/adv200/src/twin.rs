@@ -99,7 +99,27 @@ impl Twin for Adv200 {
             })
             .terminal(None, u32::from(k))
         }));
+        v.extend((1..=DIGITAL_OUTPUTS).map(|k| {
+            SignalDescription::output(
+                SignalId::indexed("digital_output", &[u32::from(k)]),
+                ValueKind::Bool,
+            )
+            .role(Role::DigitalOutput)
+            .terminal(None, u32::from(k))
+        }));
         v
+    }
+
+    /// `digital_output.K` (K 1–4): the drive's relay and digital outputs.
+    fn read_signal(&self, id: &SignalId) -> Result<SignalValue, SignalError> {
+        match terminal(id, "digital_output", DIGITAL_OUTPUTS) {
+            Some(k) => Ok(SignalValue::Bool(self.digital_output(k))),
+            None => Err(SignalError::unknown(
+                id,
+                Direction::Read,
+                "digital_output.1–4",
+            )),
+        }
     }
 
     /// `digital_input.K` (K 1–8, true or false) and `analog_input.K` (K 1–2, volts within
