@@ -832,3 +832,52 @@ fn cia301_7_2_4_1_expedited_only_server_refuses_segmented_initiates() {
     );
     assert!(h.server.is_idle());
 }
+
+#[test]
+fn cia301_7_4_3_sub_index_ff_refused_before_any_other_check() {
+    let mut h = expedited_only();
+    h.server
+        .set_capabilities(SdoCapabilities::EXPEDITED_ONLY.with_sub_index_ff_refused());
+    // Initiate download and upload, even of an object that does not exist.
+    assert_eq!(
+        h.one([0x2F, 0x00, 0x20, 0xFF, 42, 0, 0, 0]),
+        abort(0x2000, 0xFF, AbortCode::NO_SUB_INDEX)
+    );
+    assert_eq!(
+        h.one([0x40, 0x34, 0x12, 0xFF, 0, 0, 0, 0]),
+        abort(0x1234, 0xFF, AbortCode::NO_SUB_INDEX)
+    );
+    // Before the capability check: a block request for sub-index 0xFF.
+    assert_eq!(
+        h.one([0xA4, 0x08, 0x10, 0xFF, 0x7F, 0, 0, 0]),
+        abort(0x1008, 0xFF, AbortCode::NO_SUB_INDEX)
+    );
+    assert_eq!(
+        h.one([0xC2, 0x03, 0x20, 0xFF, 0x10, 0, 0, 0]),
+        abort(0x2003, 0xFF, AbortCode::NO_SUB_INDEX)
+    );
+    // Segments carry no multiplexer: the segment rule applies.
+    assert_eq!(
+        h.one([0x00, 0x17, 0x10, 0xFF, 1, 2, 3, 4]),
+        abort(0, 0, AbortCode::INVALID_COMMAND)
+    );
+    // Without the rule, a missing object is looked up as usual.
+    h.server.set_capabilities(SdoCapabilities::FULL);
+    assert_eq!(
+        h.one([0x40, 0x34, 0x12, 0xFF, 0, 0, 0, 0]),
+        abort(0x1234, 0xFF, AbortCode::NO_OBJECT)
+    );
+}
+
+#[test]
+fn cia301_7_4_3_sub_index_ff_rule_in_a_full_server_leaves_block_segments_alone() {
+    let mut h = Harness::new();
+    h.server
+        .set_capabilities(SdoCapabilities::FULL.with_sub_index_ff_refused());
+    // The last of 43 segments starts 0xAB (c = 1, seqno 43: it reads as ccs 5) and
+    // carries 0xFF where a request has its sub-index.
+    let mut data = pattern(300);
+    data[296] = 0xFF;
+    assert!(h.block_download(0x2003, 0, &data, true).is_ok());
+    assert_eq!(h.access.get(0x2003, 0), Ok(Value::Domain(data)));
+}

@@ -51,7 +51,11 @@ use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
 ///   request's index and sub-index; an upload of a value longer than 4 bytes with
 ///   0x06070012 (length too high) and the request's index and sub-index;
 /// * without block transfer, every block request (ccs 5 or 6) is aborted with 0x05040001
-///   and bytes 1–3 of the request as index and sub-index.
+///   and bytes 1–3 of the request as index and sub-index;
+/// * with [`SdoCapabilities::sub_index_ff_refused`], every initiate request and block
+///   request (ccs 1, 2, 5, 6) for sub-index 0xFF is aborted with 0x06090011 before any
+///   other check: a device that does not offer the object-structure sub-index 0xFF of
+///   CiA 301 §7.4.3 refuses it whether or not the object exists.
 ///
 /// ```
 /// use cantwin_can::{Frame, Id, Instant, Outbox};
@@ -80,20 +84,32 @@ pub struct SdoCapabilities {
     pub segmented: bool,
     /// Block download and upload (CiA 301 §7.2.4.3.9–16).
     pub block: bool,
+    /// Requests for sub-index 0xFF are refused with 0x06090011 before any other check.
+    pub sub_index_ff_refused: bool,
 }
 
 impl SdoCapabilities {
-    /// Every transfer CiA 301 defines.
+    /// Every transfer CiA 301 defines; sub-index 0xFF is looked up like any other.
     pub const FULL: SdoCapabilities = SdoCapabilities {
         segmented: true,
         block: true,
+        sub_index_ff_refused: false,
     };
 
     /// Expedited transfers only (a CiA 301 minimum-capability device).
     pub const EXPEDITED_ONLY: SdoCapabilities = SdoCapabilities {
         segmented: false,
         block: false,
+        sub_index_ff_refused: false,
     };
+
+    /// The same services, refusing sub-index 0xFF before any other check.
+    pub const fn with_sub_index_ff_refused(self) -> Self {
+        SdoCapabilities {
+            sub_index_ff_refused: true,
+            ..self
+        }
+    }
 
     /// The abort a request gets before it is served (see the type's documentation), with
     /// the multiplexer the abort frame carries; `None` if the request is offered. `b` is
@@ -109,7 +125,14 @@ impl SdoCapabilities {
                 | Request::BlockUploadAck { .. }
                 | Request::BlockUploadEnd
         );
+        let initiate = matches!(
+            req,
+            Request::InitiateDownload { .. } | Request::InitiateUpload { .. }
+        );
         let mux = Mux::of_frame(b);
+        if self.sub_index_ff_refused && (initiate || block) && mux.sub == 0xFF {
+            return Some((mux, AbortCode::NO_SUB_INDEX));
+        }
         if !self.segmented {
             match req {
                 Request::DownloadSegment { .. } | Request::UploadSegment { .. } => {
