@@ -8,13 +8,13 @@
 //!   PAR 4000 = DeviceNet runs the [`crate::devicenet`] personality instead (chapter 3: bit
 //!   rates 125k–500k, else FFC5; MAC ID 1–63, else FFC6; faults FFC7 bus-off, FFC9 duplicate
 //!   MAC ID, 0 polled I/O timed out or enable without polled I/O; no EMCY, §3.7.2).
-//! * **SDO** (§1.1 items 10–11, §1.4): requests to 0x600 + node are screened before the CiA
-//!   301 stack sees them. Sub-index 0xFF is refused (0x06090011). Unless
-//!   [`Adv200Config::expedited_only`] is off, a segmented or block request is aborted with
-//!   0x05040001 (command specifier not valid), and an upload of an object longer than 4 bytes
-//!   with 0x06070012. Parameters are served at 0x2000 + PAR sub 1 in both directions: a
-//!   download of 1–4 bytes is accepted for any parameter, an upload returns the parameter's
-//!   size.
+//! * **SDO** (§1.1 items 10–11, §1.4): the CiA 301 stack answers every request, with the
+//!   services of a minimum-capability device: sub-index 0xFF is refused (0x06090011), and
+//!   unless [`Adv200Config::expedited_only`] is off a segmented or block request is aborted
+//!   with 0x05040001 and an upload of an object longer than 4 bytes with 0x06070012
+//!   ([`SdoCapabilities`]). Drive parameters are served by the dictionary's hooks at
+//!   0x2000 + PAR sub 1 in both directions ([`crate::station`]): a download of 1–4 bytes is
+//!   accepted for any parameter, an upload returns the parameter's size.
 //! * **Runtime faults** raise Opt Bus Fault (EMCY 0xFF11, sub-code in the manufacturer bytes)
 //!   while the drive's enable command is on, or always with `Fieldbus alarm mode` = 1: 0
 //!   bus loss (no SYNC within 1.5 × 0x1006, or enable while not Operational), 8130 guarding
@@ -34,10 +34,10 @@
 //!   Operational, AL on in any other NMT state or with Opt Bus Fault active.
 
 use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
-use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, Event};
 use cantwin_canopen::nmt::State;
-use cantwin_canopen::od::{ObjectDictionary, OdHooks, Value};
+use cantwin_canopen::od::{ObjectDictionary, OdHooks};
+use cantwin_canopen::sdo::SdoCapabilities;
 
 use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
 use std::sync::Arc;
@@ -45,10 +45,11 @@ use std::sync::Arc;
 use crate::alarms::{Alarm, CardFault, opt_bus};
 use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
-use crate::ds402::{Ds402, State as PowerState};
-use crate::od::{Descriptions, Personality, value_of};
-use crate::params::{ParamAccess, ParamDb, ParamError, catalog, def, par};
-use crate::pdc::{self, Format, Pdc};
+use crate::ds402::State as PowerState;
+use crate::od::{Descriptions, Personality};
+use crate::params::{ParamDb, ParamError, def, par};
+use crate::pdc::{self, Pdc};
+use crate::station::{Station, od_i64};
 
 /// How the twin is set up besides its parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -86,20 +87,13 @@ pub struct Leds {
     pub vc5: bool,
 }
 
-/// Validates the DS402 objects the dictionary cannot check alone.
-#[derive(Debug, Clone, Copy, Default)]
-struct Hooks;
-
-impl OdHooks for Hooks {}
-
+/// The card on the bus in a CANopen personality: its CiA 301 device, whose dictionary's
+/// hooks hold the drive.
 struct Card {
-    dev: Device<Hooks>,
+    dev: Device<Station>,
     personality: Personality,
     pdc: Pdc,
-    ds402: Ds402,
     last_sync: Option<Instant>,
-    /// Values last written into the dictionary, per catalog entry.
-    pushed: Vec<i64>,
 }
 
 /// The fieldbus parameters latched at the last drive reset.
@@ -112,11 +106,41 @@ struct Latched {
     alarm_mode: bool,
 }
 
+/// The vl objects of CiA 402 as the master last wrote them into the dictionary.
+#[derive(Debug, Clone, Copy)]
+struct VlCommand {
+    controlword: u16,
+    target: i64,
+    min: i64,
+    max: i64,
+    acceleration: f64,
+    deceleration: f64,
+}
+
+impl VlCommand {
+    fn of(od: &ObjectDictionary) -> Self {
+        let rate = |index: u16| {
+            let dv = od_i64(od, index, 1).unwrap_or(1000) as f64;
+            let dt = od_i64(od, index, 2).unwrap_or(1).max(1) as f64;
+            dv / dt
+        };
+        VlCommand {
+            controlword: od_i64(od, 0x6040, 0).unwrap_or(0) as u16,
+            target: od_i64(od, 0x6042, 0).unwrap_or(0),
+            min: od_i64(od, 0x6046, 1).unwrap_or(0),
+            max: od_i64(od, 0x6046, 2).unwrap_or(i64::from(i16::MAX)),
+            acceleration: rate(0x6048),
+            deceleration: rate(0x6049),
+        }
+    }
+}
+
 /// The ADV200 drive with its EXP-CAN/DN-ADV card. See the [module documentation](self).
 pub struct Adv200 {
     config: Adv200Config,
-    params: ParamDb,
-    drive: Drive,
+    /// The drive while no CANopen card holds it (as its dictionary's hooks): fieldbus off,
+    /// a card that could not start, DeviceNet.
+    home: Station,
     card: Option<Card>,
     dnet: Option<Slave<DnApp>>,
     latched: Latched,
@@ -138,7 +162,7 @@ impl core::fmt::Debug for Adv200 {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Adv200")
             .field("powered", &self.powered)
-            .field("alarms", &self.drive.alarms())
+            .field("alarms", &self.st().drive.alarms())
             .finish_non_exhaustive()
     }
 }
@@ -150,28 +174,6 @@ impl core::fmt::Debug for Adv200 {
 pub const BUS_OFF_REPEAT: Duration = Duration::from_secs(1);
 
 const BAUDS: [u32; 5] = [0, 125_000, 250_000, 500_000, 1_000_000];
-
-fn raw_i64(od: &ObjectDictionary, index: u16, sub: u8) -> Option<i64> {
-    Some(match od.get(index, sub).ok()? {
-        Value::Integer8(v) => i64::from(v),
-        Value::Integer16(v) => i64::from(v),
-        Value::Integer32(v) => i64::from(v),
-        Value::Unsigned8(v) => i64::from(v),
-        Value::Unsigned16(v) => i64::from(v),
-        Value::Unsigned32(v) => i64::from(v),
-        _ => return None,
-    })
-}
-
-fn sdo_frame(node: u8, data: [u8; 8]) -> Option<Frame> {
-    Frame::std(0x580 + u16::from(node), &data).ok()
-}
-
-fn abort_frame(node: u8, index: u16, sub: u8, code: AbortCode) -> Option<Frame> {
-    let i = index.to_le_bytes();
-    let c = code.to_u32().to_le_bytes();
-    sdo_frame(node, [0x80, i[0], i[1], sub, c[0], c[1], c[2], c[3]])
-}
 
 impl Adv200 {
     /// A drive with factory parameters, not powered.
@@ -185,8 +187,7 @@ impl Adv200 {
     pub fn with_descriptions(config: Adv200Config, descriptions: Arc<Descriptions>) -> Self {
         Adv200 {
             config,
-            params: ParamDb::new(),
-            drive: Drive::new(),
+            home: Station::default(),
             card: None,
             dnet: None,
             latched: Latched::default(),
@@ -200,20 +201,36 @@ impl Adv200 {
         }
     }
 
+    /// The drive, wherever it is held.
+    fn st(&self) -> &Station {
+        match &self.card {
+            Some(c) => c.dev.hooks(),
+            None => &self.home,
+        }
+    }
+
+    /// The drive, mutably.
+    fn st_mut(&mut self) -> &mut Station {
+        match &mut self.card {
+            Some(c) => c.dev.hooks_mut(),
+            None => &mut self.home,
+        }
+    }
+
     /// The parameters.
     pub fn params(&self) -> &ParamDb {
-        &self.params
+        &self.st().params
     }
 
     /// The value of parameter `par`.
     pub fn param(&self, par: u16) -> Result<i64, ParamError> {
-        self.params.get(par)
+        self.params().get(par)
     }
 
     /// Writes parameter `par` from the keypad (checked like an SDO write).
     pub fn set_param(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
         self.dirty = true;
-        self.params.set(par, value)
+        self.st_mut().params.set(par, value)
     }
 
     /// Writes parameter `par` by enumeration name or number from the keypad.
@@ -226,27 +243,56 @@ impl Adv200 {
         self.set_param(par, v)
     }
 
+    /// The value of object `index`/`sub` as an SDO upload would give it (hooked objects
+    /// served from the drive), without the SDO server's transfer rules. Drive parameters
+    /// (0x2000 + PAR sub 1) answer in every personality; other objects while the card runs
+    /// CANopen or DS402.
+    pub fn object_bytes(&self, index: u16, sub: u8) -> Result<Vec<u8>, cantwin_canopen::AbortCode> {
+        let Some(c) = &self.card else {
+            if (crate::station::PARAMS_FIRST..=crate::station::PARAMS_LAST).contains(&index)
+                && sub == 1
+            {
+                let (bytes, len) = self
+                    .home
+                    .params
+                    .encode(index - crate::station::PARAMS_FIRST)
+                    .map_err(|e| e.abort_code())?;
+                return Ok(bytes[..len].to_vec());
+            }
+            return Err(cantwin_canopen::AbortCode::NO_OBJECT);
+        };
+        let od = c.dev.od();
+        let id = od.locate(index, sub)?;
+        if od.description().is_hooked(index)
+            && let Some(r) = c.dev.hooks().serve(index, sub)
+        {
+            let (bytes, len) = r?;
+            return Ok(bytes[..len].to_vec());
+        }
+        Ok(od.raw(id).to_vec())
+    }
+
     /// The drive model.
     pub fn drive(&self) -> &Drive {
-        &self.drive
+        &self.st().drive
     }
 
     /// Sets digital input k (1..=8), effective at the next event.
     pub fn set_digital_input(&mut self, k: u8, on: bool) {
         self.dirty = true;
-        self.drive.set_digital_input(k, on);
+        self.st_mut().drive.set_digital_input(k, on);
     }
 
     /// Sets analog input k (1..=2) in volts.
     pub fn set_analog_input(&mut self, k: u8, volts: f64) {
         self.dirty = true;
-        self.drive.set_analog_input(k, volts);
+        self.st_mut().drive.set_analog_input(k, volts);
     }
 
     /// Raises a drive alarm (an outside cause: overvoltage, external fault, …).
     pub fn raise_alarm(&mut self, alarm: Alarm) {
         self.dirty = true;
-        self.drive.raise(alarm);
+        self.st_mut().drive.raise(alarm);
     }
 
     /// Gives the card an internal defect (FF04, FFB4..FFC3, "Internal error, contact
@@ -277,7 +323,7 @@ impl Adv200 {
 
     /// Digital output k (1..=4).
     pub fn digital_output(&self, k: u8) -> bool {
-        Drive::digital_output(&self.params, k)
+        Drive::digital_output(self.params(), k)
     }
 
     /// The card's NMT state, if it is on the bus.
@@ -290,7 +336,7 @@ impl Adv200 {
         self.card
             .as_ref()
             .filter(|c| c.personality == Personality::Ds402)
-            .map(|c| c.ds402.state())
+            .map(|c| c.dev.hooks().ds402.state())
     }
 
     /// The CANopen device of the card, if it is on the bus.
@@ -308,7 +354,8 @@ impl Adv200 {
 
     /// The Opt Bus Fault sub-codes active.
     pub fn opt_bus_faults(&self) -> Vec<u16> {
-        self.drive
+        self.st()
+            .drive
             .alarms()
             .iter()
             .filter_map(|a| match a {
@@ -343,19 +390,29 @@ impl Adv200 {
         }
     }
 
+    /// Runs the drive held at home to `now` (no card holds it).
+    fn advance_home(&mut self, now: Instant) {
+        let st = &mut self.home;
+        st.drive.advance(&mut st.params, now);
+    }
+
     /// A drive reset (power cycle of the drive with its parameters kept): latches the
     /// fieldbus parameters and restarts the card.
     pub fn reset_drive(&mut self, now: Instant, out: &mut Outbox) {
         self.powered = true;
         self.last_now = now;
-        // Kept until the reset is over so that a card rebuilt alike finds its description
-        // still in use, instead of building it again.
-        let _previous = self.card.take();
+        // The previous card is kept until the reset is over so that a card rebuilt alike
+        // finds its description still in use, instead of building it again; the drive comes
+        // home from it first.
+        let mut previous = self.card.take();
+        if let Some(c) = &mut previous {
+            self.home = core::mem::take(c.dev.hooks_mut());
+        }
         self.dnet = None;
-        self.drive.restart();
+        self.home.drive.restart();
         self.sticky = None;
         self.bus_off_recovered = None;
-        let p = &self.params;
+        let p = &self.home.params;
         self.latched = Latched {
             ty: p.value(par::FIELDBUS_TYPE),
             baud: p.value(par::FIELDBUS_BAUDRATE),
@@ -363,21 +420,18 @@ impl Adv200 {
             ms_enable: p.value(par::FIELDBUS_MS_ENABLE) != 0,
             alarm_mode: p.value(par::FIELDBUS_ALARM_MODE) != 0,
         };
-        let _ = self.params.force(par::FIELDBUS_STATE, 0);
+        let _ = self.home.params.force(par::FIELDBUS_STATE, 0);
         // The process data the master sent lives in the card's memory: a restart starts from
         // zero, so a control word received before a power loss cannot enable the drive
         // before the master sends one again.
         for n in 1..=crate::params::CHANNELS {
-            let _ = self.params.force(par::m2s_mon(n), 0);
+            let _ = self.home.params.force(par::m2s_mon(n), 0);
         }
         let personality = match self.latched.ty {
             1 => Personality::CanOpen,
             3 => Personality::Ds402,
             2 => return self.reset_devicenet(now, out),
-            0 => {
-                self.drive.advance(&mut self.params, now);
-                return;
-            }
+            0 => return self.advance_home(now),
             _ => return self.config_fault(0xFF01, now),
         };
         if self.latched.baud == 0 {
@@ -391,11 +445,10 @@ impl Adv200 {
         }
         let bps = BAUDS.get(self.latched.baud as usize).copied().unwrap_or(0);
         if self.config.bus_bit_rate.is_some_and(|b| b != bps) {
-            self.drive.advance(&mut self.params, now);
-            return;
+            return self.advance_home(now);
         }
         let (pdc, fault) = if personality == Personality::CanOpen {
-            match pdc::configure(&mut self.params) {
+            match pdc::configure(&mut self.home.params) {
                 Ok(p) => (p, None),
                 Err(e) => (Pdc::default(), Some(e.code())),
             }
@@ -412,30 +465,35 @@ impl Adv200 {
                 let mut c = DeviceConfig::new(node);
                 c.sync_producer = false;
                 c.time_producer = false;
-                Device::with_hooks(d, c, Hooks).ok()
+                // §1.1 item 11: expedited transfers only (unless the limit is lifted);
+                // item 10: no object-structure sub-index 0xFF.
+                let services = if self.config.expedited_only {
+                    SdoCapabilities::EXPEDITED_ONLY
+                } else {
+                    SdoCapabilities::FULL
+                };
+                c.sdo = services.with_sub_index_ff_refused();
+                Device::with_hooks(d, c, Station::default()).ok()
             });
-        let Some(dev) = built else {
+        let Some(mut dev) = built else {
             return self.config_fault(0xFF04, now);
         };
-        let mut card = Card {
+        self.home.ds402 = Default::default();
+        self.home.configure(&pdc, self.latched.ms_enable);
+        core::mem::swap(dev.hooks_mut(), &mut self.home);
+        dev.on_power_up(now, out);
+        self.card = Some(Card {
             dev,
             personality,
             pdc,
-            ds402: Ds402::new(),
             last_sync: None,
-            pushed: Vec::new(),
-        };
-        card.dev.on_power_up(now, out);
-        card.pushed = catalog()
-            .iter()
-            .map(|d| raw_i64(card.dev.od(), d.sdo_index(), 1).unwrap_or(0))
-            .collect();
-        self.card = Some(card);
+        });
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
-            self.drive.raise(Alarm::OptBusFault(code));
+            self.st_mut().drive.raise(Alarm::OptBusFault(code));
         }
-        self.settle(now, out);
+        self.settle(now);
+        drop(previous);
     }
 
     /// Chapter 3: the DeviceNet personality. Bit rates 125k/250k/500k (else FFC5), MAC ID
@@ -462,10 +520,9 @@ impl Adv200 {
             .bus_bit_rate
             .is_some_and(|b| b != rate.bits_per_second())
         {
-            self.drive.advance(&mut self.params, now);
-            return;
+            return self.advance_home(now);
         }
-        let (pdc, fault) = match pdc::configure(&mut self.params) {
+        let (pdc, fault) = match pdc::configure(&mut self.home.params) {
             Ok(p) => (p, None),
             Err(e) => (Pdc::default(), Some(e.code())),
         };
@@ -477,16 +534,14 @@ impl Adv200 {
             events: Vec::new(),
         };
         let config = SlaveConfig::new(mac, rate, identity(self.config.serial));
-        let Ok(mut slave) = Slave::new(config, app) else {
+        let Ok(slave) = Slave::new(config, app) else {
             return self.config_fault(0xFF04, now);
         };
-        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
-        slave.on_power_up(now, out);
-        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
         self.dnet = Some(slave);
+        self.with_dnet(|s| s.on_power_up(now, out));
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
-            self.drive.raise(Alarm::OptBusFault(code));
+            self.home.drive.raise(Alarm::OptBusFault(code));
         }
         self.dnet_events(now);
     }
@@ -496,9 +551,9 @@ impl Adv200 {
         let Some(slave) = &mut self.dnet else {
             return false;
         };
-        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        core::mem::swap(&mut self.home.params, &mut slave.app_mut().params);
         f(slave);
-        core::mem::swap(&mut self.params, &mut slave.app_mut().params);
+        core::mem::swap(&mut self.home.params, &mut slave.app_mut().params);
         true
     }
 
@@ -508,7 +563,7 @@ impl Adv200 {
         let Some(slave) = &mut self.dnet else { return };
         let events: Vec<SlaveEvent> = slave.app_mut().events.drain(..).collect();
         let io = slave.poll_connection().is_some();
-        let mut state = self.params.value(par::FIELDBUS_STATE);
+        let mut state = self.home.params.value(par::FIELDBUS_STATE);
         for e in events {
             match e {
                 SlaveEvent::Allocated { .. } if state == 0 => state = 1,
@@ -527,18 +582,18 @@ impl Adv200 {
         if state == 2 && !io {
             state = 1;
         }
-        let _ = self.params.force(par::FIELDBUS_STATE, state);
-        self.drive.advance(&mut self.params, now);
+        let _ = self.home.params.force(par::FIELDBUS_STATE, state);
+        self.advance_home(now);
         if state != 2 && self.drive_enable_cmd() {
             self.bus_fault(opt_bus::BUS_LOSS);
         }
         if let Some(sticky) = self.sticky
-            && !self.drive.alarms().contains(&sticky)
+            && !self.home.drive.alarms().contains(&sticky)
         {
-            self.drive.raise(sticky);
+            self.home.drive.raise(sticky);
         }
-        self.drive.advance(&mut self.params, now);
-        while self.drive.poll_event().is_some() {}
+        self.advance_home(now);
+        while self.home.drive.poll_event().is_some() {}
         self.last_now = self.last_now.max(now);
         self.dirty = false;
     }
@@ -564,75 +619,107 @@ impl Adv200 {
 
     fn config_fault(&mut self, code: u16, now: Instant) {
         self.sticky = Some(Alarm::OptBusFault(code));
-        self.drive.raise(Alarm::OptBusFault(code));
-        self.drive.advance(&mut self.params, now);
+        self.home.drive.raise(Alarm::OptBusFault(code));
+        self.advance_home(now);
     }
 
     /// A runtime fieldbus fault (only while enabled unless alarm mode is on).
     fn bus_fault(&mut self, sub: u16) {
         let enabled = self.drive_enable_cmd();
         if enabled || self.latched.alarm_mode {
-            self.drive.raise(Alarm::OptBusFault(sub));
+            self.st_mut().drive.raise(Alarm::OptBusFault(sub));
         }
     }
 
     fn drive_enable_cmd(&self) -> bool {
-        match self.card.as_ref().map(|c| c.personality) {
-            Some(Personality::Ds402) => self.card.as_ref().is_some_and(|c| c.ds402.power()),
+        match &self.card {
+            Some(c) if c.personality == Personality::Ds402 => c.dev.hooks().ds402.power(),
             _ => {
-                if self.params.value(par::COMMANDS_REMOTE_SEL) == 1 {
-                    let s = self.params.value(par::DIG_ENABLE_SRC) as u16;
-                    s != 0 && self.params.value(s) != 0
+                let p = self.params();
+                if p.value(par::COMMANDS_REMOTE_SEL) == 1 {
+                    let s = p.value(par::DIG_ENABLE_SRC) as u16;
+                    s != 0 && p.value(s) != 0
                 } else {
-                    self.params.value(par::DIGITAL_INPUT_MON) & 1 != 0
+                    p.value(par::DIGITAL_INPUT_MON) & 1 != 0
                 }
             }
         }
     }
 
-    /// Runs the drive to `now`, exchanges values with the dictionary and reports alarms.
-    fn settle(&mut self, now: Instant, _out: &mut Outbox) {
+    /// Whether the drive's control task is due at `now` or an input changed since the last
+    /// evaluation: then the drive is evaluated before the stack reads its parameters.
+    fn stale(&self, now: Instant) -> bool {
+        self.dirty || self.st().drive.next_deadline().is_some_and(|d| d <= now)
+    }
+
+    /// Evaluates the drive at `now`: runs it, applies the NMT state and the fieldbus
+    /// faults, and reports alarm changes as EMCY.
+    fn settle(&mut self, now: Instant) {
         self.last_now = self.last_now.max(now);
         self.dirty = false;
-        self.profile_in(now);
-        self.drive.advance(&mut self.params, now);
+        self.profile_in();
+        let st = self.st_mut();
+        st.touched = false;
+        st.drive.advance(&mut st.params, now);
         let mut not_operational = false;
         let mut ds402 = false;
         if let Some(c) = &mut self.card {
+            let state = c.dev.state();
+            let st = c.dev.hooks_mut();
             if c.personality == Personality::Ds402 {
-                let fault = !self.drive.alarms().is_empty();
-                let stopped = self.drive.speed() == 0.0;
-                c.ds402.refresh(fault, stopped);
+                let fault = !st.drive.alarms().is_empty();
+                let stopped = st.drive.speed() == 0.0;
+                st.ds402.refresh(fault, stopped);
                 ds402 = true;
             }
-            let state = match c.dev.state() {
+            let fieldbus_state = match state {
                 State::Operational => 2,
                 State::PreOperational => 1,
                 _ => 0,
             };
-            let _ = self.params.force(par::FIELDBUS_STATE, state);
-            not_operational = c.dev.state() != State::Operational;
+            let _ = st.params.force(par::FIELDBUS_STATE, fieldbus_state);
+            not_operational = state != State::Operational;
         }
         if not_operational && self.drive_enable_cmd() {
             self.bus_fault(opt_bus::BUS_LOSS);
         }
-        if let Some(sticky) = self.sticky
-            && !self.drive.alarms().contains(&sticky)
+        let sticky = self.sticky;
+        let st = self.st_mut();
+        if let Some(sticky) = sticky
+            && !st.drive.alarms().contains(&sticky)
         {
-            self.drive.raise(sticky);
+            st.drive.raise(sticky);
         }
-        if ds402 || !self.drive.alarms().is_empty() {
+        if ds402 || !st.drive.alarms().is_empty() {
             // The power state or the alarms changed what the drive is commanded to do.
-            self.profile_in(now);
-            self.drive.advance(&mut self.params, now);
+            self.profile_in();
+            let st = self.st_mut();
+            st.drive.advance(&mut st.params, now);
         }
         self.report_alarms();
-        self.push();
+        let Some(c) = &mut self.card else { return };
+        match c.personality {
+            Personality::CanOpen => {
+                // The S2M channels' monitors show what the TPDOs carry (§1.3).
+                let st = c.dev.hooks_mut();
+                for item in c.pdc.s2m.items() {
+                    let v = pdc::s2m_value(&st.params, item.channel);
+                    let _ = st.params.force(par::s2m_mon(item.channel), v);
+                }
+            }
+            Personality::Ds402 => {
+                let target = od_i64(c.dev.od(), 0x6042, 0).unwrap_or(0);
+                c.dev.hooks_mut().update_statusword(target);
+            }
+        }
     }
 
     fn report_alarms(&mut self) {
-        while let Some(e) = self.drive.poll_event() {
-            let Some(c) = &mut self.card else { continue };
+        let Some(c) = &mut self.card else {
+            while self.home.drive.poll_event().is_some() {}
+            return;
+        };
+        while let Some(e) = c.dev.hooks_mut().drive.poll_event() {
             match e {
                 AlarmEvent::Raised(a) => {
                     // Every Opt Bus Fault sub-code is its own occurrence of 0xFF11 (§1.5):
@@ -641,7 +728,14 @@ impl Adv200 {
                 }
                 AlarmEvent::Cleared(a) => {
                     let code = a.emcy_code();
-                    if !self.drive.alarms().iter().any(|b| b.emcy_code() == code) {
+                    if !c
+                        .dev
+                        .hooks()
+                        .drive
+                        .alarms()
+                        .iter()
+                        .any(|b| b.emcy_code() == code)
+                    {
                         c.dev.emcy().clear(code);
                     }
                 }
@@ -649,129 +743,49 @@ impl Adv200 {
         }
     }
 
-    /// Values the bus wrote into the dictionary (RPDOs) go to the parameters.
-    fn pull(&mut self) {
-        let Some(c) = &mut self.card else { return };
-        for (i, d) in catalog().iter().enumerate() {
-            let Some(v) = raw_i64(c.dev.od(), d.sdo_index(), 1) else {
-                continue;
-            };
-            if v == c.pushed[i] || c.pushed[i] == i64::MIN {
-                continue;
-            }
-            let m2s = (1..=16u16).find(|n| par::m2s_mon(*n) == d.par);
-            let v = match m2s {
-                Some(n) => {
-                    let f = Format::from_value(self.params.value(par::m2s_sys(n)));
-                    if f.bits() == 16 {
-                        i64::from(v as u16 as i16)
-                    } else {
-                        v
-                    }
-                }
-                None => v,
-            };
-            c.pushed[i] = v;
-            if m2s.is_some() {
-                if self.latched.ms_enable {
-                    let _ = self.params.force(d.par, v);
-                }
-            } else if d.access == ParamAccess::Rw {
-                let _ = self.params.set(d.par, v);
-            }
-        }
-    }
-
-    /// Parameter values go into the dictionary (TPDOs read them there).
-    fn push(&mut self) {
-        let Some(c) = &mut self.card else { return };
-        if c.personality == Personality::CanOpen {
-            for item in c.pdc.s2m.items() {
-                let v = pdc::s2m_value(&self.params, item.channel);
-                let _ = self.params.force(par::s2m_mon(item.channel), v);
-            }
-        }
-        for (i, d) in catalog().iter().enumerate() {
-            let v = self.params.value(d.par);
-            if v != c.pushed[i] {
-                c.pushed[i] = v;
-                let _ = c
-                    .dev
-                    .set_value(d.sdo_index(), 1, &value_of(d.ty.data_type(), v));
-            }
-        }
-        if c.personality == Personality::Ds402 {
-            let od = c.dev.od();
-            let target = raw_i64(od, 0x6042, 0).unwrap_or(0);
-            let speed = self.params.value(par::MOTOR_SPEED);
-            let reached = c.ds402.state() == PowerState::OperationEnabled && speed == target;
-            let sw = i64::from(c.ds402.statusword(reached));
-            for (index, v) in [
-                (0x6041, sw),
-                (0x6043, self.params.value(par::RAMP_OUTPUT)),
-                (0x6044, speed),
-            ] {
-                if raw_i64(c.dev.od(), index, 0) != Some(v) {
-                    let ty = if index == 0x6041 {
-                        cantwin_canopen::od::DataType::Unsigned16
-                    } else {
-                        cantwin_canopen::od::DataType::Integer16
-                    };
-                    let _ = c.dev.set_value(index, 0, &value_of(ty, v));
-                }
-            }
-        }
-    }
-
     /// CiA 402: the control word and the vl objects command the drive.
-    fn profile_in(&mut self, _now: Instant) {
+    fn profile_in(&mut self) {
         let Some(c) = &mut self.card else { return };
         if c.personality != Personality::Ds402 {
             return;
         }
-        let od = c.dev.od();
-        let cw = raw_i64(od, 0x6040, 0).unwrap_or(0) as u16;
+        let vl = VlCommand::of(c.dev.od());
+        let sticky = self.sticky;
+        let st = c.dev.hooks_mut();
+        let cw = vl.controlword;
         // The fault reset clears the drive's alarms first, so that transition 15 sees them
         // gone in the same evaluation.
-        if c.ds402.reset_requested(cw) && !self.drive.alarms().is_empty() {
-            self.drive.reset_alarms();
-            if let Some(sticky) = self.sticky
-                && !self.drive.alarms().contains(&sticky)
+        if st.ds402.reset_requested(cw) && !st.drive.alarms().is_empty() {
+            st.drive.reset_alarms();
+            if let Some(sticky) = sticky
+                && !st.drive.alarms().contains(&sticky)
             {
-                self.drive.raise(sticky);
+                st.drive.raise(sticky);
             }
         }
-        let fault = !self.drive.alarms().is_empty();
-        let stopped = self.drive.speed() == 0.0;
-        c.ds402.update(cw, fault, stopped);
-        let target = raw_i64(od, 0x6042, 0).unwrap_or(0);
-        let min = raw_i64(od, 0x6046, 1).unwrap_or(0);
-        let max = raw_i64(od, 0x6046, 2).unwrap_or(i64::from(i16::MAX));
-        let mag = target.abs();
+        let fault = !st.drive.alarms().is_empty();
+        let stopped = st.drive.speed() == 0.0;
+        st.ds402.update(cw, fault, stopped);
+        let mag = vl.target.abs();
         let clamped = if mag == 0 {
             0
         } else {
-            mag.clamp(min, max.max(min))
+            mag.clamp(vl.min, vl.max.max(vl.min))
         };
-        let reference = if target < 0 { -clamped } else { clamped };
-        let rate = |index: u16| {
-            let dv = raw_i64(od, index, 1).unwrap_or(1000) as f64;
-            let dt = raw_i64(od, index, 2).unwrap_or(1).max(1) as f64;
-            dv / dt
-        };
-        let state = c.ds402.state();
-        self.drive.set_profile(Some(ProfileCommands {
-            enable: c.ds402.power(),
-            start: state == PowerState::OperationEnabled && !c.ds402.halt(),
+        let reference = if vl.target < 0 { -clamped } else { clamped };
+        let state = st.ds402.state();
+        st.drive.set_profile(Some(ProfileCommands {
+            enable: st.ds402.power(),
+            start: state == PowerState::OperationEnabled && !st.ds402.halt(),
             fast_stop: state == PowerState::QuickStopActive,
             reference,
-            rates: Some((rate(0x6048), rate(0x6049))),
+            rates: Some((vl.acceleration, vl.deceleration)),
         }));
     }
 
     fn sync_deadline(&self) -> Option<Instant> {
         let c = self.card.as_ref()?;
-        let period = raw_i64(c.dev.od(), 0x1006, 0).unwrap_or(0) as u64;
+        let period = c.dev.od().get_unsigned(0x1006, 0).unwrap_or(0);
         if period == 0 || c.dev.state() == State::Stopped {
             return None;
         }
@@ -779,113 +793,13 @@ impl Adv200 {
         last.checked_add(Duration::from_micros(period * 3 / 2))
     }
 
-    /// Answers a request to the default SDO server before the CiA 301 stack; `true` if done.
-    fn screen_sdo(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) -> bool {
-        let Some(c) = &self.card else { return false };
-        let node = c.dev.node_id();
-        if frame.id().as_raw() != 0x600 + u32::from(node)
-            || frame.id().is_extended()
-            || frame.is_remote()
-            || c.dev.state() == State::Stopped
-        {
-            return false;
-        }
-        let d = frame.data_bytes();
-        let mut b = [0u8; 8];
-        b[..d.len().min(8)].copy_from_slice(&d[..d.len().min(8)]);
-        let ccs = b[0] >> 5;
-        let index = u16::from_le_bytes([b[1], b[2]]);
-        let sub = b[3];
-        let mut reply = |f: Option<Frame>| {
-            if let Some(f) = f {
-                out.push(f);
-            }
-            true
-        };
-        match ccs {
-            1 | 2 | 5 | 6 if sub == 0xFF => {
-                return reply(abort_frame(node, index, sub, AbortCode::NO_SUB_INDEX));
-            }
-            0 | 3 if self.config.expedited_only => {
-                return reply(abort_frame(node, 0, 0, AbortCode::INVALID_COMMAND));
-            }
-            5 | 6 if self.config.expedited_only => {
-                return reply(abort_frame(node, index, sub, AbortCode::INVALID_COMMAND));
-            }
-            1 if self.config.expedited_only && b[0] & 0x02 == 0 => {
-                return reply(abort_frame(node, index, sub, AbortCode::INVALID_COMMAND));
-            }
-            _ => {}
-        }
-        if !matches!(ccs, 1 | 2) {
-            return false;
-        }
-        if (0x2000..=0x5FFF).contains(&index) {
-            let p = index - 0x2000;
-            if def(p).is_none() {
-                return reply(abort_frame(node, index, sub, AbortCode::NO_OBJECT));
-            }
-            if sub > 1 {
-                return reply(abort_frame(node, index, sub, AbortCode::NO_SUB_INDEX));
-            }
-            if ccs == 2 {
-                let (bytes, len) = if sub == 0 {
-                    ([1, 0, 0, 0], 1)
-                } else {
-                    match self.params.encode(p) {
-                        Ok(v) => v,
-                        Err(e) => return reply(abort_frame(node, index, sub, e.abort_code())),
-                    }
-                };
-                let cmd = 0x43 | ((4 - len as u8) << 2);
-                let i = index.to_le_bytes();
-                return reply(sdo_frame(
-                    node,
-                    [cmd, i[0], i[1], sub, bytes[0], bytes[1], bytes[2], bytes[3]],
-                ));
-            }
-            if b[0] & 0x02 == 0 {
-                // A segmented download of a parameter (limit lifted): longer than 4 bytes.
-                return reply(abort_frame(node, index, sub, AbortCode::LENGTH_TOO_HIGH));
-            }
-            let len = if b[0] & 0x01 != 0 {
-                4 - usize::from((b[0] >> 2) & 0x03)
-            } else {
-                4
-            };
-            let result = if sub == 0 {
-                Err(ParamError::ReadOnly)
-            } else {
-                self.write_param(p, &b[4..4 + len])
-            };
-            return match result {
-                Ok(()) => {
-                    let i = index.to_le_bytes();
-                    let r = reply(sdo_frame(node, [0x60, i[0], i[1], sub, 0, 0, 0, 0]));
-                    self.settle(now, out);
-                    r
-                }
-                Err(e) => reply(abort_frame(node, index, sub, e.abort_code())),
-            };
-        }
-        if ccs == 2 && self.config.expedited_only {
-            let od = c.dev.od();
-            let long = od.locate(index, sub).is_ok_and(|id| od.raw(id).len() > 4);
-            if long {
-                return reply(abort_frame(node, index, sub, AbortCode::LENGTH_TOO_HIGH));
-            }
-        }
-        false
-    }
-
-    fn write_param(&mut self, p: u16, data: &[u8]) -> Result<(), ParamError> {
-        crate::fieldbus::write_bytes(&mut self.params, p, data)
-    }
-
-    fn card_events(&mut self, now: Instant) {
+    /// Takes the device's events; returns whether there were any.
+    fn card_events(&mut self, now: Instant) -> bool {
         let mut faults = Vec::new();
+        let mut any = false;
         if let Some(c) = &mut self.card {
             while let Some(e) = c.dev.poll_event() {
+                any = true;
                 match e {
                     Event::Sync { .. } => c.last_sync = Some(now),
                     Event::LifeGuardingLost | Event::HeartbeatLost { .. } => {
@@ -895,12 +809,6 @@ impl Adv200 {
                         to: State::Operational,
                         ..
                     } => c.last_sync = Some(now),
-                    // Reset node/communication restored the dictionary's defaults: the
-                    // drive's parameters are the truth, write them all back (they are kept
-                    // by the drive, not by the card).
-                    Event::ResetApplication | Event::ResetCommunication => {
-                        c.pushed.fill(i64::MIN);
-                    }
                     _ => {}
                 }
             }
@@ -908,6 +816,7 @@ impl Adv200 {
         for f in faults {
             self.bus_fault(f);
         }
+        any
     }
 
     fn check_nmt(&mut self, frame: &Frame) {
@@ -939,17 +848,20 @@ impl Node for Adv200 {
         if !self.powered || self.card.is_none() {
             return;
         }
-        self.settle(now, out);
-        self.check_nmt(frame);
-        if !self.screen_sdo(frame, now, out)
-            && let Some(c) = &mut self.card
-        {
-            c.dev.on_frame(frame, now, out);
-            self.card_events(now);
-            self.pull();
+        // The stack reads parameters while it handles the frame (a TPDO at SYNC): the
+        // drive is brought to `now` first.
+        if self.stale(now) {
+            self.settle(now);
         }
-        self.card_events(now);
-        self.settle(now, out);
+        self.last_now = self.last_now.max(now);
+        self.check_nmt(frame);
+        if let Some(c) = &mut self.card {
+            c.dev.on_frame(frame, now, out);
+        }
+        let events = self.card_events(now);
+        if events || self.st().touched || self.st().drive.has_events() {
+            self.settle(now);
+        }
     }
 
     fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
@@ -968,7 +880,10 @@ impl Node for Adv200 {
             }
             return self.dnet_events(now);
         }
-        self.settle(now, out);
+        if self.stale(now) {
+            self.settle(now);
+        }
+        self.last_now = self.last_now.max(now);
         let mut again = false;
         if self.sync_deadline().is_some_and(|d| d <= now) {
             if let Some(c) = &mut self.card {
@@ -985,7 +900,7 @@ impl Node for Adv200 {
         }
         if again {
             self.card_events(now);
-            self.settle(now, out);
+            self.settle(now);
             if let Some(c) = &mut self.card
                 && c.dev.next_deadline().is_some_and(|d| d <= now)
             {
@@ -1002,7 +917,7 @@ impl Node for Adv200 {
             return Some(self.last_now);
         }
         [
-            self.drive.next_deadline(),
+            self.st().drive.next_deadline(),
             self.card.as_ref().and_then(|c| c.dev.next_deadline()),
             self.dnet.as_ref().and_then(|s| s.next_deadline()),
             self.sync_deadline(),
@@ -1047,6 +962,6 @@ impl Node for Adv200 {
             return self.dnet_events(now);
         }
         self.card_events(now);
-        self.settle(now, out);
+        self.settle(now);
     }
 }

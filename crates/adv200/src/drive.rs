@@ -168,6 +168,11 @@ impl Drive {
         self.alarms.is_empty()
     }
 
+    /// Whether alarm changes wait for [`Drive::poll_event`].
+    pub fn has_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
     /// The next alarm change, oldest first.
     pub fn poll_event(&mut self) -> Option<AlarmEvent> {
         if self.events.is_empty() {

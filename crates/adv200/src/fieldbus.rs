@@ -48,7 +48,11 @@ mod tests {
         write(&mut db, par::s2m_ipa(2), i64::from(par::s2m_dig(2))).unwrap();
         assert_eq!(db.value(par::s2m_sys(2)), 7, "Count 32 becomes Mdplc 32");
         write_bytes(&mut db, par::s2m_ipa(1), &par::s2m_dig(1).to_le_bytes()).unwrap();
-        assert_eq!(db.value(par::s2m_sys(1)), 6, "Not assigned becomes Mdplc 16");
+        assert_eq!(
+            db.value(par::s2m_sys(1)),
+            6,
+            "Not assigned becomes Mdplc 16"
+        );
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! * [`ds402`]: the CiA 402 power state machine (chapter 2);
 //! * [`devicenet`]: the DeviceNet personality (chapter 3);
 //! * [`od`]: the card's object dictionary for the CANopen and DS402 personalities;
+//! * [`station`]: the dictionary's hooks, through which the card reaches the drive;
 //! * [`eds`]: their EDS files, generated from the dictionary;
 //! * [`card`]: the drive and its card as one sans-IO [`cantwin_can::Node`];
 //! * [`example`]: the worked example of §1.6 as a ready network.
@@ -62,6 +63,7 @@ pub mod fieldbus;
 pub mod od;
 pub mod params;
 pub mod pdc;
+pub mod station;
 mod twin;
 
 pub use card::{Adv200, Adv200Config, Leds};

@@ -47,8 +47,31 @@ pub fn value_of(ty: DataType, v: i64) -> Value {
     }
 }
 
-fn param_objects(mut b: OdBuilder) -> OdBuilder {
+/// The widest and narrowest value of an integer type.
+fn type_range(ty: DataType) -> (i64, i64) {
+    match ty {
+        DataType::Integer16 => (i64::from(i16::MIN), i64::from(i16::MAX)),
+        DataType::Integer32 => (i64::from(i32::MIN), i64::from(i32::MAX)),
+        DataType::Unsigned32 => (0, i64::from(u32::MAX)),
+        _ => (0, i64::from(u16::MAX)),
+    }
+}
+
+/// Every parameter as 0x2000 + PAR sub 1, served by the drive's hooks. The `mon` of a
+/// channel the PDC placed is typed as wide as the channel and carries that type's limits,
+/// so that the EDS states what the PDOs carry.
+fn param_objects(mut b: OdBuilder, pdc: &Pdc) -> OdBuilder {
     let rww: [u16; 16] = core::array::from_fn(|i| par::m2s_mon(i as u16 + 1));
+    let placed: Vec<(u16, DataType)> = pdc
+        .m2s
+        .items()
+        .map(|i| (par::m2s_mon(i.channel), i.data_type()))
+        .chain(
+            pdc.s2m
+                .items()
+                .map(|i| (par::s2m_mon(i.channel), i.data_type())),
+        )
+        .collect();
     for d in catalog() {
         let access = if rww.contains(&d.par) {
             Access::Rww
@@ -57,16 +80,20 @@ fn param_objects(mut b: OdBuilder) -> OdBuilder {
         } else {
             Access::Rw
         };
-        let ty = d.ty.data_type();
+        let mapped = placed.iter().find(|(p, _)| *p == d.par).map(|(_, ty)| *ty);
+        let ty = mapped.unwrap_or(d.ty.data_type());
         let mut s = SubObject::new(d.name.clone(), ty, access)
             .default(value_of(ty, d.default))
             .mappable();
         if d.access == ParamAccess::Rw {
             s = s.limits(value_of(ty, d.min), value_of(ty, d.max));
+        } else if mapped.is_some() {
+            let (lo, hi) = type_range(ty);
+            s = s.limits(value_of(ty, lo), value_of(ty, hi));
         }
         b = b.array(d.sdo_index(), d.name.clone(), [(1, s)]);
     }
-    b
+    b.hook(crate::station::PARAMS_FIRST..=crate::station::PARAMS_LAST)
 }
 
 fn pdo_objects(mut b: OdBuilder, rx: &[Vec<u32>], tx: &[Vec<u32>]) -> OdBuilder {
@@ -218,18 +245,21 @@ fn ds402_objects(b: OdBuilder) -> OdBuilder {
         );
     let b = ramp(b, 0x6048, "vl velocity acceleration");
     let b = ramp(b, 0x6049, "vl velocity deceleration");
-    b.var(
-        0x6060,
-        SubObject::new("Modes of operation", DataType::Integer8, Access::Rw)
-            .default(Value::Integer8(2))
-            .limits(Value::Integer8(2), Value::Integer8(2)),
-    )
-    .var(
-        0x6061,
-        SubObject::new("Modes of operation display", DataType::Integer8, Access::Ro)
-            .default(Value::Integer8(2))
-            .mappable(),
-    )
+    // The statusword and the vl actual values are the drive's, computed when read; the
+    // commands are stored, and the hooks learn of every write.
+    b.hook(0x6040..=0x6049)
+        .var(
+            0x6060,
+            SubObject::new("Modes of operation", DataType::Integer8, Access::Rw)
+                .default(Value::Integer8(2))
+                .limits(Value::Integer8(2), Value::Integer8(2)),
+        )
+        .var(
+            0x6061,
+            SubObject::new("Modes of operation display", DataType::Integer8, Access::Ro)
+                .default(Value::Integer8(2))
+                .mappable(),
+        )
 }
 
 /// The dictionary of `personality` with the PDC layout `pdc` (CANopen) as the default PDO
@@ -350,7 +380,7 @@ pub fn build(
         ),
     };
     b = pdo_objects(b, &rx, &tx);
-    b = param_objects(b);
+    b = param_objects(b, pdc);
     if personality == Personality::Ds402 {
         b = ds402_objects(b);
     }

@@ -533,9 +533,22 @@ const NONE: u16 = u16::MAX;
 /// The definitions, and for every number below [`PAR_LIMIT`] the position of its
 /// definition: the drive's control task reads some sixty parameters every millisecond, so a
 /// parameter is found by one table look-up rather than a search.
+#[derive(Debug)]
 struct Catalog {
     defs: Vec<ParamDef>,
     slots: Vec<u16>,
+    /// The range of each definition's type (what [`ParamDb::force`] clamps to).
+    ranges: Vec<(i64, i64)>,
+}
+
+impl Catalog {
+    #[inline]
+    fn slot(&self, par: u16) -> Option<usize> {
+        match self.slots.get(usize::from(par)) {
+            Some(&s) if s != NONE => Some(usize::from(s)),
+            _ => None,
+        }
+    }
 }
 
 fn index_catalog() -> Catalog {
@@ -546,7 +559,12 @@ fn index_catalog() -> Catalog {
             *s = i as u16;
         }
     }
-    Catalog { defs, slots }
+    let ranges = defs.iter().map(|d| d.ty.range()).collect();
+    Catalog {
+        defs,
+        slots,
+        ranges,
+    }
 }
 
 static CATALOG: LazyLock<Catalog> = LazyLock::new(index_catalog);
@@ -556,18 +574,9 @@ pub fn catalog() -> &'static [ParamDef] {
     &CATALOG.defs
 }
 
-/// The position of parameter `par` in [`catalog`].
-#[inline]
-fn slot_of(par: u16) -> Option<usize> {
-    match CATALOG.slots.get(usize::from(par)) {
-        Some(&s) if s != NONE => Some(usize::from(s)),
-        _ => None,
-    }
-}
-
 /// The definition of parameter `par`.
 pub fn def(par: u16) -> Option<&'static ParamDef> {
-    slot_of(par).map(|i| &CATALOG.defs[i])
+    CATALOG.slot(par).map(|i| &CATALOG.defs[i])
 }
 
 /// Why a parameter access failed; each maps to the CiA 301 abort code with the meaning of
@@ -613,9 +622,28 @@ impl ParamError {
 }
 
 /// The values of every parameter.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Clone)]
 pub struct ParamDb {
     values: Vec<i64>,
+    /// The catalogue, held so that an access is one look-up without a check of its
+    /// initialisation.
+    catalog: &'static Catalog,
+}
+
+impl PartialEq for ParamDb {
+    fn eq(&self, other: &Self) -> bool {
+        self.values == other.values
+    }
+}
+
+impl Eq for ParamDb {}
+
+impl core::fmt::Debug for ParamDb {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("ParamDb")
+            .field("values", &self.values)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Default for ParamDb {
@@ -627,20 +655,23 @@ impl Default for ParamDb {
 impl ParamDb {
     /// Every parameter at its factory default.
     pub fn new() -> Self {
+        let catalog: &'static Catalog = &CATALOG;
         ParamDb {
-            values: catalog().iter().map(|d| d.default).collect(),
+            values: catalog.defs.iter().map(|d| d.default).collect(),
+            catalog,
         }
     }
 
     #[inline]
-    fn slot(par: u16) -> Result<usize, ParamError> {
-        slot_of(par).ok_or(ParamError::Missing)
+    fn slot(&self, par: u16) -> Result<usize, ParamError> {
+        self.catalog.slot(par).ok_or(ParamError::Missing)
     }
 
     /// The value of `par`.
     #[inline]
     pub fn get(&self, par: u16) -> Result<i64, ParamError> {
-        Ok(self.values[Self::slot(par)?])
+        let i = self.slot(par)?;
+        Ok(self.values.get(i).copied().unwrap_or(0))
     }
 
     /// The value of `par`, 0 if it does not exist (a Null source).
@@ -684,9 +715,11 @@ impl ParamDb {
     /// value is clamped to the type's range.
     #[inline]
     pub fn force(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
-        let i = Self::slot(par)?;
-        let (lo, hi) = CATALOG.defs[i].ty.range();
-        self.values[i] = value.clamp(lo, hi);
+        let i = self.slot(par)?;
+        let (lo, hi) = self.catalog.ranges.get(i).copied().unwrap_or((0, 0));
+        if let Some(v) = self.values.get_mut(i) {
+            *v = value.clamp(lo, hi);
+        }
         Ok(())
     }
 

@@ -26,6 +26,8 @@
 //! Each placed channel is mapped as `0x2000 + mon` sub 1 of its own channel with its width,
 //! so the PDO mappings are ordinary CiA 301 mappings a master can read back.
 
+use cantwin_canopen::od::DataType;
+
 use crate::params::{ParamDb, ParamType, def, par};
 
 /// A channel's `sys` format (§1.3).
@@ -146,9 +148,22 @@ pub struct Item {
     pub channel: u16,
     /// Width in bits, 16 or 32.
     pub bits: u8,
+    /// Whether the value is signed: always for M2S (the master's data lands sign-extended
+    /// in the channel's 32-bit `mon`), for S2M as the parameter the channel sends.
+    pub signed: bool,
 }
 
 impl Item {
+    /// The type of the channel's `mon` in the dictionary: as wide as the channel.
+    pub const fn data_type(self) -> DataType {
+        match (self.bits, self.signed) {
+            (32, true) => DataType::Integer32,
+            (32, false) => DataType::Unsigned32,
+            (_, true) => DataType::Integer16,
+            (_, false) => DataType::Unsigned16,
+        }
+    }
+
     /// The CiA 301 mapping entry: the channel's `mon` parameter (0x2000 + PAR, sub 1).
     pub fn mapping_entry(self, dir: Dir) -> u32 {
         let mon = match dir {
@@ -214,6 +229,7 @@ pub fn place(dir: Dir, channels: &[(Format, u16)]) -> Result<Layout, PdcFault> {
         layout.pdos[pdo].push(Item {
             channel: n,
             bits: f.bits(),
+            signed: true,
         });
         words += w;
     }
@@ -286,8 +302,8 @@ pub fn configure(db: &mut ParamDb) -> Result<Pdc, PdcFault> {
         }
     }
     let s2m_channels = channels(db, par::s2m_sys);
-    let s2m = place(Dir::S2M, &s2m_channels)?;
-    for item in s2m.items() {
+    let mut s2m = place(Dir::S2M, &s2m_channels)?;
+    for item in s2m.pdos.iter_mut().flatten() {
         let n = item.channel;
         let f = s2m_channels[usize::from(n) - 1].0;
         let ipa = db.value(par::s2m_ipa(n)) as u16;
@@ -303,6 +319,7 @@ pub fn configure(db: &mut ParamDb) -> Result<Pdc, PdcFault> {
         if d.ty.size() * 8 != usize::from(item.bits) {
             return Err(PdcFault::S2mSize(n));
         }
+        item.signed = d.ty.signed();
     }
     Ok(Pdc { m2s, s2m })
 }
@@ -351,7 +368,8 @@ mod tests {
             l.pdos[1],
             vec![Item {
                 channel: 4,
-                bits: 16
+                bits: 16,
+                signed: true,
             }]
         );
     }
