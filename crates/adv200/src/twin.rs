@@ -1,15 +1,21 @@
 //! The ADV200 drive as a [`Twin`]: its terminals as signals, the card's internal faults and
-//! the drive's alarms, its parameters by number, its drive model's summary.
+//! the drive's alarms, its parameters by number, its drive model's summary and the
+//! DeviceNet EDS of its DeviceNet personality.
 
 use cantwin_canopen::od::ObjectDictionary;
+use cantwin_devicenet::Application;
+use cantwin_devicenet::eds::{
+    CipType, DeviceEds, EdsDate, EdsParam, EdsTime, FileSection, descriptor,
+};
 use cantwin_twin::{
-    Context, Direction, Fault, FaultError, FaultKind, LiveValue, ObjectError, ParameterError,
-    ParameterKey, Role, SignalDescription, SignalError, SignalId, SignalValue, SummaryEntry, Twin,
-    ValueKind,
+    Context, DataSheetError, Direction, Fault, FaultError, FaultKind, FileDate, LiveValue,
+    ObjectError, ParameterError, ParameterKey, Role, SignalDescription, SignalError, SignalId,
+    SignalValue, SummaryEntry, Twin, ValueKind,
 };
 
 use crate::alarms::{Alarm, CardFault};
 use crate::card::Adv200;
+use crate::params::{ParamAccess, ParamType, catalog};
 
 /// The digital inputs, the analog inputs and the digital outputs the drive has.
 const DIGITAL_INPUTS: u8 = 8;
@@ -247,6 +253,76 @@ impl Twin for Adv200 {
         let number = number(key)?;
         self.set_param(number, value)
             .map_err(|e| ParameterError::Refused(format!("PAR {number} = {value}: {e}")))
+    }
+
+    /// The DeviceNet EDS of the card's object model (DeviceNet personality only): the
+    /// Identity object, the polled I/O sizes of the PDC layout placed at the last drive
+    /// reset, and every drive parameter as a Parameter object instance.
+    fn data_sheet(&self, written: &FileDate) -> Result<String, DataSheetError> {
+        let slave = self.devicenet().ok_or_else(|| {
+            DataSheetError::Unavailable(
+                "does not run the DeviceNet personality (PAR 4000 Fieldbus type = DeviceNet)"
+                    .into(),
+            )
+        })?;
+        let (input, output) = slave.app().poll_sizes();
+        let params = catalog()
+            .iter()
+            .map(|d| {
+                // The Parameter object answers every value as a DWORD (manual §3.4.1).
+                let ty = if d.ty.signed() {
+                    CipType::Dint
+                } else {
+                    CipType::Udint
+                };
+                let mut p = EdsParam::new(d.par, d.name.clone(), ty, 4);
+                p.units = d.unit.to_string();
+                p.min = Some(d.min);
+                p.max = Some(d.max);
+                p.default = Some(d.default);
+                if d.access == ParamAccess::Ro {
+                    p.descriptor = descriptor::READ_ONLY | descriptor::MONITOR;
+                }
+                let mut help = Vec::new();
+                if let ParamType::Src { .. } = d.ty {
+                    help.push("the number of the parameter feeding it (0 = Null)");
+                }
+                if d.after_reset {
+                    help.push("takes effect at the next drive reset");
+                }
+                p.help = help.join("; ");
+                if let ParamType::Enum(values) = d.ty {
+                    p.enums = values
+                        .iter()
+                        .map(|(v, n)| (i64::from(*v), (*n).to_string()))
+                        .collect();
+                }
+                p
+            })
+            .collect();
+        let eds = DeviceEds {
+            file: FileSection {
+                description: "ADV200 with the EXP-CAN/DN-ADV card, DeviceNet (generated from the twin's object model)".into(),
+                date: EdsDate {
+                    month: written.month,
+                    day: written.day,
+                    year: written.year,
+                },
+                time: EdsTime {
+                    hour: written.hour,
+                    minute: written.minute,
+                    second: written.second,
+                },
+                revision: (1, 0),
+            },
+            identity: slave.config().identity.clone(),
+            vendor_name: "Gefran".into(),
+            product_type_name: "AC Drive".into(),
+            catalog: Some("EXP-CAN/DN-ADV".into()),
+            polled: (input > 0 || output > 0).then_some((input, output)),
+            params,
+        };
+        Ok(cantwin_devicenet::eds::write(&eds))
     }
 
     /// `speed_rpm`, `current_a`, `thermal` (0–1), `alarms` (names), `nmt_state` and

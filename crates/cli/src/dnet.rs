@@ -11,11 +11,11 @@ use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
 use cantwin_can::{Duration, Node, Outbox};
-use cantwin_devicenet::eds::{
-    CipType, DeviceEds, EdsDate, EdsParam, EdsTime, FileSection, descriptor,
-};
-use cantwin_devicenet::wire::{BodyFormat, choice, service};
+use cantwin_devicenet::eds::{EdsDate, EdsTime};
+use cantwin_devicenet::scanner::explicit::{self, Outcome};
+use cantwin_devicenet::wire::{choice, service, status};
 use cantwin_devicenet::{MacId, Scanner, ScannerConfig, ScannerEvent};
+use cantwin_twin::{DataSheetError, FileDate};
 
 use crate::connect::{Link, Target};
 
@@ -256,54 +256,6 @@ fn decode(data: &[u8], ty: ValueType) -> String {
     }
 }
 
-/// The meaning of a CIP general status code (CIP Vol. 1 Appendix B, as every CIP network
-/// uses them).
-pub(crate) fn general_status_text(code: u8) -> &'static str {
-    match code {
-        0x00 => "success",
-        0x01 => "connection failure",
-        0x02 => "resource unavailable",
-        0x03 => "invalid parameter value",
-        0x04 => "path segment error",
-        0x05 => "path destination unknown",
-        0x06 => "partial transfer",
-        0x07 => "connection lost",
-        0x08 => "service not supported",
-        0x09 => "invalid attribute value",
-        0x0A => "attribute list error",
-        0x0B => "already in requested mode/state",
-        0x0C => "object state conflict",
-        0x0D => "object already exists",
-        0x0E => "attribute not settable",
-        0x0F => "privilege violation",
-        0x10 => "device state conflict",
-        0x11 => "reply data too large",
-        0x12 => "fragmentation of a primitive value",
-        0x13 => "not enough data",
-        0x14 => "attribute not supported",
-        0x15 => "too much data",
-        0x16 => "object does not exist",
-        0x17 => "service fragmentation sequence not in progress",
-        0x18 => "no stored attribute data",
-        0x19 => "store operation failure",
-        0x1A => "routing failure, request packet too large",
-        0x1B => "routing failure, response packet too large",
-        0x1C => "missing attribute list entry data",
-        0x1D => "invalid attribute value list",
-        0x1E => "embedded service error",
-        0x1F => "vendor specific error",
-        0x20 => "invalid parameter",
-        0x21 => "write-once value or medium already written",
-        0x22 => "invalid reply received",
-        0x25 => "key failure in path",
-        0x26 => "path size invalid",
-        0x27 => "unexpected attribute in list",
-        0x28 => "invalid member ID",
-        0x29 => "member not settable",
-        _ => "reserved or object-specific status",
-    }
-}
-
 fn mac(v: u8, what: &str) -> Result<MacId> {
     MacId::new(v).map_err(|e| anyhow::anyhow!("{what} {v}: {e}"))
 }
@@ -388,73 +340,36 @@ impl Session {
         instance: u16,
         data: &[u8],
     ) -> Result<Vec<u8>> {
-        let s = &mut self.scanner;
-        let ucmm = class > 0xFF || instance > 0xFF;
-        if ucmm {
-            let format = if class > 0xFF {
-                BodyFormat::F16_16
-            } else {
-                BodyFormat::F8_16
-            };
-            s.open_ucmm(slave, format)?;
-        } else {
-            s.allocate(slave, choice::EXPLICIT)?;
-        }
-        s.request(slave, service, class, instance, data)?;
-        if ucmm {
-            s.close_ucmm(slave)?;
-        } else {
-            s.release(slave, choice::EXPLICIT)?;
-        }
+        let connection = self
+            .scanner
+            .one_off_request(slave, service, class, instance, data)?;
         let events = self.collect(3)?;
-        let how = if ucmm {
-            "opening a UCMM connection"
-        } else {
-            "allocating the explicit connection"
-        };
-        let mut reply = None;
-        for ev in events {
-            match ev {
-                ScannerEvent::Response { data, .. } => reply = Some(Ok(data)),
-                ScannerEvent::Error {
-                    service: svc,
-                    general,
-                    additional,
-                    ..
-                } => {
-                    let err = anyhow::anyhow!(
-                        "MAC ID {slave} answered {} with general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
-                        if svc == service {
-                            "the request".to_string()
-                        } else {
-                            format!("service 0x{svc:02X}")
-                        },
-                        general_status_text(general)
-                    );
-                    if reply.is_none() {
-                        reply = Some(Err(err));
-                    }
-                }
-                ScannerEvent::Timeout { service: svc, .. } if svc == service => {
-                    reply.get_or_insert_with(|| {
-                        Err(anyhow::anyhow!(
-                            "no answer from MAC ID {slave} within {} s (a device that refuses a Set may stay silent)",
-                            self.timeout
-                        ))
-                    });
-                }
-                ScannerEvent::Timeout { .. } => {
-                    reply.get_or_insert_with(|| {
-                        Err(anyhow::anyhow!(
-                            "no answer from MAC ID {slave} {how} within {} s",
-                            self.timeout
-                        ))
-                    });
-                }
-                _ => {}
-            }
+        let how = connection.opening();
+        match explicit::outcome(events, service) {
+            Outcome::Reply(data) => Ok(data),
+            Outcome::Error {
+                service: svc,
+                general,
+                additional,
+            } => Err(anyhow::anyhow!(
+                "MAC ID {slave} answered {} with general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
+                if svc == service {
+                    "the request".to_string()
+                } else {
+                    format!("service 0x{svc:02X}")
+                },
+                status::text(general)
+            )),
+            Outcome::RequestTimeout => Err(anyhow::anyhow!(
+                "no answer from MAC ID {slave} within {} s (a device that refuses a Set may stay silent)",
+                self.timeout
+            )),
+            Outcome::ConnectionTimeout => Err(anyhow::anyhow!(
+                "no answer from MAC ID {slave} {how} within {} s",
+                self.timeout
+            )),
+            Outcome::NoAnswer => Err(anyhow::anyhow!("no answer from MAC ID {slave} {how}")),
         }
-        reply.unwrap_or_else(|| Err(anyhow::anyhow!("no answer from MAC ID {slave} {how}")))
     }
 }
 
@@ -571,7 +486,7 @@ fn browse(s: &mut Session, from: u8, to: u8) -> Result<()> {
             .map(|(m, f)| match f.refused {
                 Some((g, a)) => serde_json::json!({
                     "mac": m.get(),
-                    "refused": {"general_status": g, "additional_code": a, "text": general_status_text(g)},
+                    "refused": {"general_status": g, "additional_code": a, "text": status::text(g)},
                 }),
                 None => serde_json::json!({
                     "mac": m.get(),
@@ -597,7 +512,7 @@ fn browse(s: &mut Session, from: u8, to: u8) -> Result<()> {
             println!(
                 "{:<4} (present; refused the Allocate: general status 0x{g:02X} ({}), additional code 0x{a:02X})",
                 m.to_string(),
-                general_status_text(g)
+                status::text(g)
             );
             continue;
         }
@@ -641,7 +556,7 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
                 failure.get_or_insert_with(|| {
                     format!(
                         "MAC ID {slave} refused service 0x{service:02X}: general status 0x{general:02X} ({}), additional code 0x{additional:02X}",
-                        general_status_text(*general)
+                        status::text(*general)
                     )
                 });
             }
@@ -868,10 +783,6 @@ fn file_date() -> (EdsDate, EdsTime) {
 
 /// Build the scenario, power it up, and describe the device's DeviceNet object model.
 fn eds_text(target: &Target, device: &str) -> Result<String> {
-    use cantwin_adv200::Adv200;
-    use cantwin_adv200::params::{ParamAccess, ParamType, catalog};
-    use cantwin_devicenet::Application;
-
     let file = target
         .scenario
         .as_ref()
@@ -889,67 +800,26 @@ fn eds_text(target: &Target, device: &str) -> Result<String> {
     built
         .sim
         .run_until(cantwin_can::Instant::from_nanos(1_000_000));
-    let drive = built.sim.node::<Adv200>(port).with_context(|| {
-        format!(
-            "{device:?} is not an ADV200 drive: only its DeviceNet personality has an EDS generator"
-        )
-    })?;
-    let slave = drive.devicenet().with_context(|| {
-        format!(
-            "{device:?} does not run the DeviceNet personality (PAR 4000 Fieldbus type = DeviceNet)"
-        )
-    })?;
-    let (input, output) = slave.app().poll_sizes();
-    let params = catalog()
-        .iter()
-        .map(|d| {
-            // The Parameter object answers every value as a DWORD (manual §3.4.1).
-            let ty = if d.ty.signed() {
-                CipType::Dint
-            } else {
-                CipType::Udint
-            };
-            let mut p = EdsParam::new(d.par, d.name.clone(), ty, 4);
-            p.units = d.unit.to_string();
-            p.min = Some(d.min);
-            p.max = Some(d.max);
-            p.default = Some(d.default);
-            if d.access == ParamAccess::Ro {
-                p.descriptor = descriptor::READ_ONLY | descriptor::MONITOR;
-            }
-            let mut help = Vec::new();
-            if let ParamType::Src { .. } = d.ty {
-                help.push("the number of the parameter feeding it (0 = Null)");
-            }
-            if d.after_reset {
-                help.push("takes effect at the next drive reset");
-            }
-            p.help = help.join("; ");
-            if let ParamType::Enum(values) = d.ty {
-                p.enums = values
-                    .iter()
-                    .map(|(v, n)| (i64::from(*v), (*n).to_string()))
-                    .collect();
-            }
-            p
-        })
-        .collect();
     let (date, time) = file_date();
-    let eds = DeviceEds {
-        file: FileSection {
-            description: "ADV200 with the EXP-CAN/DN-ADV card, DeviceNet (generated from the twin's object model)".into(),
-            date,
-            time,
-            revision: (1, 0),
-        },
-        identity: slave.config().identity.clone(),
-        vendor_name: "Gefran".into(),
-        product_type_name: "AC Drive".into(),
-        catalog: Some("EXP-CAN/DN-ADV".into()),
-        polled: (input > 0 || output > 0).then_some((input, output)),
-        params,
+    let written = FileDate {
+        year: date.year,
+        month: date.month,
+        day: date.day,
+        hour: time.hour,
+        minute: time.minute,
+        second: time.second,
     };
-    Ok(cantwin_devicenet::eds::write(&eds))
+    let sheet = built
+        .sim
+        .twin(port)
+        .map_or(Err(DataSheetError::None), |t| t.data_sheet(&written));
+    match sheet {
+        Ok(text) => Ok(text),
+        Err(DataSheetError::None) => bail!(
+            "{device:?} is not an ADV200 drive: only its DeviceNet personality has an EDS generator"
+        ),
+        Err(DataSheetError::Unavailable(why)) => bail!("{device:?} {why}"),
+    }
 }
 
 #[cfg(test)]
@@ -974,7 +844,6 @@ mod tests {
         assert_eq!(decode(&[0xFE, 0xFF, 0xFF, 0xFF], ValueType::I32), "-2");
         assert_eq!(decode(&[2, b'a', b'b'], ValueType::ShortString), "\"ab\"");
         assert_eq!(decode(&[1], ValueType::U16), "01 (1 bytes, not a U16)");
-        assert_eq!(general_status_text(0x14), "attribute not supported");
     }
 
     #[test]

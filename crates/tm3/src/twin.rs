@@ -63,6 +63,11 @@ impl Twin for Tm3Coupler {
         Some(self.device().node_id())
     }
 
+    /// The CiA 301 device's heap; the island's own state is not counted.
+    fn dictionary_heap_bytes(&self) -> Option<usize> {
+        Some(self.device().heap_bytes())
+    }
+
     fn signals(&self) -> Vec<SignalDescription> {
         let mut v = Vec::new();
         for (k, slot) in self.config().island.modules().iter().enumerate() {

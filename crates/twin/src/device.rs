@@ -43,4 +43,8 @@ impl<H: OdHooks> Twin for Device<H> {
     fn canopen_node_id(&self) -> Option<u8> {
         Some(self.node_id())
     }
+
+    fn dictionary_heap_bytes(&self) -> Option<usize> {
+        Some(self.heap_bytes())
+    }
 }

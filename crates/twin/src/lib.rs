@@ -1,7 +1,8 @@
 //! One way in from above: front ends (the CLI, the monitor, the web dashboard, Python) see a
 //! simulated device as a [`Twin`]: its object dictionary where it has one, its signals as
 //! typed ids and values ([`SignalId`], [`SignalValue`], [`SignalError`]), its live values,
-//! injectable internal faults ([`Fault`]), its parameters and a summary of its model. No
+//! injectable internal faults ([`Fault`]), its parameters, a summary of its model and, for a
+//! personality without a dictionary, its own data sheet. No
 //! front end downcasts to a concrete twin type: the bus hands out `&dyn Twin` for the
 //! ports whose node is one.
 //!
@@ -58,6 +59,7 @@ mod fault;
 mod live;
 mod object;
 mod param;
+mod sheet;
 mod signal;
 mod twin;
 
@@ -66,6 +68,7 @@ pub use fault::{Fault, FaultError, FaultKind};
 pub use live::{LiveValue, Role};
 pub use object::{Context, ObjectError};
 pub use param::{ParameterError, ParameterKey};
+pub use sheet::{DataSheetError, FileDate};
 pub use signal::{
     Direction, SignalDescription, SignalError, SignalId, SignalValue, Terminal, ValueKind,
 };

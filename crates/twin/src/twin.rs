@@ -6,6 +6,7 @@ use crate::fault::{Fault, FaultError, FaultKind};
 use crate::live::LiveValue;
 use crate::object::{Context, ObjectError};
 use crate::param::{ParameterError, ParameterKey};
+use crate::sheet::{DataSheetError, FileDate};
 use crate::signal::{Direction, SignalDescription, SignalError, SignalId, SignalValue};
 
 /// One entry of a device model's summary ([`Twin::summary`]).
@@ -57,6 +58,13 @@ pub trait Twin {
     ) -> Result<(), ObjectError> {
         let _ = (index, sub, data, cx);
         Err(ObjectError::NoDictionary)
+    }
+
+    /// Bytes of heap the device's CANopen stack uses (the values of its dictionary, its SDO
+    /// servers, services and queues; a description shared between alike twins is not
+    /// counted), for memory benchmarks. `None` (the default) when it has no such stack.
+    fn dictionary_heap_bytes(&self) -> Option<usize> {
+        None
     }
 
     /// The CANopen node-ID (CiA 301 §7.3.2.1), when the device is a CANopen slave now.
@@ -120,6 +128,14 @@ pub trait Twin {
     ) -> Result<(), ParameterError> {
         let _ = (key, value, cx);
         Err(ParameterError::None)
+    }
+
+    /// The device's own data sheet as text, dated `written`: the EDS of a personality
+    /// whose description is not an object dictionary (a drive's DeviceNet EDS). The default
+    /// has none; a CANopen twin's EDS is generated from [`Twin::dictionary`].
+    fn data_sheet(&self, written: &FileDate) -> Result<String, DataSheetError> {
+        let _ = written;
+        Err(DataSheetError::None)
     }
 
     /// A summary of the device's model (a drive's speed, current, alarms and states).

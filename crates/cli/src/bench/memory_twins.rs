@@ -6,9 +6,8 @@
 //! node-ID (or MAC ID) of its own, plus the shipped examples' listener, so that a lone twin's
 //! frames are acknowledged as they are with many.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
-use cantwin_tm3::coupler::Tm3Coupler;
 use cantwin_tm3::island::MAX_MODULES;
 
 /// One kind of twin measured in `cantwin sim`.
@@ -125,10 +124,11 @@ pub fn tm3_device_heap() -> Result<usize> {
     let scenario = Scenario::parse(&fleet.scenario_text(1), "bench-tm3.toml")?;
     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let port = built.device("twin1").context("the coupler")?.port;
-    let Some(coupler) = built.sim.node::<Tm3Coupler>(port) else {
-        bail!("twin1 is not a TM3 coupler");
-    };
-    Ok(coupler.device().heap_bytes())
+    built
+        .sim
+        .twin(port)
+        .and_then(|t| t.dictionary_heap_bytes())
+        .context("twin1 has no CANopen stack")
 }
 
 #[cfg(test)]

@@ -241,6 +241,10 @@ impl Twin for Cia301Node {
     fn canopen_node_id(&self) -> Option<u8> {
         Some(self.device.node_id())
     }
+
+    fn dictionary_heap_bytes(&self) -> Option<usize> {
+        Some(self.device.heap_bytes())
+    }
 }
 
 /// The object dictionary of the kind, from its settings.
