@@ -44,7 +44,6 @@ pub struct Registry {
 
 impl Registry {
     /// An empty registry ([`Registry::builtin`] has every kind built into cantwin).
-    #[allow(clippy::new_without_default)]
     pub fn new() -> Self {
         Registry { kinds: Vec::new() }
     }
