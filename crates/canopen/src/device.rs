@@ -604,11 +604,12 @@ pub struct Emcy<'a, H> {
 
 impl<H: OdHooks> Emcy<'_, H> {
     /// Raises error `code` with five manufacturer-specific bytes: recorded in 0x1001 and
-    /// 0x1003 and sent as EMCY (subject to the inhibit time) at the next [`Node::on_tick`]
-    /// if EMCY is allowed in the NMT state. Raising an active code again does nothing.
+    /// 0x1003 (the entry from [`OdHooks::error_entry`]) and sent as EMCY (subject to the
+    /// inhibit time, its bytes from [`OdHooks::emcy_manufacturer`]) at the next
+    /// [`Node::on_tick`] if EMCY is allowed in the NMT state. Raising an active code again
+    /// does nothing.
     pub fn raise(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
-        let send = self.core.state.allows(Service::Emcy);
-        let r = self.core.emcy.raise(code, manufacturer, send);
+        let r = self.core.raise(code, manufacturer);
         self.core.mirror_errors();
         r
     }
@@ -617,7 +618,31 @@ impl<H: OdHooks> Emcy<'_, H> {
     /// (one active entry, one EMCY per occurrence); raises it if it is not active.
     pub fn signal(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
         let send = self.core.state.allows(Service::Emcy);
-        let r = self.core.emcy.signal(code, manufacturer, send);
+        let Core {
+            emcy, hooks, od, ..
+        } = &mut *self.core;
+        let r = if emcy.is_active(code) {
+            emcy.signal(code, manufacturer, send)
+        } else {
+            emcy.raise_with(code, manufacturer, send, |register| {
+                hooks.error_entry(od, code, register, manufacturer)
+            })
+        };
+        self.core.mirror_errors();
+        r
+    }
+
+    /// Reports error `code` with `manufacturer` bytes: raises it if it is not active,
+    /// otherwise records another occurrence with its own 0x1003 entry and EMCY (a second
+    /// module failing with the same code), still one active error that one clear ends.
+    pub fn report(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
+        let send = self.core.state.allows(Service::Emcy);
+        let Core {
+            emcy, hooks, od, ..
+        } = &mut *self.core;
+        let r = emcy.report_with(code, manufacturer, send, |register| {
+            hooks.error_entry(od, code, register, manufacturer)
+        });
         self.core.mirror_errors();
         r
     }
@@ -805,7 +830,7 @@ impl<H: OdHooks> Core<H> {
         self.enter(State::PreOperational, now);
         self.heartbeat.start(now);
         if self.error_passive {
-            self.emcy.raise(EMCY_ERROR_PASSIVE, [0; 5], true);
+            self.raise_sending(EMCY_ERROR_PASSIVE, [0; 5], true);
         }
     }
 
@@ -826,9 +851,19 @@ impl<H: OdHooks> Core<H> {
         }
     }
 
-    fn raise(&mut self, code: u16, manufacturer: [u8; 5]) {
+    /// Raises `code`, its 0x1003 entry made by the hooks (see [`Emcy::raise`]).
+    fn raise(&mut self, code: u16, manufacturer: [u8; 5]) -> bool {
         let send = self.state.allows(Service::Emcy);
-        self.emcy.raise(code, manufacturer, send);
+        self.raise_sending(code, manufacturer, send)
+    }
+
+    fn raise_sending(&mut self, code: u16, manufacturer: [u8; 5], send: bool) -> bool {
+        let Core {
+            emcy, hooks, od, ..
+        } = self;
+        emcy.raise_with(code, manufacturer, send, |register| {
+            hooks.error_entry(od, code, register, manufacturer)
+        })
     }
 
     fn clear(&mut self, code: u16) {
@@ -889,7 +924,10 @@ impl<H: OdHooks> Core<H> {
 
     fn send_emcys(&mut self, now: Instant, out: &mut Outbox) {
         if self.state.allows(Service::Emcy) {
-            while let Some(e) = self.emcy.poll(now) {
+            while let Some(mut e) = self.emcy.poll(now) {
+                e.manufacturer =
+                    self.hooks
+                        .emcy_manufacturer(&self.od, e.code, e.register, e.manufacturer);
                 out.push(e.encode(self.emcy.cob_id().can_id()));
             }
         }
@@ -1001,7 +1039,9 @@ impl<H: OdHooks> Core<H> {
                         }
                         self.pdo_events();
                     }
-                    Err(code) => self.raise(code, [0; 5]),
+                    Err(code) => {
+                        self.raise(code, [0; 5]);
+                    }
                 }
             }
             return true;

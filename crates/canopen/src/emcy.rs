@@ -118,27 +118,76 @@ impl Producer {
     }
 
     /// Raises `code` (not 0x0000): records it and queues the EMCY if `send`. Returns
-    /// whether it was newly raised.
+    /// whether it was newly raised. The 0x1003 entry is the code alone.
     pub fn raise(&mut self, code: u16, manufacturer: [u8; 5], send: bool) -> bool {
+        self.raise_with(code, manufacturer, send, |_| u32::from(code))
+    }
+
+    /// [`Producer::raise`] with the 0x1003 entry made by `entry` from the error register
+    /// as it is after the raise (CiA 301 §7.5.2.4: bits 16–31 of an entry are
+    /// manufacturer-specific additional information).
+    pub fn raise_with(
+        &mut self,
+        code: u16,
+        manufacturer: [u8; 5],
+        send: bool,
+        entry: impl FnOnce(u8) -> u32,
+    ) -> bool {
         if code == 0 || self.is_active(code) {
             return false;
         }
         self.active.push(Active { code });
-        if self.history_len > 0 {
-            if self.history.len() >= usize::from(self.history_len) {
-                self.history.pop();
-            }
-            self.history.insert(0, u32::from(code));
-        }
-        self.changed = true;
+        let register = self.register();
+        self.record(entry(register));
         if send {
             self.enqueue(Emcy {
                 code,
-                register: self.register(),
+                register,
                 manufacturer,
             });
         }
         true
+    }
+
+    /// Reports error `code` with `manufacturer` bytes: raises it if it is not active,
+    /// otherwise records another occurrence of it (a different cause in the device's own
+    /// detail, such as another module) with its own 0x1003 entry and EMCY, without a second
+    /// active entry. This is CANopenNode's `CO_errorReport` for another error bit of the
+    /// same code. Returns whether an EMCY was queued or the code newly raised.
+    pub fn report_with(
+        &mut self,
+        code: u16,
+        manufacturer: [u8; 5],
+        send: bool,
+        entry: impl FnOnce(u8) -> u32,
+    ) -> bool {
+        if code == 0 {
+            return false;
+        }
+        if !self.is_active(code) {
+            return self.raise_with(code, manufacturer, send, entry);
+        }
+        let register = self.register();
+        self.record(entry(register));
+        if send {
+            self.enqueue(Emcy {
+                code,
+                register,
+                manufacturer,
+            });
+        }
+        send
+    }
+
+    /// Adds an entry to the pre-defined error field, newest first.
+    fn record(&mut self, entry: u32) {
+        if self.history_len > 0 {
+            if self.history.len() >= usize::from(self.history_len) {
+                self.history.pop();
+            }
+            self.history.insert(0, entry);
+        }
+        self.changed = true;
     }
 
     /// Signals another occurrence of `code` with other manufacturer-specific bytes (the

@@ -190,6 +190,38 @@ pub trait OdHooks {
     fn written(&mut self, od: &mut ObjectDictionary, index: u16, sub: u8) {
         let _ = (od, index, sub);
     }
+
+    /// The five manufacturer-specific bytes (bytes 3–7, CiA 301 §7.2.7.3.1) of an EMCY
+    /// the device sends now: error `code` (0x0000 for an error reset) with error register
+    /// `register`, raised or cleared with `info`. Asked for every EMCY as it goes to the
+    /// bus, so the bytes may carry the device's state at that moment (a status register,
+    /// the failing module). The default sends `info`.
+    fn emcy_manufacturer(
+        &mut self,
+        od: &ObjectDictionary,
+        code: u16,
+        register: u8,
+        info: [u8; 5],
+    ) -> [u8; 5] {
+        let _ = (od, code, register);
+        info
+    }
+
+    /// The 32-bit entry the pre-defined error field (0x1003, CiA 301 §7.5.2.4) records for
+    /// error `code` raised with `info`, the error register being `register` after it: bits
+    /// 0–15 are the code, bits 16–31 manufacturer-specific additional information. Asked
+    /// once per recorded error, as CANopenNode's `CO_errorReport` takes an info code. The
+    /// default records the code alone.
+    fn error_entry(
+        &mut self,
+        od: &ObjectDictionary,
+        code: u16,
+        register: u8,
+        info: [u8; 5],
+    ) -> u32 {
+        let _ = (od, register, info);
+        u32::from(code)
+    }
 }
 
 /// A dictionary together with the device's hooks, as one [`ObjectAccess`]. Built on the
