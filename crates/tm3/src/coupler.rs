@@ -7,7 +7,13 @@
 //! * **EMCY contents.** Every EMCY carries 0x1002 in its manufacturer-specific bytes 3–6
 //!   (little-endian, as read by SDO) and the module number in byte 7 (0 = coupler).
 //! * **0x1003** entries hold the EMCY code (bits 0–15), the error register after the error
-//!   (16–23) and the module number (24–31), newest first, 10 entries.
+//!   (16–23) and the module number (24–31), newest first, 10 entries. Both forms come from
+//!   the device's hooks ([`CouplerHooks`]): the CiA 301 layer asks them for the bytes of
+//!   every EMCY it sends and for every entry it records. A module's error raised while the
+//!   same code is active for another module is another occurrence of it: its own EMCY and
+//!   entry, one active error.
+//! * **0x1002** is stored when the module or bus status changes and again after every reset
+//!   communication (which sets it back to its default).
 //! * **Modules.** At power-up each configured position is compared with what is fitted: a
 //!   missing or different module is a configuration error (EMCY 0x7002, status 1), a
 //!   module that does not answer a configuration timeout (0x7001, status 1), an absent
@@ -46,8 +52,8 @@
 
 use crate::diag::{self, Status};
 use crate::island::{Island, MAX_MODULES};
-use crate::od::{self, IslandDescription};
-use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use crate::od::IslandDescription;
+use cantwin_can::{ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
 use cantwin_canopen::nmt::State;
@@ -176,9 +182,49 @@ impl OdHooks for ManualLimits {
     }
 }
 
+/// The coupler's hooks into its CiA 301 device: the manual's value restrictions
+/// ([`ManualLimits`]), and the manual's forms of the EMCY and of 0x1003. An error is raised
+/// with the module number (0 = coupler) as its fifth manufacturer-specific byte; the EMCY
+/// then carries 0x1002 as it is when the EMCY is sent in bytes 3–6 and the module in
+/// byte 7, and the 0x1003 entry is [`diag::history_entry`] of code, error register and
+/// module.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CouplerHooks {
+    /// 0x1002 as the coupler last published it.
+    status: u32,
+}
+
+impl CouplerHooks {
+    /// 0x1002 as the EMCYs carry it.
+    pub fn manufacturer_status(&self) -> u32 {
+        self.status
+    }
+}
+
+impl OdHooks for CouplerHooks {
+    fn validate(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), AbortCode> {
+        ManualLimits.validate(od, index, sub, data)
+    }
+
+    fn emcy_manufacturer(&mut self, _: &ObjectDictionary, _: u16, _: u8, info: [u8; 5]) -> [u8; 5] {
+        let s = self.status.to_le_bytes();
+        [s[0], s[1], s[2], s[3], info[4]]
+    }
+
+    fn error_entry(&mut self, _: &ObjectDictionary, code: u16, register: u8, info: [u8; 5]) -> u32 {
+        diag::history_entry(code, register, info[4])
+    }
+}
+
 /// The TM3 CANopen bus coupler. See the [module documentation](self).
 pub struct Tm3Coupler {
-    device: Device<ManualLimits>,
+    device: Device<CouplerHooks>,
     desc: Arc<OdDescription>,
     config: CouplerConfig,
     fitted: Vec<Fitted>,
@@ -191,23 +237,15 @@ pub struct Tm3Coupler {
     failure: bool,
     internal_error: bool,
     switch: u8,
-    history: Vec<u32>,
-    /// `history` changed since it was last written into 0x1003.
-    history_dirty: bool,
-    /// 0x1003 was last written non-empty.
-    history_written: bool,
     /// An EMCY was raised or cleared outside the CiA 301 layer's own processing: it must
     /// run once more to send it.
     flush: bool,
     /// The (code, module) pairs raised and still active.
     raised: Vec<(u16, u8)>,
-    /// The modules of the EMCYs the CiA 301 layer will send in this call, in order.
-    pending: Vec<(u16, u8)>,
     sync_seen: Option<Instant>,
     sync_timed_out: bool,
     rx_level: u64,
     rx_last: Instant,
-    scratch: Outbox,
     now: Instant,
     /// The CiA 301 layer's events, passed on to [`Tm3Coupler::poll_event`].
     events: std::collections::VecDeque<Event>,
@@ -251,7 +289,11 @@ impl Tm3Coupler {
             return Err(CouplerError::OtherIsland);
         }
         let desc = Arc::clone(shared.description());
-        let device = Device::with_hooks(desc.clone(), device_config(config.node_id), ManualLimits)?;
+        let device = Device::with_hooks(
+            desc.clone(),
+            device_config(config.node_id),
+            CouplerHooks::default(),
+        )?;
         let n = config.island.modules().len();
         let fitted = config
             .island
@@ -270,17 +312,12 @@ impl Tm3Coupler {
             failure: false,
             internal_error: false,
             switch: config.node_id,
-            history: Vec::new(),
-            history_dirty: false,
-            history_written: false,
             flush: false,
             raised: Vec::new(),
-            pending: Vec::new(),
             sync_seen: None,
             sync_timed_out: false,
             rx_level: 0,
             rx_last: Instant::ZERO,
-            scratch: Outbox::new(),
             now: Instant::ZERO,
             events: std::collections::VecDeque::new(),
             config,
@@ -288,12 +325,12 @@ impl Tm3Coupler {
     }
 
     /// The CiA 301 device inside.
-    pub fn device(&self) -> &Device<ManualLimits> {
+    pub fn device(&self) -> &Device<CouplerHooks> {
         &self.device
     }
 
     /// The CiA 301 device inside, mutably.
-    pub fn device_mut(&mut self) -> &mut Device<ManualLimits> {
+    pub fn device_mut(&mut self) -> &mut Device<CouplerHooks> {
         &mut self.device
     }
 
@@ -548,6 +585,7 @@ impl Tm3Coupler {
             && !matches!(what, Fitted::Module(s) if Some(s) == self.config.island.modules().get(i).map(|m| m.spec))
         {
             self.status[i] = Status::RuntimeError;
+            self.publish_status();
             self.run(now, out, |c, _| c.raise(diag::RUNTIME_ERROR, (i + 1) as u8));
         }
         Ok(())
@@ -560,6 +598,7 @@ impl Tm3Coupler {
             return;
         }
         self.internal_error = on;
+        self.publish_status();
         self.run(now, out, |c, _| {
             if on {
                 c.failure = true;
@@ -584,9 +623,9 @@ impl Tm3Coupler {
         });
     }
 
-    /// Raises `code` for `module` (0 = coupler): through the CiA 301 layer if newly
-    /// active there, else (the same code for another module) as an EMCY of its own. A
-    /// code already active for that module is not raised again.
+    /// Raises `code` for `module` (0 = coupler) through the CiA 301 layer: a new error,
+    /// or, while the code is active for another module, another occurrence of it with its
+    /// own EMCY and 0x1003 entry. A code already active for that module is not raised again.
     fn raise(&mut self, code: u16, module: u8) {
         if self.raised.contains(&(code, module)) && self.device.emcy().is_active(code) {
             return;
@@ -599,19 +638,8 @@ impl Tm3Coupler {
             self.device.emcy().set_register_bits(0x20, true);
         }
         self.raised.push((code, module));
-        if self.device.emcy().raise(code, [0; 5]) {
-            self.pending.push((code, module));
-        } else if self.state().allows_emcy()
-            && let Some(id) = self.emcy_id()
-        {
-            let mut data = [0u8; 8];
-            data[..2].copy_from_slice(&code.to_le_bytes());
-            data[2] = self.device.error_register();
-            data[7] = module;
-            self.scratch.push(Frame::data_array(id, data));
-        }
-        let register = self.device.error_register();
-        self.push_history(diag::history_entry(code, register, module));
+        self.device.emcy().report(code, [0, 0, 0, 0, module]);
+        self.flush = true;
     }
 
     /// Clears `code` (error reset EMCY if it was active).
@@ -624,19 +652,16 @@ impl Tm3Coupler {
         }
     }
 
-    fn push_history(&mut self, entry: u32) {
-        self.history_dirty = true;
-        self.flush = true;
-        self.history.insert(0, entry);
-        self.history.truncate(usize::from(od::ERROR_HISTORY));
-    }
-
-    fn emcy_id(&self) -> Option<Id> {
-        let v = self.device.od().get_unsigned(0x1014, 0)? as u32;
-        if v & (1 << 31) != 0 {
-            return None;
+    /// Publishes 0x1002 after the module or bus status changed, or after a reset
+    /// communication set it back to its default: into the dictionary, and to the hooks for
+    /// the EMCYs.
+    fn publish_status(&mut self) {
+        let status = self.manufacturer_status();
+        self.device.hooks_mut().status = status;
+        let od = self.device.od_mut();
+        if od.get_unsigned(0x1002, 0) != Some(u64::from(status)) {
+            let _ = od.set(0x1002, 0, &Value::Unsigned32(status));
         }
-        Id::standard((v & 0x7FF) as u16).ok()
     }
 
     fn module_check(&mut self) {
@@ -672,54 +697,17 @@ impl Tm3Coupler {
     /// Runs `f` on the coupler and then everything that follows a call into the device.
     fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
         self.now = now;
-        let before = diag::STACK_CODES.map(|c| self.device.emcy().is_active(c));
-        let mut scratch = Outbox::new();
-        f(self, &mut scratch);
-        for (k, &code) in diag::STACK_CODES.iter().enumerate() {
-            if !before[k] && self.device.emcy().is_active(code) {
-                let register = self.device.error_register();
-                self.raised.push((code, 0));
-                self.pending.push((code, 0));
-                self.push_history(diag::history_entry(code, register, 0));
-                if code == diag::RPDO_TIMEOUT {
-                    self.failure = true;
-                    self.device.error_detected(1, now, &mut scratch);
-                }
-            }
+        let timed_out = self.device.emcy().is_active(diag::RPDO_TIMEOUT);
+        f(self, out);
+        if !timed_out && self.device.emcy().is_active(diag::RPDO_TIMEOUT) {
+            // Manual 1029H: an RPDO deadline is handled like a communication error.
+            self.failure = true;
+            self.device.error_detected(1, now, out);
         }
-        self.events(now, &mut scratch);
+        self.events(now, out);
         // Send the EMCYs raised or cleared above.
         if core::mem::take(&mut self.flush) {
-            self.device.on_tick(now, &mut scratch);
-        }
-        self.mirror();
-        let status = self.manufacturer_status().to_le_bytes();
-        let emcy = self.emcy_id();
-        let mut pending = core::mem::take(&mut self.pending).into_iter();
-        for mut f in scratch.drain() {
-            if Some(f.id()) == emcy && f.len() == 8 && !f.is_remote() {
-                let mut d = [0u8; 8];
-                d.copy_from_slice(f.data_bytes());
-                let code = u16::from_le_bytes([d[0], d[1]]);
-                d[3..7].copy_from_slice(&status);
-                // The CiA 301 layer sends its EMCYs in the order they were raised.
-                d[7] = match code {
-                    0 => 0,
-                    _ => pending
-                        .by_ref()
-                        .find(|&(c, _)| c == code)
-                        .map_or(0, |(_, m)| m),
-                };
-                f = Frame::data_array(f.id(), d);
-            }
-            out.push(f);
-        }
-        // EMCYs the coupler built itself (a code already active for another module).
-        for f in self.scratch.drain() {
-            let mut d = [0u8; 8];
-            d.copy_from_slice(f.data_bytes());
-            d[3..7].copy_from_slice(&status);
-            out.push(Frame::data_array(f.id(), d));
+            self.device.on_tick(now, out);
         }
         let device = &mut self.device;
         self.raised.retain(|&(c, _)| device.emcy().is_active(c));
@@ -733,8 +721,8 @@ impl Tm3Coupler {
             self.events.push_back(e);
             match e {
                 Event::ResetCommunication => {
-                    self.history.clear();
                     self.raised.clear();
+                    self.publish_status();
                     self.sync_seen = None;
                     self.sync_timed_out = false;
                     self.raise_module_errors();
@@ -823,32 +811,6 @@ impl Tm3Coupler {
         Some(last + period + Duration::from_nanos(period.as_nanos() / 2))
     }
 
-    /// Writes 0x1002 and the coupler's form of 0x1003 into the dictionary.
-    fn mirror(&mut self) {
-        let status = self.manufacturer_status();
-        let od = self.device.od_mut();
-        if od.get_unsigned(0x1002, 0) != Some(u64::from(status)) {
-            let _ = od.set(0x1002, 0, &Value::Unsigned32(status));
-        }
-        // The CiA 301 layer empties 0x1003 when 0 is written to sub 0 (or at a reset), and
-        // writes its own form of the entries whenever its errors change.
-        let count = od.get_unsigned(0x1003, 0).unwrap_or(0);
-        if count == 0 && !self.history.is_empty() && self.history_written {
-            self.history.clear();
-        }
-        let first = od.get_unsigned(0x1003, 1).unwrap_or(0);
-        let want_first = u64::from(self.history.first().copied().unwrap_or(0));
-        if count != self.history.len() as u64 || first != want_first || self.history_dirty {
-            let _ = od.set(0x1003, 0, &Value::Unsigned8(self.history.len() as u8));
-            for k in 0..od::ERROR_HISTORY {
-                let v = self.history.get(usize::from(k)).copied().unwrap_or(0);
-                let _ = od.set(0x1003, k + 1, &Value::Unsigned32(v));
-            }
-        }
-        self.history_dirty = false;
-        self.history_written = !self.history.is_empty();
-    }
-
     /// The firmware's receive queue takes `frame`; false if it overflowed.
     fn rx_queue(&mut self, now: Instant) -> bool {
         let service = self.config.rx_service_time.as_nanos().max(1);
@@ -872,22 +834,14 @@ impl Tm3Coupler {
     }
 }
 
-/// Whether EMCY may be sent in a state.
-trait AllowsEmcy {
-    fn allows_emcy(self) -> bool;
-}
-
-impl AllowsEmcy for State {
-    fn allows_emcy(self) -> bool {
-        matches!(self, State::PreOperational | State::Operational)
-    }
-}
-
 impl Node for Tm3Coupler {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         if self.switch != self.device.node_id()
-            && let Ok(d) =
-                Device::with_hooks(self.desc.clone(), device_config(self.switch), ManualLimits)
+            && let Ok(d) = Device::with_hooks(
+                self.desc.clone(),
+                device_config(self.switch),
+                CouplerHooks::default(),
+            )
         {
             self.device = d;
         }
@@ -896,6 +850,7 @@ impl Node for Tm3Coupler {
         self.rx_level = 0;
         self.rx_last = now;
         self.module_check();
+        self.publish_status();
         self.run(now, out, |c, o| {
             c.device.on_power_up(now, o);
             c.reapply_inputs();

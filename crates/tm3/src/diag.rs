@@ -36,18 +36,6 @@ pub const ROTARY_SWITCH_CHANGED: u16 = 0xFF03;
 /// 0xFF04 KPI_NOT_CONFIGURED_IN_OP: operational although not configured.
 pub const NOT_CONFIGURED_IN_OP: u16 = 0xFF04;
 
-/// The codes the CiA 301 layer raises by itself (controller, error control, PDOs).
-pub(crate) const STACK_CODES: [u16; 8] = [
-    MESSAGE_LOST,
-    ERROR_PASSIVE,
-    GUARD_OR_HEARTBEAT,
-    BUS_OFF_RECOVERED,
-    PDO_LENGTH,
-    0x8220,
-    RPDO_TIMEOUT,
-    0x8240,
-];
-
 /// The 2-bit status of a module or of the bus in 0x1002 (manual: object 1002H).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Status {
