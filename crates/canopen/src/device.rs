@@ -10,6 +10,10 @@
 //! * **Boot-up** (§7.3.2.2.1): [`Node::on_power_up`] sets every object to its default,
 //!   applies the stored parameters, sends the boot-up message and enters pre-operational in
 //!   the same instant. Reset node and reset communication do the same for their areas.
+//! * **Stored parameters** (§7.5.2.10, §7.5.2.11): a device keeps what "save" stores in
+//!   memory for as long as it exists (resets and power cycles restore it) unless it is
+//!   given a backend ([`Device::set_storage`], e.g. files that outlive the process); so
+//!   "save" and "load" always work, and 0x0606 0000 means the backend failed.
 //! * **Reset communication** restores 0x1000–0x1FFF to the power-on values (defaults, then
 //!   stored communication parameters); this empties 0x1003, clears active errors, resets
 //!   the guarding toggle bit and aborts SDO transfers silently. **Reset node** restores
@@ -74,7 +78,7 @@ use crate::od::{
 };
 use crate::pdo::{PdoEngine, PdoEvent};
 use crate::sdo::{SdoCapabilities, SdoServer};
-use crate::storage::{self, Group, Storage, StorageError};
+use crate::storage::{self, Group, MemoryStorage, Storage, StorageError};
 use crate::sync::SyncService;
 use crate::time::TimeService;
 use crate::wire::{self, CobId, ErrorControl, NmtCommand};
@@ -220,7 +224,9 @@ struct Core<H> {
     pdo: Option<PdoEngine>,
     /// RPDO faults whose EMCY is active: (RPDO slot, error code).
     pdo_faults: Vec<(u16, u16)>,
-    storage: Option<Box<dyn Storage>>,
+    /// Where 0x1010/0x1011 keep the parameters: in memory unless the device was given a
+    /// backend.
+    storage: Box<dyn Storage>,
     events: VecDeque<Event>,
     error_passive: bool,
     overrun: bool,
@@ -313,7 +319,7 @@ impl<H: OdHooks> Device<H> {
             reaction: Reaction::PreOperational,
             pdo,
             pdo_faults: Vec::new(),
-            storage: None,
+            storage: Box::new(MemoryStorage::new()),
             events: VecDeque::new(),
             error_passive: false,
             overrun: false,
@@ -336,10 +342,18 @@ impl<H: OdHooks> Device<H> {
         Ok(device)
     }
 
-    /// Uses `storage` for 0x1010/0x1011 and for the power-on values of every reset.
+    /// Uses `storage` for 0x1010/0x1011 and for the power-on values of every reset,
+    /// instead of the in-memory store a device starts with.
     pub fn set_storage(&mut self, storage: Box<dyn Storage>) {
         self.deadline = None;
-        self.core.storage = Some(storage);
+        self.core.storage = storage;
+    }
+
+    /// Hands over the parameter storage (to a device that replaces this one, e.g. at a
+    /// power-up with another node-ID), leaving this one an empty in-memory store.
+    pub fn take_storage(&mut self) -> Box<dyn Storage> {
+        self.deadline = None;
+        core::mem::replace(&mut self.core.storage, Box::new(MemoryStorage::new()))
     }
 
     /// The node-ID.
@@ -769,10 +783,7 @@ impl<H: OdHooks> Core<H> {
     /// Loads the stored parameters of `group` on top of the defaults.
     fn load_group(&mut self, group: Group) {
         self.od.restore_defaults(group.range());
-        let Some(storage) = &mut self.storage else {
-            return;
-        };
-        let loaded = match storage.load(group) {
+        let loaded = match self.storage.load(group) {
             Ok(Some(blob)) => storage::apply(&mut self.od, group, &blob).map(|_| ()),
             Ok(None) => Ok(()),
             Err(e) => Err(e),
@@ -1285,20 +1296,18 @@ impl<H: OdHooks> Core<H> {
 }
 
 /// The storage behind a write of `v` to 0x1010 or 0x1011, which only the signature
-/// `signature` ("save" or "load") triggers: any other value is refused with 0x0800 0020, and
-/// a device without storage answers 0x0606 0000 (CiA 301 §7.5.2.10 and §7.5.2.11).
+/// `signature` ("save" or "load") triggers: any other value is refused with 0x0800 0020
+/// (CiA 301 §7.5.2.10 and §7.5.2.11). A failing backend answers 0x0606 0000 where it is
+/// used.
 fn signed_storage(
-    storage: &mut Option<Box<dyn Storage>>,
+    storage: &mut Box<dyn Storage>,
     v: u32,
     signature: u32,
 ) -> Result<&mut dyn Storage, AbortCode> {
     if v != signature {
         return Err(AbortCode::DATA_TRANSFER);
     }
-    match storage {
-        Some(s) => Ok(s.as_mut()),
-        None => Err(AbortCode::HARDWARE_ERROR),
-    }
+    Ok(storage.as_mut())
 }
 
 impl<H: OdHooks> ObjectAccess for Core<H> {

@@ -107,12 +107,36 @@ fn cia301_7_5_2_11_restore_defaults_takes_effect_after_the_next_reset() {
 }
 
 #[test]
-fn cia301_7_5_2_10_without_a_storage_backend_save_is_a_hardware_error() {
+fn cia301_7_5_2_10_without_a_storage_backend_parameters_are_kept_in_memory() {
     let mut h = Harness::booted();
-    assert_eq!(
-        h.write(ms(0), 0x1010, 1, &sig(SAVE)),
-        Err(AbortCode::HARDWARE_ERROR)
-    );
+    h.write(ms(0), 0x2000, 0, &42u32.to_le_bytes()).unwrap();
+    assert_eq!(h.write(ms(0), 0x1010, 1, &sig(SAVE)), Ok(()));
+    h.write(ms(0), 0x2000, 0, &43u32.to_le_bytes()).unwrap();
+    // Reset node and a power cycle of the same device restore the stored value.
+    h.rx(ms(10), "000#8105");
+    assert_eq!(h.read_u32(0x2000, 0).unwrap(), 42);
+    h.write(ms(20), 0x2000, 0, &44u32.to_le_bytes()).unwrap();
+    h.power_up(ms(30));
+    assert_eq!(h.read_u32(0x2000, 0).unwrap(), 42);
+    // "load" erases it: the default after the next reset.
+    assert_eq!(h.write(ms(40), 0x1011, 1, &sig(LOAD)), Ok(()));
+    h.rx(ms(50), "000#8105");
+    assert_eq!(h.read_u32(0x2000, 0).unwrap(), 7);
+}
+
+#[test]
+fn cia301_7_5_2_10_storage_moves_to_a_device_that_replaces_this_one() {
+    let mut h = Harness::booted();
+    h.write(ms(0), 0x2000, 0, &42u32.to_le_bytes()).unwrap();
+    h.write(ms(0), 0x1010, 1, &sig(SAVE)).unwrap();
+    let storage = h.dev.take_storage();
+    let mut next = Harness::new();
+    next.dev.set_storage(storage);
+    next.power_up(ms(10));
+    assert_eq!(next.read_u32(0x2000, 0).unwrap(), 42);
+    // What stays behind is an empty store.
+    h.power_up(ms(20));
+    assert_eq!(h.read_u32(0x2000, 0).unwrap(), 7);
 }
 
 #[test]

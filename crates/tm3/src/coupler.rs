@@ -837,12 +837,14 @@ impl Tm3Coupler {
 impl Node for Tm3Coupler {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         if self.switch != self.device.node_id()
-            && let Ok(d) = Device::with_hooks(
+            && let Ok(mut d) = Device::with_hooks(
                 self.desc.clone(),
                 device_config(self.switch),
                 CouplerHooks::default(),
             )
         {
+            // The stored parameters belong to the coupler, not to its node-ID.
+            d.set_storage(self.device.take_storage());
             self.device = d;
         }
         self.internal_error = false;
