@@ -100,7 +100,11 @@ fn dictionary() -> ObjectDictionary {
     // RPDO1: reference, a dummy byte, control word, outputs (6 bytes, event-driven).
     // TPDO1 on every SYNC: actual speed, reference, outputs.
     let b = PdoObjects::new(1, 1)
-        .rpdo(0, 255, &[0x2000_0010, 0x0005_0008, 0x2001_0010, 0x6200_0008])
+        .rpdo(
+            0,
+            255,
+            &[0x2000_0010, 0x0005_0008, 0x2001_0010, 0x6200_0008],
+        )
         .tpdo(0, 1, &[0x2003_0010, 0x2000_0010, 0x6200_0008])
         .add_to(b);
     ObjectDictionary::new(Arc::new(b.build().unwrap()), NODE)
@@ -199,9 +203,70 @@ fn cia301_7_2_2_tpdo_reads_hooked_objects_through_the_read_hook() {
     };
     od.set(0x6200, 0, &Value::Unsigned8(0x42)).unwrap();
     let mut out = Outbox::new();
-    pdo.on_sync(None, Instant::from_nanos(1_000), &mut od, &mut model, &mut out);
+    pdo.on_sync(
+        None,
+        Instant::from_nanos(1_000),
+        &mut od,
+        &mut model,
+        &mut out,
+    );
     assert_eq!(
         out.frames(),
-        [Frame::data(Id::standard(0x185).unwrap(), &[0xDB, 0x05, 0x24, 0xFA, 0x42]).unwrap()]
+        [Frame::data(
+            Id::standard(0x185).unwrap(),
+            &[0xDB, 0x05, 0x24, 0xFA, 0x42]
+        )
+        .unwrap()]
+    );
+}
+
+#[test]
+fn cia301_7_2_2_a_device_passes_a_refused_rpdo_on_without_an_emcy() {
+    use cantwin_can::Node;
+    use cantwin_canopen::device::{Device, DeviceConfig, Event};
+    use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
+
+    let b = cia301_defaults(OdBuilder::new(), &Cia301Options::default())
+        .var(
+            0x2001,
+            SubObject::new("Control word", DataType::Unsigned16, Access::Rw).mappable(),
+        )
+        .hook(0x2000..=0x20FF);
+    let b = PdoObjects::new(1, 0).rpdo(0, 255, &[0x2001_0010]).add_to(b);
+    let desc = Arc::new(b.build().unwrap());
+    let mut dev = Device::with_hooks(desc, DeviceConfig::new(NODE), Model::default()).unwrap();
+    let mut out = Outbox::new();
+    dev.on_power_up(Instant::ZERO, &mut out);
+    dev.on_frame(
+        &Frame::std(0x000, &[0x01, NODE]).unwrap(),
+        Instant::ZERO,
+        &mut out,
+    );
+    while dev.poll_event().is_some() {}
+    out.clear();
+    let t = Instant::from_nanos(1_000_000);
+    dev.on_frame(&rpdo1(&[0xAD, 0xDE]), t, &mut out);
+    assert_eq!(
+        dev.poll_event(),
+        Some(Event::Pdo(PdoEvent::Refused {
+            rpdo: 0,
+            index: 0x2001,
+            sub: 0,
+            code: AbortCode::DEVICE_STATE
+        }))
+    );
+    assert_eq!(dev.poll_event(), None);
+    assert!(out.frames().is_empty());
+    assert_eq!(dev.od().get(0x2001, 0), Ok(Value::Unsigned16(0)));
+    // The next good RPDO is applied.
+    dev.on_frame(&rpdo1(&[0x0F, 0x00]), t, &mut out);
+    assert_eq!(
+        dev.poll_event(),
+        Some(Event::Pdo(PdoEvent::Received { rpdo: 0 }))
+    );
+    assert_eq!(dev.od().get(0x2001, 0), Ok(Value::Unsigned16(0x000F)));
+    assert_eq!(
+        dev.hooks().calls.last().map(String::as_str),
+        Some("written 2001")
     );
 }
