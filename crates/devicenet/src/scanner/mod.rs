@@ -6,6 +6,7 @@
 //! flight at a time. Results come back as [`ScannerEvent`]s from [`Scanner::poll_event`].
 
 mod exchange;
+pub mod explicit;
 
 use crate::fragment::{ExplicitReassembler, ExplicitSender, IoReassembler, TxProgress};
 use crate::link::{DupMacCheck, LinkState};

@@ -71,6 +71,54 @@ pub mod status {
     pub const INVALID_PARAMETER: u8 = 0x20;
     /// No additional code.
     pub const NO_ADDITIONAL: u8 = 0xFF;
+
+    /// The meaning of a general status code (CIP Vol. 1 Appendix B, as every CIP network
+    /// uses them).
+    pub fn text(code: u8) -> &'static str {
+        match code {
+            0x00 => "success",
+            0x01 => "connection failure",
+            0x02 => "resource unavailable",
+            0x03 => "invalid parameter value",
+            0x04 => "path segment error",
+            0x05 => "path destination unknown",
+            0x06 => "partial transfer",
+            0x07 => "connection lost",
+            0x08 => "service not supported",
+            0x09 => "invalid attribute value",
+            0x0A => "attribute list error",
+            0x0B => "already in requested mode/state",
+            0x0C => "object state conflict",
+            0x0D => "object already exists",
+            0x0E => "attribute not settable",
+            0x0F => "privilege violation",
+            0x10 => "device state conflict",
+            0x11 => "reply data too large",
+            0x12 => "fragmentation of a primitive value",
+            0x13 => "not enough data",
+            0x14 => "attribute not supported",
+            0x15 => "too much data",
+            0x16 => "object does not exist",
+            0x17 => "service fragmentation sequence not in progress",
+            0x18 => "no stored attribute data",
+            0x19 => "store operation failure",
+            0x1A => "routing failure, request packet too large",
+            0x1B => "routing failure, response packet too large",
+            0x1C => "missing attribute list entry data",
+            0x1D => "invalid attribute value list",
+            0x1E => "embedded service error",
+            0x1F => "vendor specific error",
+            0x20 => "invalid parameter",
+            0x21 => "write-once value or medium already written",
+            0x22 => "invalid reply received",
+            0x25 => "key failure in path",
+            0x26 => "path size invalid",
+            0x27 => "unexpected attribute in list",
+            0x28 => "invalid member ID",
+            0x29 => "member not settable",
+            _ => "reserved or object-specific status",
+        }
+    }
 }
 
 /// Additional codes of Allocate/Release error responses (DeviceNet Vol. 1, Predefined
@@ -432,6 +480,16 @@ pub fn explicit_frames(header: Header, body: &[u8]) -> Vec<Vec<u8>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn general_status_codes_have_the_cip_texts() {
+        assert_eq!(status::text(0x14), "attribute not supported");
+        assert_eq!(
+            status::text(status::OBJECT_DOES_NOT_EXIST),
+            "object does not exist"
+        );
+        assert_eq!(status::text(0x23), "reserved or object-specific status");
+    }
 
     /// I-7242D DeviceNet/Modbus RTU Gateway User's Manual v1.1 (ICP DAS, 2006), §7.2.8:
     /// master 0x0A allocates explicit messaging from slave 0x09.
