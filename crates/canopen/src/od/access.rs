@@ -265,6 +265,15 @@ impl<'a, H: OdHooks + ?Sized> Hooked<'a, H> {
     pub fn od(&mut self) -> &mut ObjectDictionary {
         self.od
     }
+
+    /// Offers a checked write of a hooked object to [`OdHooks::write`]; communication
+    /// objects are the stack's and always stored.
+    fn take_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Option<Result<(), AbortCode>> {
+        if index < 0x2000 {
+            return None;
+        }
+        self.hooks.write(self.od, index, sub, data)
+    }
 }
 
 impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
@@ -297,7 +306,7 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
         }
         self.od.check_download(id, data)?;
         self.hooks.validate(self.od, index, sub, data)?;
-        match self.hooks.write(self.od, index, sub, data) {
+        match self.take_write(index, sub, data) {
             Some(r) => r?,
             None => self.od.set_raw(id, data)?,
         }
@@ -331,7 +340,7 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
         // The hook may take the staged bytes; the buffer is lent to it and given back, so
         // its allocation serves the next download.
         let staged = core::mem::take(&mut self.od.staging);
-        let taken = self.hooks.write(self.od, index, sub, &staged);
+        let taken = self.take_write(index, sub, &staged);
         self.od.staging = staged;
         match taken {
             Some(r) => {
