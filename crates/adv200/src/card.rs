@@ -36,7 +36,7 @@
 use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 use cantwin_canopen::device::{Device, DeviceConfig, Event};
 use cantwin_canopen::nmt::State;
-use cantwin_canopen::od::{ObjectDictionary, OdHooks};
+use cantwin_canopen::od::{EntryId, ObjectDictionary, OdHooks};
 use cantwin_canopen::sdo::SdoCapabilities;
 
 use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
@@ -94,6 +94,9 @@ struct Card {
     personality: Personality,
     pdc: Pdc,
     last_sync: Option<Instant>,
+    /// Where the dictionary keeps 0x1006 (communication cycle period), located once: the
+    /// bus-loss deadline reads it at every call.
+    cycle_period: Option<EntryId>,
 }
 
 /// The fieldbus parameters latched at the last drive reset.
@@ -482,11 +485,13 @@ impl Adv200 {
         self.home.configure(&pdc, self.latched.ms_enable);
         core::mem::swap(dev.hooks_mut(), &mut self.home);
         dev.on_power_up(now, out);
+        let cycle_period = dev.od().locate(0x1006, 0).ok();
         self.card = Some(Card {
             dev,
             personality,
             pdc,
             last_sync: None,
+            cycle_period,
         });
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
@@ -785,7 +790,13 @@ impl Adv200 {
 
     fn sync_deadline(&self) -> Option<Instant> {
         let c = self.card.as_ref()?;
-        let period = c.dev.od().get_unsigned(0x1006, 0).unwrap_or(0);
+        let period = c.cycle_period.map_or(0, |id| {
+            let raw = c.dev.od().raw(id);
+            let mut b = [0u8; 4];
+            let n = raw.len().min(4);
+            b[..n].copy_from_slice(&raw[..n]);
+            u64::from(u32::from_le_bytes(b))
+        });
         if period == 0 || c.dev.state() == State::Stopped {
             return None;
         }

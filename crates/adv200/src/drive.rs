@@ -22,7 +22,9 @@
 use cantwin_can::{Duration, Instant};
 
 use crate::alarms::Alarm;
-use crate::params::{ParamDb, par};
+use std::sync::LazyLock;
+
+use crate::params::{ParamDb, Slot, par};
 
 /// The control task period.
 pub const STEP: Duration = Duration::from_millis(1);
@@ -64,12 +66,87 @@ pub struct Drive {
     analog: [i64; 2],
     profile: Option<ProfileCommands>,
     next_step: Option<Instant>,
+    /// Whether no source the control task reads names a parameter it sets later in the
+    /// same step, for the settings generation it was found for (see [`Drive::advance`]).
+    feedback_free: Option<(u64, bool)>,
 }
 
-fn bit(db: &ParamDb, src: u16) -> bool {
-    let s = db.value(src) as u16;
+/// Whether the boolean source the parameter in slot `src` names is on.
+fn bit(db: &ParamDb, src: Slot) -> bool {
+    let s = db.at(src) as u16;
     s != 0 && db.value(s) != 0
 }
+
+/// The slots of the parameters the control task reads and sets every step.
+struct Slots {
+    digital_input_mon: Slot,
+    digital_inputs: [Slot; 8],
+    analog_inputs: [Slot; 2],
+    word_decomp_src: Slot,
+    word_decomp_mon: Slot,
+    word_decomp_bits: [Slot; 16],
+    alarm_reset: Slot,
+    commands_remote_sel: Slot,
+    dig_enable_src: Slot,
+    dig_start_src: Slot,
+    full_scale_speed: Slot,
+    ramp_ref_1_src: Slot,
+    acceleration: Slot,
+    deceleration: Slot,
+    fast_stop_decel: Slot,
+    rated_current: Slot,
+    load: Slot,
+    thermal_tc: Slot,
+    ramp_output: Slot,
+    motor_speed: Slot,
+    output_current: Slot,
+    motor_thermal: Slot,
+    speed_zero_thr: Slot,
+    speed_is_zero: Slot,
+    enable_state: Slot,
+    drive_ok: Slot,
+    run_state: Slot,
+    active_alarm: Slot,
+    digital_output_srcs: [Slot; 4],
+    digital_output_mon: Slot,
+    word_comp_bit_srcs: [Slot; 16],
+    word_comp_mon: Slot,
+}
+
+static SLOTS: LazyLock<Slots> = LazyLock::new(|| Slots {
+    digital_input_mon: Slot::of(par::DIGITAL_INPUT_MON),
+    digital_inputs: core::array::from_fn(|k| Slot::of(par::digital_input(k as u16 + 1))),
+    analog_inputs: [Slot::of(par::ANALOG_INPUT_1), Slot::of(par::ANALOG_INPUT_2)],
+    word_decomp_src: Slot::of(par::WORD_DECOMP_SRC),
+    word_decomp_mon: Slot::of(par::WORD_DECOMP_MON),
+    word_decomp_bits: core::array::from_fn(|k| Slot::of(par::word_decomp_bit(k as u16))),
+    alarm_reset: Slot::of(par::ALARM_RESET),
+    commands_remote_sel: Slot::of(par::COMMANDS_REMOTE_SEL),
+    dig_enable_src: Slot::of(par::DIG_ENABLE_SRC),
+    dig_start_src: Slot::of(par::DIG_START_SRC),
+    full_scale_speed: Slot::of(par::FULL_SCALE_SPEED),
+    ramp_ref_1_src: Slot::of(par::RAMP_REF_1_SRC),
+    acceleration: Slot::of(par::ACCELERATION),
+    deceleration: Slot::of(par::DECELERATION),
+    fast_stop_decel: Slot::of(par::FAST_STOP_DECEL),
+    rated_current: Slot::of(par::RATED_CURRENT),
+    load: Slot::of(par::LOAD),
+    thermal_tc: Slot::of(par::THERMAL_TC),
+    ramp_output: Slot::of(par::RAMP_OUTPUT),
+    motor_speed: Slot::of(par::MOTOR_SPEED),
+    output_current: Slot::of(par::OUTPUT_CURRENT),
+    motor_thermal: Slot::of(par::MOTOR_THERMAL),
+    speed_zero_thr: Slot::of(par::SPEED_ZERO_THR),
+    speed_is_zero: Slot::of(par::SPEED_IS_ZERO),
+    enable_state: Slot::of(par::ENABLE_STATE),
+    drive_ok: Slot::of(par::DRIVE_OK),
+    run_state: Slot::of(par::RUN_STATE),
+    active_alarm: Slot::of(par::ACTIVE_ALARM),
+    digital_output_srcs: core::array::from_fn(|k| Slot::of(par::digital_output_src(k as u16 + 1))),
+    digital_output_mon: Slot::of(par::DIGITAL_OUTPUT_MON),
+    word_comp_bit_srcs: core::array::from_fn(|k| Slot::of(par::word_comp_bit_src(k as u16))),
+    word_comp_mon: Slot::of(par::WORD_COMP_MON),
+});
 
 impl Drive {
     /// A drive at rest, cold, without alarms.
@@ -187,23 +264,75 @@ impl Drive {
     }
 
     /// Runs the control task up to `now`, then evaluates the inputs at `now`.
+    ///
+    /// A control step that ran at `now` already evaluated the inputs at `now`: the
+    /// evaluation is not repeated unless a source reads a parameter the step sets after the
+    /// source is read (the evaluation then carries that value one stage further, as it
+    /// always did).
     pub fn advance(&mut self, db: &mut ParamDb, now: Instant) {
+        let mut stepped_now = false;
         while let Some(t) = self.next_step {
             if t > now {
                 break;
             }
             self.step(db, STEP.as_secs_f64());
+            stepped_now = t == now;
             self.next_step = if self.idle() && !self.wants_motion(db) {
                 None
             } else {
                 Some(t + STEP)
             };
         }
-        self.step(db, 0.0);
+        if !(stepped_now && self.is_feedback_free(db)) {
+            self.step(db, 0.0);
+        }
         if self.next_step.is_none() && (!self.idle() || self.wants_motion(db)) {
             let ms = STEP.as_nanos();
             self.next_step = Some(Instant::from_nanos((now.as_nanos() / ms + 1) * ms));
         }
+    }
+
+    /// Whether every source the step reads names a parameter set before it in the step (or
+    /// not set by the step at all); cached per settings generation.
+    fn is_feedback_free(&mut self, db: &ParamDb) -> bool {
+        let generation = db.generation();
+        if let Some((g, free)) = self.feedback_free
+            && g == generation
+        {
+            return free;
+        }
+        let s: &Slots = &SLOTS;
+        // What the step sets after the commands and the ramp reference are read, and
+        // after the digital outputs and WordComp read theirs.
+        let monitors = [
+            par::RAMP_OUTPUT,
+            par::MOTOR_SPEED,
+            par::OUTPUT_CURRENT,
+            par::MOTOR_THERMAL,
+            par::SPEED_IS_ZERO,
+            par::ENABLE_STATE,
+            par::DRIVE_OK,
+            par::RUN_STATE,
+            par::ACTIVE_ALARM,
+            par::DIGITAL_OUTPUT_MON,
+            par::WORD_COMP_MON,
+        ];
+        let late = [par::DIGITAL_OUTPUT_MON, par::WORD_COMP_MON];
+        let names = |slot: Slot, set: &[u16]| set.contains(&(db.at(slot) as u16));
+        let early = [
+            s.word_decomp_src,
+            s.dig_enable_src,
+            s.dig_start_src,
+            s.ramp_ref_1_src,
+        ];
+        let free = !early.iter().any(|x| names(*x, &monitors))
+            && !s
+                .digital_output_srcs
+                .iter()
+                .chain(&s.word_comp_bit_srcs)
+                .any(|x| names(*x, &late));
+        self.feedback_free = Some((generation, free));
+        free
     }
 
     /// When the control task runs next.
@@ -211,66 +340,61 @@ impl Drive {
         self.next_step
     }
 
-    fn commands(&self, db: &ParamDb) -> (bool, bool, bool) {
+    fn commands(&self, db: &ParamDb, s: &Slots) -> (bool, bool, bool) {
         if let Some(p) = self.profile {
             return (p.enable, p.start, p.fast_stop);
         }
-        if db.value(par::COMMANDS_REMOTE_SEL) == 1 {
-            (
-                bit(db, par::DIG_ENABLE_SRC),
-                bit(db, par::DIG_START_SRC),
-                false,
-            )
+        if db.at(s.commands_remote_sel) == 1 {
+            (bit(db, s.dig_enable_src), bit(db, s.dig_start_src), false)
         } else {
             (self.inputs & 1 != 0, self.inputs & 2 != 0, false)
         }
     }
 
     fn wants_motion(&self, db: &ParamDb) -> bool {
-        let (enable, _, _) = self.commands(db);
+        let (enable, _, _) = self.commands(db, &SLOTS);
         enable && self.alarms.is_empty()
     }
 
     fn step(&mut self, db: &mut ParamDb, dt: f64) {
+        let s: &Slots = &SLOTS;
         // Inputs.
-        let _ = db.force(par::DIGITAL_INPUT_MON, i64::from(self.inputs));
-        for k in 1..=8u16 {
-            let _ = db.force(par::digital_input(k), i64::from(self.inputs >> (k - 1) & 1));
+        db.force_at(s.digital_input_mon, i64::from(self.inputs));
+        for (k, slot) in s.digital_inputs.iter().enumerate() {
+            db.force_at(*slot, i64::from(self.inputs >> k & 1));
         }
-        let _ = db.force(par::ANALOG_INPUT_1, self.analog[0]);
-        let _ = db.force(par::ANALOG_INPUT_2, self.analog[1]);
+        db.force_at(s.analog_inputs[0], self.analog[0]);
+        db.force_at(s.analog_inputs[1], self.analog[1]);
         // WordDecomp.
-        let src = db.value(par::WORD_DECOMP_SRC) as u16;
+        let src = db.at(s.word_decomp_src) as u16;
         let word = if src == 0 { 0 } else { db.value(src) & 0xFFFF };
-        let _ = db.force(par::WORD_DECOMP_MON, word);
-        for k in 0..16u16 {
-            let _ = db.force(par::word_decomp_bit(k), word >> k & 1);
+        db.force_at(s.word_decomp_mon, word);
+        for (k, slot) in s.word_decomp_bits.iter().enumerate() {
+            db.force_at(*slot, word >> k & 1);
         }
         // Commands.
-        if db.value(par::ALARM_RESET) != 0 {
-            let _ = db.force(par::ALARM_RESET, 0);
+        if db.at(s.alarm_reset) != 0 {
+            db.force_at(s.alarm_reset, 0);
             self.reset_alarms();
         }
-        let (enable, start, fast_stop) = self.commands(db);
+        let (enable, start, fast_stop) = self.commands(db, s);
         let enabled = enable && self.alarms.is_empty();
         let run = enabled && start && !fast_stop;
         // Ramp.
-        let fs = db.value(par::FULL_SCALE_SPEED) as f64;
+        let fs = db.at(s.full_scale_speed) as f64;
         let (reference, rates) = match self.profile {
             Some(p) => (p.reference as f64, p.rates),
             None => {
-                let src = db.value(par::RAMP_REF_1_SRC) as u16;
+                let src = db.at(s.ramp_ref_1_src) as u16;
                 let r = if src == 0 { 0 } else { db.value(src) };
                 (r as f64, None)
             }
         };
         let target = if run { reference.clamp(-fs, fs) } else { 0.0 };
-        let (acc, dec) = rates.unwrap_or((
-            db.value(par::ACCELERATION) as f64,
-            db.value(par::DECELERATION) as f64,
-        ));
+        let (acc, dec) =
+            rates.unwrap_or((db.at(s.acceleration) as f64, db.at(s.deceleration) as f64));
         let rate = if fast_stop && enabled {
-            db.value(par::FAST_STOP_DECEL) as f64
+            db.at(s.fast_stop_decel) as f64
         } else if target.abs() > self.speed.abs() && target * self.speed >= 0.0 {
             acc
         } else {
@@ -287,16 +411,16 @@ impl Drive {
         }
         self.ramping = (self.speed - target).abs() > 0.0 || (dt > 0.0 && before != self.speed);
         // Current and temperature.
-        let rated = db.value(par::RATED_CURRENT) as f64 / 10.0;
+        let rated = db.at(s.rated_current) as f64 / 10.0;
         self.current = if enabled {
-            let load = (db.value(par::LOAD) as f64 / 100.0).abs();
+            let load = (db.at(s.load) as f64 / 100.0).abs();
             let accel = if self.speed != target { 0.5 } else { 0.0 };
             rated * (0.3 + load + accel)
         } else {
             0.0
         };
         if dt > 0.0 {
-            let tau = db.value(par::THERMAL_TC) as f64;
+            let tau = db.at(s.thermal_tc) as f64;
             let ratio = if rated > 0.0 {
                 self.current / rated
             } else {
@@ -312,33 +436,33 @@ impl Drive {
         }
         // Monitors.
         let speed = self.speed.round() as i64;
-        let _ = db.force(par::RAMP_OUTPUT, speed);
-        let _ = db.force(par::MOTOR_SPEED, speed);
-        let _ = db.force(par::OUTPUT_CURRENT, (self.current * 10.0).round() as i64);
-        let _ = db.force(par::MOTOR_THERMAL, (self.thermal * 100.0).round() as i64);
-        let zero = speed.abs() <= db.value(par::SPEED_ZERO_THR);
-        let _ = db.force(par::SPEED_IS_ZERO, i64::from(zero));
+        db.force_at(s.ramp_output, speed);
+        db.force_at(s.motor_speed, speed);
+        db.force_at(s.output_current, (self.current * 10.0).round() as i64);
+        db.force_at(s.motor_thermal, (self.thermal * 100.0).round() as i64);
+        let zero = speed.abs() <= db.at(s.speed_zero_thr);
+        db.force_at(s.speed_is_zero, i64::from(zero));
         let enabled = enable && self.alarms.is_empty();
-        let _ = db.force(par::ENABLE_STATE, i64::from(enabled));
-        let _ = db.force(par::DRIVE_OK, i64::from(self.alarms.is_empty()));
-        let _ = db.force(par::RUN_STATE, i64::from(enabled && start));
+        db.force_at(s.enable_state, i64::from(enabled));
+        db.force_at(s.drive_ok, i64::from(self.alarms.is_empty()));
+        db.force_at(s.run_state, i64::from(enabled && start));
         let active = self.alarms.first().map_or(0, |a| a.emcy_code());
-        let _ = db.force(par::ACTIVE_ALARM, i64::from(active));
+        db.force_at(s.active_alarm, i64::from(active));
         // Digital outputs and WordComp.
         let mut outputs = 0;
-        for k in 1..=4u16 {
-            if bit(db, par::digital_output_src(k)) {
-                outputs |= 1 << (k - 1);
+        for (k, slot) in s.digital_output_srcs.iter().enumerate() {
+            if bit(db, *slot) {
+                outputs |= 1 << k;
             }
         }
-        let _ = db.force(par::DIGITAL_OUTPUT_MON, outputs);
+        db.force_at(s.digital_output_mon, outputs);
         let mut comp = 0;
-        for k in 0..16u16 {
-            if bit(db, par::word_comp_bit_src(k)) {
+        for (k, slot) in s.word_comp_bit_srcs.iter().enumerate() {
+            if bit(db, *slot) {
                 comp |= 1 << k;
             }
         }
-        let _ = db.force(par::WORD_COMP_MON, comp);
+        db.force_at(s.word_comp_mon, comp);
     }
 
     /// Digital output k (1..=4).

@@ -579,6 +579,19 @@ pub fn def(par: u16) -> Option<&'static ParamDef> {
     CATALOG.slot(par).map(|i| &CATALOG.defs[i])
 }
 
+/// Where a parameter sits in a [`ParamDb`], found once: for code that reads and sets the
+/// same parameters every millisecond (the drive's control task). A slot of no parameter
+/// reads 0 and ignores writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Slot(u16);
+
+impl Slot {
+    /// The slot of parameter `par`.
+    pub fn of(par: u16) -> Slot {
+        Slot(CATALOG.slot(par).map_or(NONE, |i| i as u16))
+    }
+}
+
 /// Why a parameter access failed; each maps to the CiA 301 abort code with the meaning of
 /// the §1.4 table (whose OCR'd codes are damaged).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -625,6 +638,9 @@ impl ParamError {
 #[derive(Clone)]
 pub struct ParamDb {
     values: Vec<i64>,
+    /// Counts the writes of settings ([`ParamDb::set`], [`ParamDb::touch`]), so that code
+    /// deriving something from the settings knows when to derive it again.
+    generation: u64,
     /// The catalogue, held so that an access is one look-up without a check of its
     /// initialisation.
     catalog: &'static Catalog,
@@ -658,6 +674,7 @@ impl ParamDb {
         let catalog: &'static Catalog = &CATALOG;
         ParamDb {
             values: catalog.defs.iter().map(|d| d.default).collect(),
+            generation: 0,
             catalog,
         }
     }
@@ -678,6 +695,21 @@ impl ParamDb {
     #[inline]
     pub fn value(&self, par: u16) -> i64 {
         self.get(par).unwrap_or(0)
+    }
+
+    /// The value in slot `s` ([`ParamDb::value`] by slot).
+    #[inline]
+    pub fn at(&self, s: Slot) -> i64 {
+        self.values.get(usize::from(s.0)).copied().unwrap_or(0)
+    }
+
+    /// Sets the value in slot `s` ([`ParamDb::force`] by slot).
+    #[inline]
+    pub fn force_at(&mut self, s: Slot, value: i64) {
+        let i = usize::from(s.0);
+        if let (Some(v), Some(&(lo, hi))) = (self.values.get_mut(i), self.catalog.ranges.get(i)) {
+            *v = value.clamp(lo, hi);
+        }
     }
 
     /// Checks a write as the keypad or the bus would make it: access, limits, and for a
@@ -708,7 +740,19 @@ impl ParamDb {
     /// Writes `par` as a user would (see [`ParamDb::check`]).
     pub fn set(&mut self, par: u16, value: i64) -> Result<(), ParamError> {
         self.check(par, value)?;
+        self.generation = self.generation.wrapping_add(1);
         self.force(par, value)
+    }
+
+    /// Counts a change of settings made with [`ParamDb::force`] (the PDC wiring of a drive
+    /// reset).
+    pub fn touch(&mut self) {
+        self.generation = self.generation.wrapping_add(1);
+    }
+
+    /// The number of settings writes so far (see [`ParamDb::touch`]).
+    pub fn generation(&self) -> u64 {
+        self.generation
     }
 
     /// Sets `par` as the drive itself does (monitors), without access or limit checks; the

@@ -261,6 +261,8 @@ fn channels(db: &ParamDb, sys: fn(u16) -> u16) -> Vec<(Format, u16)> {
 /// places both directions. The first error found is returned (M2S before S2M, lower channels
 /// first).
 pub fn configure(db: &mut ParamDb) -> Result<Pdc, PdcFault> {
+    // The export wiring below rewrites src parameters.
+    db.touch();
     let m2s_channels = channels(db, par::m2s_sys);
     let m2s = place(Dir::M2S, &m2s_channels)?;
     for item in m2s.items() {
