@@ -31,8 +31,11 @@ pub mod bits;
 mod fault;
 mod filter;
 mod frame;
+#[doc(hidden)]
+pub mod fuzz;
 mod id;
 mod node;
+pub mod rng;
 mod time;
 
 pub use bitrate::{BitRate, BitRateError};
@@ -40,5 +43,6 @@ pub use fault::{ErrorCounters, ErrorState};
 pub use filter::{Filter, FilterSet};
 pub use frame::{Frame, FrameError};
 pub use id::{ExtendedId, Id, IdError, StandardId};
-pub use node::{ControllerEvent, Node, Outbox};
+pub use node::{ControllerEvent, ListenOnly, Node, Outbox};
+pub use rng::SplitMix64;
 pub use time::{Duration, Instant};

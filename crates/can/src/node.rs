@@ -151,6 +151,19 @@ impl<N: Node + ?Sized> Node for Box<N> {
     }
 }
 
+/// A node that never sends on its own and acknowledges what it sees: the port through which
+/// a driver puts frames on a bus itself (a replayed master, a fuzzer, a benchmark's master).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ListenOnly;
+
+impl Node for ListenOnly {
+    fn on_frame(&mut self, _frame: &Frame, _now: Instant, _out: &mut Outbox) {}
+    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
