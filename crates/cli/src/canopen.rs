@@ -17,47 +17,14 @@ use crate::connect::{Link, Target};
 use crate::output;
 use serde_json::json;
 
-/// CiA 309-3 data type mnemonics.
-const TYPES: &[(&str, DataType)] = &[
-    ("b", DataType::Boolean),
-    ("i8", DataType::Integer8),
-    ("i16", DataType::Integer16),
-    ("i24", DataType::Integer24),
-    ("i32", DataType::Integer32),
-    ("i40", DataType::Integer40),
-    ("i48", DataType::Integer48),
-    ("i56", DataType::Integer56),
-    ("i64", DataType::Integer64),
-    ("u8", DataType::Unsigned8),
-    ("u16", DataType::Unsigned16),
-    ("u24", DataType::Unsigned24),
-    ("u32", DataType::Unsigned32),
-    ("u40", DataType::Unsigned40),
-    ("u48", DataType::Unsigned48),
-    ("u56", DataType::Unsigned56),
-    ("u64", DataType::Unsigned64),
-    ("r32", DataType::Real32),
-    ("r64", DataType::Real64),
-    ("t", DataType::TimeOfDay),
-    ("td", DataType::TimeDifference),
-    ("vs", DataType::VisibleString),
-    ("os", DataType::OctetString),
-    ("us", DataType::UnicodeString),
-    ("d", DataType::Domain),
-];
-
 pub(crate) fn data_type(mnemonic: &str) -> Result<DataType> {
-    TYPES
-        .iter()
-        .find(|(m, _)| m.eq_ignore_ascii_case(mnemonic))
-        .map(|(_, t)| *t)
-        .with_context(|| {
-            let all: Vec<&str> = TYPES.iter().map(|(m, _)| *m).collect();
-            format!(
-                "unknown data type {mnemonic:?} (CiA 309-3 mnemonics: {})",
-                all.join(" ")
-            )
-        })
+    cantwin_cia309::data_type(mnemonic).with_context(|| {
+        let all: Vec<&str> = cantwin_cia309::MNEMONICS.iter().map(|(m, _)| *m).collect();
+        format!(
+            "unknown data type {mnemonic:?} (CiA 309-3 mnemonics: {})",
+            all.join(" ")
+        )
+    })
 }
 
 pub(crate) fn number(text: &str, what: &str) -> Result<u32> {
