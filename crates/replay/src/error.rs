@@ -1,0 +1,47 @@
+//! Why a replay could not run.
+
+use cantwin_scenario::ScenarioError;
+
+/// Why a replay could not run. Errors about the capture read as the rest of a sentence
+/// that starts with the capture's name.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// A frame of the capture is on a channel none of the scenario's buses has.
+    #[error("channel {channel:?} is none of the scenario's buses ({buses})")]
+    UnknownChannel {
+        /// The capture's channel.
+        channel: String,
+        /// The scenario's buses, comma-separated.
+        buses: String,
+    },
+    /// The capture holds several channels but the scenario one bus.
+    #[error("holds {count} channels ({channels}) but the scenario has one bus")]
+    Channels {
+        /// How many channels the capture holds.
+        count: usize,
+        /// The channels, comma-separated.
+        channels: String,
+    },
+    /// The capture holds no frames.
+    #[error("holds no frames to replay")]
+    NoFrames,
+    /// The scenario did not build.
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    /// A bus of the scenario was gone after building it.
+    #[error("a bus of the scenario is gone")]
+    BusGone,
+    /// A master frame could not be put on the bus.
+    #[error("injecting {frame} at {at}: {reason}")]
+    Inject {
+        /// The frame, as text.
+        frame: String,
+        /// Its time in the capture, in seconds.
+        at: String,
+        /// Why the bus refused it.
+        reason: String,
+    },
+    /// Learning the master's identifiers did not reach a fixed point.
+    #[error("the master's identifiers did not settle")]
+    Unsettled,
+}

@@ -1,0 +1,266 @@
+//! Replay runs: the master's frames injected on freshly built twins, to a fixed point of
+//! the master's identifiers.
+
+use std::collections::BTreeSet;
+
+use cantwin_bus::{BusId, PortConfig, PortId, Recorder, TapId};
+use cantwin_can::{Frame, Instant, ListenOnly};
+use cantwin_scenario::{BuildEnv, Built, Registry, Scenario};
+
+use crate::diff::{Entry, Kind, diff};
+use crate::error::ReplayError;
+use crate::frames::{Captured, id_key, seconds};
+
+/// What one replay run recorded.
+struct Run {
+    /// Twins' frames: bus, end of frame relative to the anchor, frame.
+    frames: Vec<Captured>,
+    /// Identifiers the twins sent, per bus.
+    ids: Vec<BTreeSet<u32>>,
+    injected: usize,
+}
+
+/// Time on the bus from start of frame to the end of EOF (the time captures stamp), without
+/// the 3 bits of intermission.
+fn to_eof(frame: &Frame, bit_ns: u64) -> i64 {
+    i64::from(frame.bit_length().saturating_sub(3)) * bit_ns as i64
+}
+
+fn instant(ns: i64) -> Instant {
+    Instant::from_nanos(u64::try_from(ns).unwrap_or(0))
+}
+
+struct Replayer<'a> {
+    scenario: &'a Scenario,
+    registry: &'a Registry,
+    captured: &'a [Captured],
+    /// Nanoseconds per bit, per bus.
+    bit_ns: Vec<u64>,
+    end: i64,
+}
+
+impl Replayer<'_> {
+    fn build(&self) -> Result<Built, ReplayError> {
+        Ok(self.scenario.build(self.registry, &BuildEnv::default())?)
+    }
+
+    /// One run injecting the captured frames whose identifiers are in `master`.
+    fn run(&self, master: &[BTreeSet<u32>]) -> Result<Run, ReplayError> {
+        let mut built = self.build()?;
+        let mut ports: Vec<(BusId, PortId, TapId)> = Vec::new();
+        for (_, id) in built.buses.clone() {
+            let bus = built.sim.bus_mut(id).ok_or(ReplayError::BusGone)?;
+            // The replayed master's port; it also acknowledges frames, as the capture's
+            // master did.
+            let port = bus.attach(ListenOnly, PortConfig::default().with_queue_depth(4096));
+            let tap = bus.add_tap(Recorder::new());
+            ports.push((id, port, tap));
+        }
+        let is_master = |c: &Captured| master[c.bus].contains(&id_key(c.frame.id()));
+        let twin_frames = |built: &Built| -> Vec<(usize, Instant, Frame)> {
+            let mut v = Vec::new();
+            for (i, (id, port, tap)) in ports.iter().enumerate() {
+                if let Some(r) = built.sim.bus(*id).and_then(|b| b.tap::<Recorder>(*tap)) {
+                    v.extend(
+                        r.frames()
+                            .filter(|f| !f.dropped && f.sender != *port)
+                            .map(|f| (i, f.end, f.frame)),
+                    );
+                }
+            }
+            v
+        };
+        // The capture's time 0 is its first frame's end of frame. When that frame is the
+        // master's it is sent at once; otherwise time 0 is when the twins' first frame ends.
+        let anchor: i64 = match self.captured.first() {
+            Some(first) if is_master(first) => to_eof(&first.frame, self.bit_ns[first.bus]),
+            Some(_) => {
+                let limit = instant(self.end);
+                loop {
+                    if let Some(t) = twin_frames(&built).iter().map(|f| f.1).min() {
+                        break i64::try_from(t.as_nanos()).unwrap_or(i64::MAX);
+                    }
+                    match built.sim.step_next() {
+                        Some(t) if t <= limit => {}
+                        // The twins are silent: keep the capture's clock.
+                        _ => break 0,
+                    }
+                }
+            }
+            None => 0,
+        };
+        let mut injected = 0;
+        for c in self.captured.iter().filter(|c| is_master(c)) {
+            let start = anchor + c.t - to_eof(&c.frame, self.bit_ns[c.bus]);
+            let start = instant(start).max(built.sim.now());
+            built.sim.run_until(start);
+            let port = ports[c.bus].1;
+            built
+                .sim
+                .transmit(port, c.frame)
+                .map_err(|e| ReplayError::Inject {
+                    frame: c.frame.to_string(),
+                    at: seconds(c.t),
+                    reason: e.to_string(),
+                })?;
+            injected += 1;
+        }
+        built.sim.run_until(instant(anchor + self.end));
+        let mut ids = vec![BTreeSet::new(); ports.len()];
+        let frames = twin_frames(&built)
+            .into_iter()
+            .map(|(bus, end, frame)| {
+                ids[bus].insert(id_key(frame.id()));
+                Captured {
+                    bus,
+                    t: i64::try_from(end.as_nanos()).unwrap_or(i64::MAX) - anchor,
+                    frame,
+                }
+            })
+            .collect();
+        Ok(Run {
+            frames,
+            ids,
+            injected,
+        })
+    }
+}
+
+/// The identifiers CANopen twins own in the predefined connection set (CiA 301 §7.3.5).
+fn owned_ids(built: &Built) -> Vec<BTreeSet<u32>> {
+    built
+        .buses
+        .iter()
+        .map(|(_, bus)| {
+            built
+                .devices
+                .iter()
+                .filter(|d| d.port.bus() == *bus)
+                .filter_map(|d| d.node_id)
+                .flat_map(|n| {
+                    let n = u32::from(n);
+                    [0x080, 0x180, 0x280, 0x380, 0x480, 0x580, 0x700].map(|base| base + n)
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// What a replay found.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Report {
+    /// The master's identifiers ([`id_key`]s), per bus.
+    pub master: Vec<BTreeSet<u32>>,
+    /// How many runs it took the master's identifiers to settle.
+    pub passes: usize,
+    /// Master frames injected in the last run.
+    pub injected: usize,
+    /// The captured twin frames compared (the capture's frames not on a master identifier).
+    pub expected: usize,
+    /// The comparison, in time order.
+    pub entries: Vec<Entry>,
+}
+
+impl Report {
+    /// How many entries are of `kind`.
+    pub fn count(&self, kind: Kind) -> usize {
+        self.entries.iter().filter(|e| e.kind == kind).count()
+    }
+
+    /// The master's identifiers on any bus, in order.
+    pub fn master_ids(&self) -> Vec<u32> {
+        let all: BTreeSet<u32> = self.master.iter().flatten().copied().collect();
+        all.into_iter().collect()
+    }
+}
+
+/// Replays the master's frames of `captured` (see [`crate::CapturedFrames`]) on the twins
+/// of `scenario`, built from `registry`, and compares the twins' frames with the captured
+/// ones within `tolerance` nanoseconds. `master_ids` fixes the master's identifiers on
+/// every bus; without it they are learnt to a fixed point (see the crate documentation).
+pub fn replay(
+    scenario: &Scenario,
+    registry: &Registry,
+    captured: &[Captured],
+    tolerance: i64,
+    master_ids: Option<&BTreeSet<u32>>,
+) -> Result<Report, ReplayError> {
+    let buses = scenario.buses.len();
+    let last = captured.last().map(|c| c.t).unwrap_or(0);
+    let replayer = Replayer {
+        scenario,
+        registry,
+        captured,
+        bit_ns: scenario
+            .buses
+            .iter()
+            .map(|b| b.bit_rate.bit_time().as_nanos())
+            .collect(),
+        end: last + tolerance + 1_000_000,
+    };
+    let owned = owned_ids(&replayer.build()?);
+    let mut captured_ids = vec![BTreeSet::new(); buses];
+    for c in captured {
+        captured_ids[c.bus].insert(id_key(c.frame.id()));
+    }
+
+    let (master, run, passes) = match master_ids {
+        Some(ids) => {
+            let master = vec![ids.clone(); buses];
+            let run = replayer.run(&master)?;
+            (master, run, 1)
+        }
+        None => {
+            let mut master = vec![BTreeSet::new(); buses];
+            let mut run = replayer.run(&master)?;
+            let mut seen: Vec<BTreeSet<u32>> = run.ids.clone();
+            let mut passes = 1;
+            loop {
+                let next: Vec<BTreeSet<u32>> = (0..buses)
+                    .map(|b| {
+                        captured_ids[b]
+                            .iter()
+                            .filter(|id| !seen[b].contains(id) && !owned[b].contains(id))
+                            .copied()
+                            .collect()
+                    })
+                    .collect();
+                if next == master {
+                    break;
+                }
+                // Each pass only removes identifiers, so this ends; the bound is a guard.
+                if passes > 2 * captured_ids.iter().map(BTreeSet::len).sum::<usize>() + 2 {
+                    return Err(ReplayError::Unsettled);
+                }
+                master = next;
+                run = replayer.run(&master)?;
+                for (s, ids) in seen.iter_mut().zip(&run.ids) {
+                    s.extend(ids.iter().copied());
+                }
+                passes += 1;
+            }
+            (master, run, passes)
+        }
+    };
+
+    let expected: Vec<Captured> = captured
+        .iter()
+        .filter(|c| !master[c.bus].contains(&id_key(c.frame.id())))
+        .copied()
+        .collect();
+    // Twins' frames after the capture ended have nothing to be compared with.
+    let replayed: Vec<Captured> = run
+        .frames
+        .iter()
+        .filter(|r| r.t <= last + tolerance)
+        .copied()
+        .collect();
+    let entries = diff(&expected, &replayed, tolerance);
+    Ok(Report {
+        master,
+        passes,
+        injected: run.injected,
+        expected: expected.len(),
+        entries,
+    })
+}
