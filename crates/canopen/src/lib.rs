@@ -27,6 +27,8 @@ pub mod abort;
 pub mod device;
 pub mod emcy;
 pub mod error_behaviour;
+#[doc(hidden)]
+pub mod fuzz;
 pub mod guarding;
 pub mod heartbeat;
 pub mod master;

@@ -47,6 +47,8 @@ pub mod bus_tap;
 pub mod candump;
 mod dump;
 mod error;
+#[doc(hidden)]
+pub mod fuzz;
 mod io_util;
 pub mod pcap;
 pub mod pcapng;

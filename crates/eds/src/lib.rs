@@ -67,6 +67,8 @@
 mod check;
 mod doc;
 mod error;
+#[doc(hidden)]
+pub mod fuzz;
 mod ini;
 mod model;
 mod od;

@@ -39,6 +39,8 @@
 //! ```
 #![forbid(unsafe_code)]
 
+#[doc(hidden)]
+pub mod fuzz;
 pub mod memory;
 pub mod paced;
 mod port;

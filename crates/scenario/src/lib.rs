@@ -46,6 +46,8 @@
 
 mod build;
 mod error;
+#[doc(hidden)]
+pub mod fuzz;
 pub mod kinds;
 mod model;
 mod registry;
