@@ -24,6 +24,7 @@
 #![forbid(unsafe_code)]
 
 pub mod abort;
+pub mod bench;
 pub mod device;
 pub mod emcy;
 pub mod error_behaviour;

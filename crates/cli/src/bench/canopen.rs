@@ -8,14 +8,16 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, anyhow, bail};
 use cantwin_bus::{BusConfig, BusId, PortConfig, Recorder, Simulation, TxOrder};
-use cantwin_can::{BitRate, Duration, Frame, Id, Instant, Node, Outbox};
-use cantwin_canopen::ObjectAccess;
+use cantwin_can::{BitRate, Duration, Instant, Node};
+use cantwin_canopen::bench::{NetworkDevice, SdoBenchClient, SdoWork, SyncMaster};
 use cantwin_canopen::device::{Device, DeviceConfig};
+use cantwin_canopen::master::Mode;
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
-use cantwin_canopen::sdo::crc::Crc16;
-use cantwin_canopen::sdo::wire::{BlockSegment, Initiate, Mux, Request, Response};
+use cantwin_canopen::sdo::wire::Mux;
+
+pub use cantwin_canopen::bench::Filtering;
 
 use super::trials::Trial;
 
@@ -65,122 +67,14 @@ pub fn pdo_4_4_description() -> Result<OdDescription> {
         .map_err(|e| anyhow!("4+4 PDO dictionary: {e}"))
 }
 
-/// Which frames reach a network device's `on_frame`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Filtering {
-    /// Only the identifiers this device consumes, listed by hand as firmware would program
-    /// the controller's acceptance filter: NMT (0x000), SYNC (0x080), TIME (0x100), its SDO
-    /// request (0x600 + node) and node guarding remote request (0x700 + node). The network
-    /// devices have no RPDO, no heartbeat consumer and no EMCY consumer, so nothing else is
-    /// for them.
-    Firmware,
-    /// The bus asks the `Device` itself ([`Node::accepts`]), which derives its filter from
-    /// its COB-IDs.
-    Device,
-    /// Every frame is handed to every device (a driver that never asks `accepts`); the
-    /// device skips the frames its filter does not pass.
-    Everything,
-    /// Every frame is handed to every device, whose own filter is off: each frame goes
-    /// through the whole stack (the behaviour before devices filtered).
-    Unfiltered,
-}
-
-/// A network device: a CiA 301 [`Device`] whose 0x1017 is set to [`HEARTBEAT_MS`] at
-/// power-up, and whose events are drained after every call as an application would.
-struct NetDevice {
-    device: Device,
-    filtering: Filtering,
-}
-
-impl NetDevice {
-    fn drain(&mut self) {
-        while self.device.poll_event().is_some() {}
-    }
-}
-
-impl Node for NetDevice {
-    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
-        self.device.on_power_up(now, out);
-        // Through ObjectAccess, as an SDO download would, so the producer starts at once.
-        let _ = self.device.write(0x1017, 0, &HEARTBEAT_MS.to_le_bytes());
-        self.drain();
-    }
-    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
-        self.device.on_frame(frame, now, out);
-        self.drain();
-    }
-    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
-        self.device.on_tick(now, out);
-        self.drain();
-    }
-    fn next_deadline(&self) -> Option<Instant> {
-        self.device.next_deadline()
-    }
-    fn accepts(&self, id: Id) -> bool {
-        match self.filtering {
-            Filtering::Device => self.device.accepts(id),
-            Filtering::Everything | Filtering::Unfiltered => true,
-            Filtering::Firmware => {
-                let Id::Standard(id) = id else {
-                    return false;
-                };
-                let node = u16::from(self.device.node_id());
-                let raw = id.as_raw();
-                matches!(raw, 0x000 | 0x080 | 0x100) || raw == 0x600 + node || raw == 0x700 + node
-            }
-        }
-    }
-    fn acceptance_version(&self) -> Option<u64> {
-        match self.filtering {
-            Filtering::Device => self.device.acceptance_version(),
-            // Fixed filters.
-            Filtering::Firmware | Filtering::Everything | Filtering::Unfiltered => Some(0),
-        }
-    }
-}
-
 /// A `network` device with node-ID `node` that the bus asks for its own acceptance filter
 /// ([`Filtering::Device`]), for other benchmarks' baselines.
 pub fn network_device(desc: &Arc<OdDescription>, node: u8) -> Result<impl Node + Send + 'static> {
-    Ok(NetDevice {
-        device: Device::new(Arc::clone(desc), DeviceConfig::new(node))?,
-        filtering: Filtering::Device,
-    })
-}
-
-/// The network's master: NMT start of all nodes at power-up (CiA 301 §7.2.8.3.1.1), then a
-/// SYNC without counter every [`SYNC_PERIOD`] (§7.2.5).
-struct SyncMaster {
-    next_sync: Instant,
-    syncs: u64,
-}
-
-impl Node for SyncMaster {
-    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
-        if let Ok(f) = Frame::std(0x000, &[0x01, 0x00]) {
-            out.push(f);
-        }
-        self.next_sync = now + SYNC_PERIOD;
-    }
-    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
-    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
-        while self.next_sync <= now {
-            if let Ok(f) = Frame::std(0x080, &[]) {
-                out.push(f);
-            }
-            self.syncs += 1;
-            self.next_sync += SYNC_PERIOD;
-        }
-    }
-    fn next_deadline(&self) -> Option<Instant> {
-        Some(self.next_sync)
-    }
-    fn accepts(&self, _: Id) -> bool {
-        false
-    }
-    fn acceptance_version(&self) -> Option<u64> {
-        Some(0)
-    }
+    Ok(NetworkDevice::new(
+        Device::new(Arc::clone(desc), DeviceConfig::new(node))?,
+        Filtering::Device,
+        HEARTBEAT_MS,
+    ))
 }
 
 /// Build `buses` networks into `sim`, each of [`NETWORK_DEVICES`] devices and a master.
@@ -193,21 +87,18 @@ fn add_networks(
     let mut ids = Vec::with_capacity(buses);
     for b in 0..buses {
         let bus = sim.add_bus(BusConfig::new(format!("can{b}"), BitRate::R1M));
-        sim.attach(
-            bus,
-            SyncMaster {
-                next_sync: Instant::ZERO,
-                syncs: 0,
-            },
-            PortConfig::default(),
-        )?;
+        sim.attach(bus, SyncMaster::new(SYNC_PERIOD), PortConfig::default())?;
         for node in 1..=NETWORK_DEVICES {
             let config = DeviceConfig {
                 acceptance_filter: filtering != Filtering::Unfiltered,
                 ..DeviceConfig::new(node)
             };
             let device = Device::new(Arc::clone(desc), config)?;
-            sim.attach(bus, NetDevice { device, filtering }, PortConfig::default())?;
+            sim.attach(
+                bus,
+                NetworkDevice::new(device, filtering, HEARTBEAT_MS),
+                PortConfig::default(),
+            )?;
         }
         ids.push(bus);
     }
@@ -457,205 +348,6 @@ fn sdo_description(size: usize) -> Result<OdDescription> {
         .map_err(|e| anyhow!("SDO dictionary: {e}"))
 }
 
-fn request(b: [u8; 8]) -> Option<Frame> {
-    Id::standard(0x600 + u16::from(SDO_NODE))
-        .ok()
-        .map(|id| Frame::data_array(id, b))
-}
-
-fn response_of(frame: &Frame) -> Option<Response> {
-    let b = <[u8; 8]>::try_from(frame.data_bytes()).ok()?;
-    Response::decode(&b).ok()
-}
-
-/// A client reading 0x1000 (device type) by expedited upload, again as soon as each answer
-/// arrives (CiA 301 §7.2.4.3.6).
-struct ExpeditedClient {
-    round_trips: u64,
-    failures: u64,
-}
-
-impl ExpeditedClient {
-    fn ask(out: &mut Outbox) {
-        let r = Request::InitiateUpload {
-            mux: Mux::new(0x1000, 0),
-        };
-        if let Some(f) = request(r.encode()) {
-            out.push(f);
-        }
-    }
-}
-
-impl Node for ExpeditedClient {
-    fn on_power_up(&mut self, _: Instant, out: &mut Outbox) {
-        Self::ask(out);
-    }
-    fn on_frame(&mut self, frame: &Frame, _: Instant, out: &mut Outbox) {
-        match response_of(frame) {
-            Some(Response::InitiateUpload {
-                init: Initiate::Expedited { .. },
-                ..
-            }) => self.round_trips += 1,
-            _ => self.failures += 1,
-        }
-        Self::ask(out);
-    }
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-    fn accepts(&self, id: Id) -> bool {
-        id.as_raw() == 0x580 + u32::from(SDO_NODE)
-    }
-    fn acceptance_version(&self) -> Option<u64> {
-        Some(0)
-    }
-}
-
-/// A client downloading `data` by segmented transfer (§7.2.4.3.3, §7.2.4.3.4).
-struct SegmentedClient {
-    data: Vec<u8>,
-    next: usize,
-    toggle: bool,
-    done: bool,
-    failed: bool,
-}
-
-impl SegmentedClient {
-    fn send_segment(&mut self, out: &mut Outbox) {
-        let end = (self.next + 7).min(self.data.len());
-        let mut d = [0u8; 7];
-        d[..end - self.next].copy_from_slice(&self.data[self.next..end]);
-        let len = (end - self.next) as u8;
-        self.next = end;
-        let r = Request::DownloadSegment {
-            toggle: self.toggle,
-            last: self.next == self.data.len(),
-            len,
-            data: d,
-        };
-        if let Some(f) = request(r.encode()) {
-            out.push(f);
-        }
-    }
-}
-
-impl Node for SegmentedClient {
-    fn on_power_up(&mut self, _: Instant, out: &mut Outbox) {
-        let init = Initiate::Segmented {
-            size: Some(self.data.len() as u32),
-        };
-        if let Some(f) = request(Request::InitiateDownload { mux: DOMAIN, init }.encode()) {
-            out.push(f);
-        }
-    }
-    fn on_frame(&mut self, frame: &Frame, _: Instant, out: &mut Outbox) {
-        match response_of(frame) {
-            Some(Response::InitiateDownload { .. }) => self.send_segment(out),
-            Some(Response::DownloadSegment { toggle }) if toggle == self.toggle => {
-                self.toggle = !self.toggle;
-                if self.next < self.data.len() {
-                    self.send_segment(out);
-                } else {
-                    self.done = true;
-                }
-            }
-            _ => self.failed = true,
-        }
-    }
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-    fn accepts(&self, id: Id) -> bool {
-        id.as_raw() == 0x580 + u32::from(SDO_NODE)
-    }
-    fn acceptance_version(&self) -> Option<u64> {
-        Some(0)
-    }
-}
-
-/// A client downloading `data` by block transfer, each block as soon as the previous one is
-/// acknowledged (§7.2.4.3.9 to §7.2.4.3.11).
-struct BlockClient {
-    data: Vec<u8>,
-    next: usize,
-    blksize: u8,
-    done: bool,
-    failed: bool,
-}
-
-impl BlockClient {
-    fn segments(&self) -> usize {
-        self.data.len().div_ceil(7).max(1)
-    }
-
-    fn send_block(&mut self, out: &mut Outbox) {
-        let n = usize::from(self.blksize).min(self.segments() - self.next);
-        for k in 0..n {
-            let i = self.next + k;
-            let lo = (i * 7).min(self.data.len());
-            let hi = ((i + 1) * 7).min(self.data.len());
-            let mut d = [0u8; 7];
-            d[..hi - lo].copy_from_slice(&self.data[lo..hi]);
-            let seg = BlockSegment {
-                last: i + 1 == self.segments(),
-                seqno: k as u8 + 1,
-                data: d,
-            };
-            if let Some(f) = request(seg.encode()) {
-                out.push(f);
-            }
-        }
-    }
-}
-
-impl Node for BlockClient {
-    fn on_power_up(&mut self, _: Instant, out: &mut Outbox) {
-        let r = Request::BlockDownloadInitiate {
-            mux: DOMAIN,
-            crc: true,
-            size: Some(self.data.len() as u32),
-        };
-        if let Some(f) = request(r.encode()) {
-            out.push(f);
-        }
-    }
-    fn on_frame(&mut self, frame: &Frame, _: Instant, out: &mut Outbox) {
-        match response_of(frame) {
-            Some(Response::BlockDownloadInitiate { blksize, .. }) => {
-                self.blksize = blksize;
-                self.send_block(out);
-            }
-            Some(Response::BlockDownloadAck { ackseq, blksize }) => {
-                self.next += usize::from(ackseq);
-                self.blksize = blksize;
-                if self.next >= self.segments() {
-                    let unused = (self.segments() * 7 - self.data.len()) as u8;
-                    let crc = Crc16::of(&self.data);
-                    if let Some(f) = request(Request::BlockDownloadEnd { unused, crc }.encode()) {
-                        out.push(f);
-                    }
-                } else {
-                    self.send_block(out);
-                }
-            }
-            Some(Response::BlockDownloadEnd) => self.done = true,
-            _ => self.failed = true,
-        }
-    }
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-    fn accepts(&self, id: Id) -> bool {
-        id.as_raw() == 0x580 + u32::from(SDO_NODE)
-    }
-    fn acceptance_version(&self) -> Option<u64> {
-        Some(0)
-    }
-}
-
 /// A bus with the SDO server device and `client`; both queues deep enough for a whole block,
 /// in FIFO order so that a block's segments keep their sequence.
 fn sdo_bus<C: Node + Send + 'static>(
@@ -677,10 +369,7 @@ fn sdo_bus<C: Node + Send + 'static>(
     let device = Device::new(desc, DeviceConfig::new(SDO_NODE))?;
     sim.attach(
         bus,
-        NetDevice {
-            device,
-            filtering: Filtering::Device,
-        },
+        NetworkDevice::new(device, Filtering::Device, HEARTBEAT_MS),
         port,
     )?;
     let client = sim.attach(bus, client, port)?;
@@ -748,22 +437,24 @@ fn efficiency(
 /// The expedited part of the `sdo` benchmark: a client reading 0x1000 for `duration` of bus
 /// time, each request as soon as the previous answer arrives.
 pub fn run_sdo_expedited(duration: Duration) -> Result<ExpeditedReport> {
-    let client = ExpeditedClient {
-        round_trips: 0,
-        failures: 0,
-    };
+    let client = SdoBenchClient::new(
+        SDO_NODE,
+        SdoWork::UploadLoop {
+            mux: Mux::new(0x1000, 0),
+        },
+    )?;
     let (mut sim, _, _, port) = sdo_bus(16, client, false)?;
     let started = std::time::Instant::now();
     sim.run_until(Instant::ZERO + duration);
     let wall_time = started.elapsed();
     let c = sim
-        .node::<ExpeditedClient>(port)
+        .node::<SdoBenchClient>(port)
         .context("the client is gone")?;
-    if c.failures > 0 {
-        bail!("{} expedited uploads failed", c.failures);
+    if c.failures() > 0 {
+        bail!("{} expedited uploads failed", c.failures());
     }
     Ok(ExpeditedReport {
-        round_trips: c.round_trips,
+        round_trips: c.completed(),
         wall_time,
         bus_time: duration,
     })
@@ -776,19 +467,20 @@ pub fn run_sdo_transfers(bulk_bytes: usize) -> Result<TransferReport> {
     // Enough bus time for either transfer: 2 frames of at most 135 bits per 7 bytes.
     let limit = Instant::ZERO + BitRate::R1M.bit_time() * ((bulk_bytes as u64 / 7 + 10) * 300);
 
-    let seg = SegmentedClient {
-        data: data.clone(),
-        next: 0,
-        toggle: false,
-        done: false,
-        failed: false,
-    };
+    let seg = SdoBenchClient::new(
+        SDO_NODE,
+        SdoWork::Download {
+            mux: DOMAIN,
+            data: data.clone(),
+            mode: Mode::Segmented,
+        },
+    )?;
     let (mut sim, bus, tap, port) = sdo_bus(bulk_bytes, seg, true)?;
     sim.run_until(limit);
     let c = sim
-        .node::<SegmentedClient>(port)
+        .node::<SdoBenchClient>(port)
         .context("the client is gone")?;
-    if !c.done || c.failed {
+    if c.completed() != 1 || c.failures() > 0 {
         bail!("the segmented download did not complete");
     }
     let (segmented_fraction, segmented_bus_time) = efficiency(
@@ -798,19 +490,20 @@ pub fn run_sdo_transfers(bulk_bytes: usize) -> Result<TransferReport> {
         Limit::RequestResponse,
     )?;
 
-    let block = BlockClient {
-        data,
-        next: 0,
-        blksize: 0,
-        done: false,
-        failed: false,
-    };
+    let block = SdoBenchClient::new(
+        SDO_NODE,
+        SdoWork::Download {
+            mux: DOMAIN,
+            data,
+            mode: Mode::Block { blksize: 127 },
+        },
+    )?;
     let (mut sim, bus, tap, port) = sdo_bus(bulk_bytes, block, true)?;
     sim.run_until(limit);
     let c = sim
-        .node::<BlockClient>(port)
+        .node::<SdoBenchClient>(port)
         .context("the client is gone")?;
-    if !c.done || c.failed {
+    if c.completed() != 1 || c.failures() > 0 {
         bail!("the block download did not complete");
     }
     let (block_fraction, block_bus_time) =

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use anyhow::{Context, Result, anyhow, bail};
 use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
 use cantwin_cal::{CmsClient, Payload, Request};
-use cantwin_can::{BitRate, Duration, Frame, Instant, Node, Outbox};
+use cantwin_can::{BitRate, Duration, Frame, Instant, ListenOnly};
 use cantwin_canopen::device::DeviceConfig;
 use cantwin_devicenet::Scanner;
 use cantwin_opendrive::messages::{self, Code, CommandByte, message0_write};
@@ -105,18 +105,6 @@ fn ms(v: u64) -> Instant {
     Instant::ZERO + Duration::from_millis(v)
 }
 
-/// A node that only acknowledges frames: the master's port where the bench itself puts the
-/// master's frames on the bus.
-struct Ack;
-
-impl Node for Ack {
-    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-}
-
 /// Run `sim` from `from` for `duration`, calling `cycle` every `period` (the master's cyclic
 /// traffic), timing it in chunks of [`CHUNK`].
 fn measure(
@@ -162,7 +150,7 @@ fn build(text: &str, name: &str) -> Result<(Simulation, BusId, PortId)> {
     let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
     let bus = built.bus("can0").context("the scenario's bus can0")?;
     let mut sim = built.sim;
-    let master = sim.attach(bus, Ack, PortConfig::default())?;
+    let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
     Ok((sim, bus, master))
 }
 
@@ -193,7 +181,7 @@ fn baseline(duration: Duration) -> Result<TwinRun> {
         super::canopen::network_device(&desc, 5)?,
         PortConfig::default(),
     )?;
-    let master = sim.attach(bus, Ack, PortConfig::default())?;
+    let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
     nmt_start(&mut sim, master)?;
     measure(&mut sim, bus, ms(10), duration, CYCLE, sync_cycle(master))
 }
@@ -287,7 +275,7 @@ fn tm3_full_island(duration: Duration) -> Result<TwinRun> {
         cantwin_tm3::full_island::FullIsland::new(3)?,
         PortConfig::default(),
     )?;
-    sim.attach(bus, Ack, PortConfig::default())?;
+    sim.attach(bus, ListenOnly, PortConfig::default())?;
     measure(&mut sim, bus, ms(100), duration, CYCLE, |_, _| Ok(()))
 }
 
@@ -301,7 +289,7 @@ fn bare_tpdos(frames_per_second: f64, duration: Duration) -> Result<TwinRun> {
             cantwin_canopen::device::Device::new(Arc::clone(&desc), DeviceConfig::new(node))?;
         sim.attach(bus, device, PortConfig::default())?;
     }
-    let master = sim.attach(bus, Ack, PortConfig::default())?;
+    let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
     nmt_start(&mut sim, master)?;
     // 56 TPDOs and the SYNC itself per period.
     let period_ns = (57.0 * 1e9 / frames_per_second.max(1.0)).round() as u64;
