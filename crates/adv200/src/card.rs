@@ -38,6 +38,7 @@ use cantwin_canopen::device::{Device, DeviceConfig, Event};
 use cantwin_canopen::nmt::State;
 use cantwin_canopen::od::{EntryId, ObjectDictionary, OdHooks};
 use cantwin_canopen::sdo::SdoCapabilities;
+use cantwin_cia402::objects as cia402;
 
 use cantwin_devicenet::{Led, MacId, Slave, SlaveConfig, SlaveEvent};
 use std::sync::Arc;
@@ -128,12 +129,12 @@ impl VlCommand {
             dv / dt
         };
         VlCommand {
-            controlword: od_i64(od, 0x6040, 0).unwrap_or(0) as u16,
-            target: od_i64(od, 0x6042, 0).unwrap_or(0),
-            min: od_i64(od, 0x6046, 1).unwrap_or(0),
-            max: od_i64(od, 0x6046, 2).unwrap_or(i64::from(i16::MAX)),
-            acceleration: rate(0x6048),
-            deceleration: rate(0x6049),
+            controlword: od_i64(od, cia402::CONTROLWORD, 0).unwrap_or(0) as u16,
+            target: od_i64(od, cia402::VL_TARGET_VELOCITY, 0).unwrap_or(0),
+            min: od_i64(od, cia402::VL_VELOCITY_MIN_MAX_AMOUNT, 1).unwrap_or(0),
+            max: od_i64(od, cia402::VL_VELOCITY_MIN_MAX_AMOUNT, 2).unwrap_or(i64::from(i16::MAX)),
+            acceleration: rate(cia402::VL_VELOCITY_ACCELERATION),
+            deceleration: rate(cia402::VL_VELOCITY_DECELERATION),
         }
     }
 }
@@ -713,7 +714,7 @@ impl Adv200 {
                 }
             }
             Personality::Ds402 => {
-                let target = od_i64(c.dev.od(), 0x6042, 0).unwrap_or(0);
+                let target = od_i64(c.dev.od(), cia402::VL_TARGET_VELOCITY, 0).unwrap_or(0);
                 c.dev.hooks_mut().update_statusword(target);
             }
         }
@@ -778,11 +779,10 @@ impl Adv200 {
             mag.clamp(vl.min, vl.max.max(vl.min))
         };
         let reference = if vl.target < 0 { -clamped } else { clamped };
-        let state = st.ds402.state();
         st.drive.set_profile(Some(ProfileCommands {
             enable: st.ds402.power(),
-            start: state == PowerState::OperationEnabled && !st.ds402.halt(),
-            fast_stop: state == PowerState::QuickStopActive,
+            start: st.ds402.running(),
+            fast_stop: st.ds402.quick_stopping(),
             reference,
             rates: Some((vl.acceleration, vl.deceleration)),
         }));

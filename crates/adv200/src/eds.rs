@@ -10,6 +10,7 @@
 //! key keep or ignore it, as CiA 306 says of keys it does not define.
 
 use cantwin_canopen::od::OdBuildError;
+use cantwin_cia402::objects as cia402;
 use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 
 use crate::od::{Personality, build};
@@ -50,15 +51,15 @@ pub fn eds_for(personality: Personality, pdc: &Pdc) -> Result<Eds, OdBuildError>
         .collect();
     if personality == Personality::Ds402 {
         units.extend([
-            (0x6042, 0, "rpm"),
-            (0x6043, 0, "rpm"),
-            (0x6044, 0, "rpm"),
-            (0x6046, 1, "rpm"),
-            (0x6046, 2, "rpm"),
-            (0x6048, 1, "rpm"),
-            (0x6048, 2, "s"),
-            (0x6049, 1, "rpm"),
-            (0x6049, 2, "s"),
+            (cia402::VL_TARGET_VELOCITY, 0, "rpm"),
+            (cia402::VL_VELOCITY_DEMAND, 0, "rpm"),
+            (cia402::VL_VELOCITY_ACTUAL_VALUE, 0, "rpm"),
+            (cia402::VL_VELOCITY_MIN_MAX_AMOUNT, 1, "rpm"),
+            (cia402::VL_VELOCITY_MIN_MAX_AMOUNT, 2, "rpm"),
+            (cia402::VL_VELOCITY_ACCELERATION, 1, "rpm"),
+            (cia402::VL_VELOCITY_ACCELERATION, 2, "s"),
+            (cia402::VL_VELOCITY_DECELERATION, 1, "rpm"),
+            (cia402::VL_VELOCITY_DECELERATION, 2, "s"),
         ]);
     }
     for (index, sub, unit) in units {

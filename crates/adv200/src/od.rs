@@ -18,6 +18,8 @@ use cantwin_canopen::od::{
 };
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 
+use cantwin_cia402::objects as cia402;
+
 use crate::params::{ParamAccess, catalog, par};
 use crate::pdc::{Dir, Pdc};
 
@@ -210,27 +212,27 @@ fn ds402_objects(b: OdBuilder) -> OdBuilder {
     };
     let b = b
         .var(
-            0x6040,
+            cia402::CONTROLWORD,
             var("Controlword", DataType::Unsigned16, Access::Rw, 0),
         )
         .var(
-            0x6041,
+            cia402::STATUSWORD,
             var("Statusword", DataType::Unsigned16, Access::Ro, 0x0240),
         )
         .var(
-            0x6042,
+            cia402::VL_TARGET_VELOCITY,
             var("vl target velocity", DataType::Integer16, Access::Rw, 0),
         )
         .var(
-            0x6043,
+            cia402::VL_VELOCITY_DEMAND,
             var("vl velocity demand", DataType::Integer16, Access::Ro, 0),
         )
         .var(
-            0x6044,
+            cia402::VL_VELOCITY_ACTUAL_VALUE,
             var("vl control effort", DataType::Integer16, Access::Ro, 0),
         )
         .array(
-            0x6046,
+            cia402::VL_VELOCITY_MIN_MAX_AMOUNT,
             "vl velocity min max amount",
             [
                 (
@@ -243,23 +245,36 @@ fn ds402_objects(b: OdBuilder) -> OdBuilder {
                 ),
             ],
         );
-    let b = ramp(b, 0x6048, "vl velocity acceleration");
-    let b = ramp(b, 0x6049, "vl velocity deceleration");
+    let b = ramp(
+        b,
+        cia402::VL_VELOCITY_ACCELERATION,
+        "vl velocity acceleration",
+    );
+    let b = ramp(
+        b,
+        cia402::VL_VELOCITY_DECELERATION,
+        "vl velocity deceleration",
+    );
     // The statusword and the vl actual values are the drive's, computed when read; the
     // commands are stored, and the hooks learn of every write.
-    b.hook(0x6040..=0x6049)
+    b.hook(cia402::CONTROLWORD..=cia402::VL_VELOCITY_DECELERATION)
         .var(
-            0x6060,
+            cia402::MODES_OF_OPERATION,
             SubObject::new("Modes of operation", DataType::Integer8, Access::Rw)
                 .default(Value::Integer8(2))
                 .limits(Value::Integer8(2), Value::Integer8(2)),
         )
         .var(
-            0x6061,
+            cia402::MODES_OF_OPERATION_DISPLAY,
             SubObject::new("Modes of operation display", DataType::Integer8, Access::Ro)
                 .default(Value::Integer8(2))
                 .mappable(),
         )
+}
+
+/// A PDO mapping entry of sub-index 0 of `index` with `bits`.
+const fn entry(index: u16, bits: u32) -> u32 {
+    (index as u32) << 16 | bits
 }
 
 /// The dictionary of `personality` with the PDC layout `pdc` (CANopen) as the default PDO
@@ -375,8 +390,14 @@ pub fn build(
                 .collect(),
         ),
         Personality::Ds402 => (
-            vec![vec![0x6040_0010, 0x6042_0010]],
-            vec![vec![0x6041_0010, 0x6044_0010]],
+            vec![vec![
+                entry(cia402::CONTROLWORD, 16),
+                entry(cia402::VL_TARGET_VELOCITY, 16),
+            ]],
+            vec![vec![
+                entry(cia402::STATUSWORD, 16),
+                entry(cia402::VL_VELOCITY_ACTUAL_VALUE, 16),
+            ]],
         ),
     };
     b = pdo_objects(b, &rx, &tx);

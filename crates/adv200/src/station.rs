@@ -21,6 +21,7 @@
 
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::{ObjectDictionary, OdHooks, ReadInfo, Value};
+use cantwin_cia402::objects as cia402;
 
 use crate::drive::Drive;
 use crate::ds402::{Ds402, State as PowerState};
@@ -111,9 +112,9 @@ impl Station {
         let word = |v: i64| Some(Ok(((v as u32).to_le_bytes(), 2)));
         match (index, sub) {
             (PARAMS_FIRST..=PARAMS_LAST, 1) => Some(self.encode(index - PARAMS_FIRST)),
-            (0x6041, 0) => word(i64::from(self.statusword)),
-            (0x6043, 0) => word(self.params.value(par::RAMP_OUTPUT)),
-            (0x6044, 0) => word(self.params.value(par::MOTOR_SPEED)),
+            (cia402::STATUSWORD, 0) => word(i64::from(self.statusword)),
+            (cia402::VL_VELOCITY_DEMAND, 0) => word(self.params.value(par::RAMP_OUTPUT)),
+            (cia402::VL_VELOCITY_ACTUAL_VALUE, 0) => word(self.params.value(par::MOTOR_SPEED)),
             _ => None,
         }
     }
