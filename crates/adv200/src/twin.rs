@@ -50,16 +50,14 @@ impl Twin for Adv200 {
 
     /// Drive parameters at 0x2000 + PAR sub 1 in every personality (the §1.4 SDO mapping;
     /// the bytes are the parameter's size), the card's other objects while it runs CANopen
-    /// or DS402.
+    /// or DS402; the objects the drive serves through the dictionary's hooks (parameters,
+    /// the CiA 402 statusword and actual values) as an upload reads them.
     fn read_object(&self, index: u16, sub: u8) -> Result<Vec<u8>, ObjectError> {
-        if (0x2000..=0x5FFF).contains(&index)
-            && sub == 1
-            && let Ok((bytes, len)) = self.params().encode(index - 0x2000)
-        {
-            return Ok(bytes[..len].to_vec());
+        let parameter = (0x2000..=0x5FFF).contains(&index) && sub == 1;
+        if !parameter && self.dictionary().is_none() {
+            return Err(ObjectError::NoDictionary);
         }
-        let od = self.dictionary().ok_or(ObjectError::NoDictionary)?;
-        Ok(od.get(index, sub)?.to_le_bytes())
+        Ok(self.object_bytes(index, sub)?)
     }
 
     fn write_object(
