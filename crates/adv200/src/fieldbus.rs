@@ -31,7 +31,7 @@ pub fn write(db: &mut ParamDb, p: u16, v: i64) -> Result<(), ParamError> {
     db.set(p, v)
 }
 
-/// Decodes 1–4 bytes for parameter `p` ([`ParamDb::decode`]) and writes them ([`write`]).
+/// Decodes 1–4 bytes for parameter `p` ([`ParamDb::decode`]) and writes them ([`write()`]).
 pub fn write_bytes(db: &mut ParamDb, p: u16, data: &[u8]) -> Result<(), ParamError> {
     let v = ParamDb::decode(p, data)?;
     write(db, p, v)

@@ -5,7 +5,8 @@
 //! * [`alarms`]: the alarm list and its EMCY codes (§1.5);
 //! * [`pdc`]: the Process Data Channel mapping rules (§1.3) and their Opt Bus Fault codes;
 //! * [`fieldbus`]: the one path by which either fieldbus writes a parameter;
-//! * [`ds402`]: the CiA 402 power state machine (chapter 2);
+//! * [`ds402`]: the CiA 402 power drive state machine of `cantwin-cia402` with the card's
+//!   option codes (chapter 2);
 //! * [`devicenet`]: the DeviceNet personality (chapter 3);
 //! * [`od`]: the card's object dictionary for the CANopen and DS402 personalities;
 //! * [`station`]: the dictionary's hooks, through which the card reaches the drive;

@@ -9,7 +9,10 @@
 //! the defaults of §1.1.3. 0x1005 has bit 31 set as §1.1.9 prints it. TPDO COB-IDs have bit
 //! 30 set: no remote request (§1.1.7 says RTR is not supported).
 //!
-//! Every drive parameter PAR is the ARRAY 0x2000 + PAR with its value at sub-index 1 (§1.4).
+//! Every drive parameter PAR is the ARRAY 0x2000 + PAR with its value at sub-index 1 (§1.4),
+//! served by the drive through the dictionary's hooks ([`crate::station`]); the dictionary
+//! stores no parameter value. A channel the Process Data Channel placed has its `mon` typed
+//! as wide as the channel, so that its PDO mapping, its SDO upload and the EDS agree.
 //! DS402 adds 0x6040–0x6061 of chapter 2 and maps 0x6040/0x6042 into RPDO1 and 0x6041/0x6044
 //! into TPDO1.
 
