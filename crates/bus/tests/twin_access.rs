@@ -1,6 +1,8 @@
 //! A node attached as a twin is reached as `dyn Twin` through the bus and the simulation,
 //! without its type; frames it sends while changed from above are queued on its port.
 
+#![allow(clippy::unwrap_used)]
+
 use cantwin_bus::{BoxedNode, BusConfig, PortConfig, Recorder, Simulation};
 use cantwin_can::{BitRate, Frame, Instant, Node, Outbox};
 use cantwin_twin::{Context, Direction, SignalError, SignalId, SignalValue, Twin};

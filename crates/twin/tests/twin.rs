@@ -1,6 +1,8 @@
 //! The Twin contract: typed signal values as scripts write them, terminal names, and the
 //! generic CiA 301 device's dictionary reached and written through its own checks.
 
+#![allow(clippy::unwrap_used)]
+
 use std::sync::Arc;
 
 use cantwin_can::{Instant, Outbox};
