@@ -98,6 +98,37 @@ struct Card {
     /// Where the dictionary keeps 0x1006 (communication cycle period), located once: the
     /// bus-loss deadline reads it at every call.
     cycle_period: Option<EntryId>,
+    /// The objects served by the drive that event-driven TPDOs (transmission type 0, 254,
+    /// 255: §1.1.7 "254...255 if asynchronous") map, with the bytes they had at the last
+    /// evaluation: a change is the application event that sends the TPDO.
+    watched: Vec<(u16, u8, [u8; 4])>,
+}
+
+/// The objects served by the drive that the event-driven TPDOs of `dev` map, with their
+/// present bytes.
+fn watch_list(dev: &Device<Station>) -> Vec<(u16, u8, [u8; 4])> {
+    let od = dev.od();
+    let mut watched: Vec<(u16, u8, [u8; 4])> = Vec::new();
+    for n in 0..0x200u16 {
+        let Some(ttype) = od.get_unsigned(0x1800 + n, 2) else {
+            continue;
+        };
+        if !(ttype == 0 || ttype >= 254) {
+            continue;
+        }
+        let count = od.get_unsigned(0x1A00 + n, 0).unwrap_or(0).min(64) as u8;
+        for k in 1..=count {
+            let entry = od.get_unsigned(0x1A00 + n, k).unwrap_or(0) as u32;
+            let (index, sub) = ((entry >> 16) as u16, (entry >> 8) as u8);
+            if watched.iter().any(|w| w.0 == index && w.1 == sub) {
+                continue;
+            }
+            if let Some(Ok((bytes, _))) = dev.hooks().serve(index, sub) {
+                watched.push((index, sub, bytes));
+            }
+        }
+    }
+    watched
 }
 
 /// The fieldbus parameters latched at the last drive reset.
@@ -487,12 +518,14 @@ impl Adv200 {
         core::mem::swap(dev.hooks_mut(), &mut self.home);
         dev.on_power_up(now, out);
         let cycle_period = dev.od().locate(0x1006, 0).ok();
+        dev.hooks_mut().remapped = true;
         self.card = Some(Card {
             dev,
             personality,
             pdc,
             last_sync: None,
             cycle_period,
+            watched: Vec::new(),
         });
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
@@ -718,6 +751,20 @@ impl Adv200 {
                 c.dev.hooks_mut().update_statusword(target);
             }
         }
+        if c.dev.hooks().remapped {
+            c.dev.hooks_mut().remapped = false;
+            c.watched = watch_list(&c.dev);
+        }
+        for w in &mut c.watched {
+            if let Some(Ok((bytes, _))) = c.dev.hooks().serve(w.0, w.1)
+                && bytes != w.2
+            {
+                w.2 = bytes;
+                if let Some(p) = c.dev.pdo_mut() {
+                    p.mark_changed(w.0, w.1);
+                }
+            }
+        }
     }
 
     fn report_alarms(&mut self) {
@@ -820,6 +867,8 @@ impl Adv200 {
                         to: State::Operational,
                         ..
                     } => c.last_sync = Some(now),
+                    // The TPDO parameters are back at their power-on values.
+                    Event::ResetCommunication => c.dev.hooks_mut().remapped = true,
                     _ => {}
                 }
             }
@@ -870,7 +919,8 @@ impl Node for Adv200 {
             c.dev.on_frame(frame, now, out);
         }
         let events = self.card_events(now);
-        if events || self.st().touched || self.st().drive.has_events() {
+        let st = self.st();
+        if events || st.touched || st.remapped || st.drive.has_events() {
             self.settle(now);
         }
     }

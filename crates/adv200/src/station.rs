@@ -48,6 +48,9 @@ pub struct Station {
     pub(crate) touched: bool,
     /// The statusword (0x6041) as the drive's last evaluation made it.
     pub(crate) statusword: u16,
+    /// A TPDO's communication or mapping parameters were written: which objects the
+    /// event-driven TPDOs map must be found again.
+    pub(crate) remapped: bool,
 }
 
 /// The integer the dictionary stores at `index`/`sub`.
@@ -169,6 +172,8 @@ impl OdHooks for Station {
         // the event that wrote it.
         if index >= PARAMS_FIRST {
             self.touched = true;
+        } else if (0x1800..=0x1BFF).contains(&index) {
+            self.remapped = true;
         }
     }
 }

@@ -269,3 +269,21 @@ fn manual_1_2_fieldbus_parameters_act_only_after_a_drive_reset() {
     assert_eq!(h.send("60C#40A62F0100000000"), Vec::<String>::new());
     assert_eq!(h.send("60D#40A62F0100000000"), ["58D#4BA62F010D000000"]);
 }
+
+#[test]
+fn manual_1_1_7_asynchronous_tpdo_is_sent_when_its_value_changes() {
+    let mut h = H::canopen(|d| s2m(d, 1, "Count 16", par::DIG_RAMP_REF_1));
+    // TPDO1 transmission type 255 (§1.1.7: "254...255 se asincrono").
+    assert_eq!(h.send("60C#2F001802FF000000"), ["58C#6000180200000000"]);
+    h.send("000#010C");
+    // PAR 600 = 100: the TPDO follows at once; writing the same value again sends nothing.
+    assert_eq!(
+        h.send("60C#2B58220164000000"),
+        ["58C#6058220100000000", "18C#6400"]
+    );
+    assert_eq!(h.send("60C#2B58220164000000"), ["58C#6058220100000000"]);
+    // Synchronous again (type 1): a change waits for the SYNC.
+    assert_eq!(h.send("60C#2F00180201000000"), ["58C#6000180200000000"]);
+    assert_eq!(h.send("60C#2B582201C8000000"), ["58C#6058220100000000"]);
+    assert_eq!(h.send("080#"), ["18C#C800"]);
+}
