@@ -189,9 +189,13 @@ fn mapping(b: OdBuilder, index: u16, name: String, map: &[u32]) -> OdBuilder {
 }
 
 fn ds402_objects(b: OdBuilder) -> OdBuilder {
+    // The PDO-mappable CiA 402 values state their type's whole range as their limits, as
+    // the PDC channels do, so that the EDS says what a PDO can carry.
     let var = |name: &str, ty: DataType, access: Access, v: i64| {
+        let (lo, hi) = type_range(ty);
         SubObject::new(name, ty, access)
             .default(value_of(ty, v))
+            .limits(value_of(ty, lo), value_of(ty, hi))
             .mappable()
     };
     let ramp = |b: OdBuilder, index: u16, name: &str| {

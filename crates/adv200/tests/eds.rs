@@ -151,6 +151,13 @@ fn manual_1_6_exported_eds_types_every_mapped_entry_as_its_mapping() {
 }
 
 #[test]
+fn manual_2_exported_eds_types_every_mapped_entry_as_its_mapping() {
+    // RPDO1 0x6040 + 0x6042, TPDO1 0x6041 + 0x6044, 16 bits each.
+    let eds = cantwin_eds::parse(&eds_text(Personality::Ds402).unwrap()).unwrap();
+    assert_eq!(mapped_entries_agree(&eds), 4);
+}
+
+#[test]
 fn manual_1_4_out_of_range_writes_abort_with_the_eds_limits() {
     use cantwin_can::{Frame, Instant, Node, Outbox};
     let eds = cantwin_eds::parse(&eds_text(Personality::CanOpen).unwrap()).unwrap();
