@@ -435,6 +435,37 @@ impl SdoServer {
                 return;
             }
         };
+        if self.state == State::Idle && !(self.caps.sub_index_ff_refused && b[3] == 0xFF) {
+            // The most frequent requests first, served without a transfer state: no
+            // capability refuses them but the sub-index 0xFF rule.
+            match req {
+                // Initiate upload (§7.2.4.3.6).
+                Request::InitiateUpload { mux } => {
+                    self.mux = mux;
+                    match self.start_upload(mux, tx, access, out) {
+                        Err(code) => self.abort(code, access, out),
+                        Ok(()) if self.state != State::Idle => {
+                            self.deadline = now.checked_add(self.timeout);
+                        }
+                        Ok(()) => {}
+                    }
+                    return;
+                }
+                // Expedited download (§7.2.4.3.3).
+                Request::InitiateDownload {
+                    mux,
+                    init: Initiate::Expedited { data, len },
+                } => {
+                    self.mux = mux;
+                    match Self::expedited_download(mux, &data, len, access) {
+                        Ok(()) => Self::send(out, tx, Response::InitiateDownload { mux }),
+                        Err(code) => self.abort(code, access, out),
+                    }
+                    return;
+                }
+                _ => {}
+            }
+        }
         if self.caps != SdoCapabilities::FULL
             && let Some((mux, code)) = self.caps.refusal(b, &req)
         {
@@ -445,12 +476,6 @@ impl SdoServer {
         }
         let result = match self.state {
             State::Idle => match req {
-                // The most frequent requests first (initiate upload §7.2.4.3.6, expedited
-                // download §7.2.4.3.3): served without a transfer state.
-                Request::InitiateUpload { mux } => {
-                    self.mux = mux;
-                    self.start_upload(mux, tx, access, out)
-                }
                 Request::Abort { .. } => return self.cancel(access),
                 _ => self.initiate(req, tx, access, out),
             },
@@ -531,14 +556,7 @@ impl SdoServer {
                 self.mux = mux;
                 match init {
                     Initiate::Expedited { data, len } => {
-                        let len = match len {
-                            Some(l) => usize::from(l),
-                            None => access
-                                .fixed_size(mux.index, mux.sub)
-                                .filter(|s| *s < 4)
-                                .unwrap_or(4),
-                        };
-                        access.write(mux.index, mux.sub, &data[..len])?;
+                        Self::expedited_download(mux, &data, len, access)?;
                     }
                     Initiate::Segmented { size } => {
                         access.write_begin(mux.index, mux.sub, size.map(|s| s as usize))?;
@@ -611,6 +629,25 @@ impl SdoServer {
                 Err(AbortCode::INVALID_COMMAND)
             }
         }
+    }
+
+    /// Writes the data of an expedited download; without an indicated size, the type's size
+    /// if it is below 4 bytes, else 4 bytes.
+    #[inline]
+    fn expedited_download(
+        mux: Mux,
+        data: &[u8; 4],
+        len: Option<u8>,
+        access: &mut dyn ObjectAccess,
+    ) -> Result<(), AbortCode> {
+        let len = match len {
+            Some(l) => usize::from(l.min(4)),
+            None => access
+                .fixed_size(mux.index, mux.sub)
+                .filter(|s| *s < 4)
+                .unwrap_or(4),
+        };
+        access.write(mux.index, mux.sub, &data[..len])
     }
 
     /// Initiate upload response: expedited up to 4 bytes, otherwise segmented with size.
