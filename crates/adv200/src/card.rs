@@ -191,6 +191,9 @@ pub struct Adv200 {
     bus_off_recovered: Option<Instant>,
     /// Where the card's dictionary description comes from at a drive reset.
     descriptions: Arc<Descriptions>,
+    /// [`Node::next_deadline`] as of the end of the last call that could change it: the bus
+    /// asks for it after every event; every other change of the drive sets `dirty`.
+    deadline: Option<Instant>,
 }
 
 impl core::fmt::Debug for Adv200 {
@@ -233,6 +236,7 @@ impl Adv200 {
             card_faults: std::collections::BTreeSet::new(),
             bus_off_recovered: None,
             descriptions,
+            deadline: None,
         }
     }
 
@@ -434,6 +438,11 @@ impl Adv200 {
     /// A drive reset (power cycle of the drive with its parameters kept): latches the
     /// fieldbus parameters and restarts the card.
     pub fn reset_drive(&mut self, now: Instant, out: &mut Outbox) {
+        self.restart(now, out);
+        self.deadline = self.compute_deadline();
+    }
+
+    fn restart(&mut self, now: Instant, out: &mut Outbox) {
         self.powered = true;
         self.last_now = now;
         // The previous card is kept until the reset is over so that a card rebuilt alike
@@ -894,12 +903,8 @@ impl Adv200 {
     }
 }
 
-impl Node for Adv200 {
-    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
-        self.reset_drive(now, out);
-    }
-
-    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+impl Adv200 {
+    fn frame_in(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
         if self.powered && self.dnet.is_some() {
             self.dnet_events(now);
             self.with_dnet(|s| s.on_frame(frame, now, out));
@@ -925,7 +930,7 @@ impl Node for Adv200 {
         }
     }
 
-    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+    fn tick(&mut self, now: Instant, out: &mut Outbox) {
         if !self.powered {
             return;
         }
@@ -970,13 +975,8 @@ impl Node for Adv200 {
         }
     }
 
-    fn next_deadline(&self) -> Option<Instant> {
-        if !self.powered {
-            return None;
-        }
-        if self.dirty {
-            return Some(self.last_now);
-        }
+    /// The next deadline of the drive, its card and the bus-loss watch, as of now.
+    fn compute_deadline(&self) -> Option<Instant> {
         [
             self.st().drive.next_deadline(),
             self.card.as_ref().and_then(|c| c.dev.next_deadline()),
@@ -988,7 +988,7 @@ impl Node for Adv200 {
         .min()
     }
 
-    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+    fn sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
         if let Some(c) = &mut self.card {
             c.dev.on_sent(frame, now, out);
         }
@@ -997,7 +997,7 @@ impl Node for Adv200 {
         }
     }
 
-    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+    fn controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
         if self.dnet.is_none() {
             match event {
                 ControllerEvent::BusOff => {
@@ -1024,5 +1024,41 @@ impl Node for Adv200 {
         }
         self.card_events(now);
         self.settle(now);
+    }
+}
+
+impl Node for Adv200 {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.reset_drive(now, out);
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.frame_in(frame, now, out);
+        self.deadline = self.compute_deadline();
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.tick(now, out);
+        self.deadline = self.compute_deadline();
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        if !self.powered {
+            return None;
+        }
+        if self.dirty {
+            return Some(self.last_now);
+        }
+        self.deadline
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.sent(frame, now, out);
+        self.deadline = self.compute_deadline();
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        self.controller_event(event, now, out);
+        self.deadline = self.compute_deadline();
     }
 }
