@@ -774,6 +774,21 @@ mod tests {
     }
 
     #[test]
+    fn signal_values_that_no_signal_takes_are_refused_with_their_line() {
+        let e = error_of(
+            "\n[[at]]\ntime_ms = 5\naction = \"set\"\ndevice = \"node5\"\nsignal = \"x\"\nvalue = { a = 1 }\n",
+        );
+        assert!(
+            e.contains("s.toml:12: key `at[0].value`: a signal value is a boolean"),
+            "{e}"
+        );
+        let e = error_of(
+            "\n[[expect]]\nat_ms = 1\nsignal = { device = \"node5\", name = \"x\", equals = 1979-05-27 }\n",
+        );
+        assert!(e.contains("key `expect[0].signal.equals`"), "{e}");
+    }
+
+    #[test]
     fn validate_refuses_a_signal_the_kind_cannot_read() {
         let s = Scenario::parse(
             &format!(
