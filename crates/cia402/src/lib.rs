@@ -47,6 +47,7 @@
 #![forbid(unsafe_code)]
 
 pub mod controlword;
+pub mod index;
 pub mod modes;
 pub mod objects;
 pub mod options;

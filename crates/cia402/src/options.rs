@@ -3,7 +3,7 @@
 
 use cantwin_canopen::od::ObjectDictionary;
 
-use crate::objects;
+use crate::index;
 
 /// How a drive decelerates when it stops (the common part of the option codes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -211,19 +211,19 @@ impl OptionCodes {
             i16::try_from(v).ok()
         };
         OptionCodes {
-            quick_stop: code(objects::QUICK_STOP_OPTION_CODE)
+            quick_stop: code(index::QUICK_STOP_OPTION_CODE)
                 .and_then(QuickStopOption::from_code)
                 .unwrap_or(fallback.quick_stop),
-            shutdown: code(objects::SHUTDOWN_OPTION_CODE)
+            shutdown: code(index::SHUTDOWN_OPTION_CODE)
                 .and_then(DisableOption::from_code)
                 .unwrap_or(fallback.shutdown),
-            disable_operation: code(objects::DISABLE_OPERATION_OPTION_CODE)
+            disable_operation: code(index::DISABLE_OPERATION_OPTION_CODE)
                 .and_then(DisableOption::from_code)
                 .unwrap_or(fallback.disable_operation),
-            halt: code(objects::HALT_OPTION_CODE)
+            halt: code(index::HALT_OPTION_CODE)
                 .and_then(HaltOption::from_code)
                 .unwrap_or(fallback.halt),
-            fault_reaction: code(objects::FAULT_REACTION_OPTION_CODE)
+            fault_reaction: code(index::FAULT_REACTION_OPTION_CODE)
                 .and_then(FaultReactionOption::from_code)
                 .unwrap_or(fallback.fault_reaction),
         }

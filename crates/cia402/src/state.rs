@@ -41,7 +41,6 @@
 
 use crate::controlword::{Command, Controlword};
 use crate::options::{DisableOption, FaultReactionOption, OptionCodes, StopRamp};
-use crate::statusword::{StatusFlags, Statusword};
 
 /// A state of the power drive state machine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -443,11 +442,6 @@ impl PowerStateMachine {
             voltage: self.state.voltage(),
             motion,
         }
-    }
-
-    /// The statusword of the present state with `flags` beside it.
-    pub fn statusword(&self, flags: StatusFlags) -> Statusword {
-        Statusword::encode(self.state, flags)
     }
 }
 

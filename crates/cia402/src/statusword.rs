@@ -15,7 +15,7 @@
 //! Where bit 5 (quick stop, active low) is not part of a state it is encoded 0; bit 4
 //! (voltage enabled) comes from the drive, not from the state.
 
-use crate::state::State;
+use crate::state::{PowerStateMachine, State};
 
 /// Bit 0: ready to switch on.
 pub const READY_TO_SWITCH_ON: u16 = 1 << 0;
@@ -151,6 +151,15 @@ impl Statusword {
     /// bit is 0).
     pub const fn quick_stopping(self) -> bool {
         self.0 & QUICK_STOP == 0
+    }
+}
+
+/// The statusword is encoded here rather than in [`crate::state`], so that the state machine
+/// does not depend on its encoding.
+impl PowerStateMachine {
+    /// The statusword of the present state with `flags` beside it.
+    pub fn statusword(&self, flags: StatusFlags) -> Statusword {
+        Statusword::encode(self.state(), flags)
     }
 }
 

@@ -23,7 +23,7 @@ use cantwin_can::Duration;
 use cantwin_canopen::od::ObjectDictionary;
 
 use crate::controlword::{VL_RFG_ENABLE, VL_RFG_UNLOCK, VL_RFG_USE_REF};
-use crate::objects;
+use crate::index;
 use crate::options::StopRamp;
 use crate::state::{Motion, PowerStage};
 
@@ -153,8 +153,8 @@ impl VlParams {
     /// The values `od` holds; objects the dictionary lacks keep `fallback`'s, and so does
     /// [`VlParams::rfg_bits`].
     pub fn from_od(od: &ObjectDictionary, fallback: VlParams) -> VlParams {
-        let amount = objects::VL_VELOCITY_MIN_MAX_AMOUNT;
-        let min_max = objects::VL_VELOCITY_MIN_MAX;
+        let amount = index::VL_VELOCITY_MIN_MAX_AMOUNT;
+        let min_max = index::VL_VELOCITY_MIN_MAX;
         VlParams {
             min_max_amount: MinMaxAmount {
                 min: unsigned(od, amount, 1).unwrap_or(fallback.min_max_amount.min),
@@ -174,9 +174,9 @@ impl VlParams {
                 }),
                 _ => fallback.min_max,
             },
-            acceleration: ramp_of(od, objects::VL_VELOCITY_ACCELERATION, fallback.acceleration),
-            deceleration: ramp_of(od, objects::VL_VELOCITY_DECELERATION, fallback.deceleration),
-            quick_stop: ramp_of(od, objects::VL_VELOCITY_QUICK_STOP, fallback.quick_stop),
+            acceleration: ramp_of(od, index::VL_VELOCITY_ACCELERATION, fallback.acceleration),
+            deceleration: ramp_of(od, index::VL_VELOCITY_DECELERATION, fallback.deceleration),
+            quick_stop: ramp_of(od, index::VL_VELOCITY_QUICK_STOP, fallback.quick_stop),
             rfg_bits: fallback.rfg_bits,
         }
     }
