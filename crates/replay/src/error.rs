@@ -22,6 +22,14 @@ pub enum ReplayError {
         /// The channels, comma-separated.
         channels: String,
     },
+    /// A captured frame is placed on a bus the scenario does not have.
+    #[error("places a frame on bus {bus}, but the scenario has {buses} buses")]
+    NoSuchBus {
+        /// The frame's bus, as a position in the scenario.
+        bus: usize,
+        /// How many buses the scenario has.
+        buses: usize,
+    },
     /// The capture holds no frames.
     #[error("holds no frames to replay")]
     NoFrames,

@@ -186,6 +186,10 @@ pub fn replay(
     master_ids: Option<&BTreeSet<u32>>,
 ) -> Result<Report, ReplayError> {
     let buses = scenario.buses.len();
+    // Every run indexes its buses by the frames' positions.
+    if let Some(c) = captured.iter().find(|c| c.bus >= buses) {
+        return Err(ReplayError::NoSuchBus { bus: c.bus, buses });
+    }
     let last = captured.last().map(|c| c.t).unwrap_or(0);
     let replayer = Replayer {
         scenario,
@@ -263,4 +267,29 @@ pub fn replay(
         expected: expected.len(),
         entries,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_frame_on_a_bus_the_scenario_lacks_is_refused() {
+        let scenario = Scenario::parse(
+            "name = \"one bus\"\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n",
+            "one-bus.toml",
+        )
+        .unwrap();
+        let frame = Frame::std(0x705, &[0x00]).unwrap();
+        let captured = [Captured {
+            bus: 1,
+            t: 0,
+            frame,
+        }];
+        let e = replay(&scenario, &Registry::builtin(), &captured, 1_000_000, None).unwrap_err();
+        assert!(
+            matches!(e, ReplayError::NoSuchBus { bus: 1, buses: 1 }),
+            "{e}"
+        );
+    }
 }
