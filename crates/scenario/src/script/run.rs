@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 use cantwin_bus::{FaultRule, FrameSelector, PortConfig, PortId, Recorder, Simulation, TapId};
-use cantwin_can::{Frame, Instant, Node, Outbox};
+use cantwin_can::{Instant, ListenOnly};
 use cantwin_twin::{
     Direction, Fault, FaultError, FaultKind, ObjectError, SignalError, SignalId, Twin,
 };
@@ -101,18 +101,6 @@ impl fmt::Display for CheckReport {
             )?;
         }
         Ok(())
-    }
-}
-
-/// The port a script sends from: receives everything, sends only what it is given.
-#[derive(Debug, Default)]
-struct ScriptPort;
-
-impl Node for ScriptPort {
-    fn on_frame(&mut self, _frame: &Frame, _now: Instant, _out: &mut Outbox) {}
-    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
     }
 }
 
@@ -214,7 +202,8 @@ pub fn check_with_progress(
     let mut taps: Vec<(String, cantwin_bus::BusId, TapId)> = Vec::new();
     for (name, id) in built.buses.clone() {
         if let Some(bus) = built.sim.bus_mut(id) {
-            let port = bus.attach(ScriptPort, PortConfig::default().with_queue_depth(64));
+            // The port a script sends from: receives everything, sends only what it is given.
+            let port = bus.attach(ListenOnly, PortConfig::default().with_queue_depth(64));
             let tap = bus.add_tap(Recorder::new());
             script_ports.insert(name.clone(), port);
             taps.push((name, id, tap));
@@ -655,6 +644,7 @@ fn probe(
 mod tests {
     use super::*;
     use crate::script::parse::parse_pattern;
+    use cantwin_can::Frame;
 
     const HEAD: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
         [[device]]\nname = \"node5\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 5\nheartbeat_ms = 100\n";
