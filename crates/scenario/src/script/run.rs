@@ -397,13 +397,7 @@ pub fn apply_action(
     script_ports: &BTreeMap<String, PortId>,
     kind: &ActionKind,
 ) -> Result<(), String> {
-    let port = |d: &str| {
-        devices
-            .iter()
-            .find(|x| x.name == d)
-            .map(|d| d.port)
-            .ok_or_else(|| format!("no device {d:?}"))
-    };
+    let port = |d: &str| device_named(devices, d).map(|d| d.port);
     let bus_id = |b: &str| {
         buses
             .iter()
