@@ -20,15 +20,6 @@ fn unsupported(device: &str, kind: &str, what: &str) -> PyErr {
     PyTypeError::new_err(format!("{device} is a {kind} device, which has no {what}"))
 }
 
-/// "a" or "an" before a kind's name.
-fn article(kind: &str) -> &'static str {
-    if kind.starts_with(['a', 'e', 'i', 'o', 'u']) {
-        "an"
-    } else {
-        "a"
-    }
-}
-
 /// Run `f` on the twin of `device` now (`None` when the device is not a twin).
 fn with_twin<R>(
     core: &mut Core,
@@ -152,13 +143,7 @@ fn terminal(
 
 /// A signal error as the scripts word it: a signal the device lacks is named with its kind.
 fn signal_error(device: &str, d: &BuiltDevice, e: &SignalError) -> PyErr {
-    let message = match e {
-        SignalError::Unknown { .. } => {
-            format!("{} {} device has {e}", article(&d.kind), d.kind)
-        }
-        other => other.to_string(),
-    };
-    PyValueError::new_err(format!("{device}: {message}"))
+    PyValueError::new_err(format!("{device}: {}", d.signal_message(e)))
 }
 
 /// Sets `signal` of `device` to `value` now.
@@ -394,15 +379,8 @@ pub(crate) fn inject(core: &mut Core, device: &str, fault: Option<&str>) -> PyRe
         Some(f) => t.inject(&Fault::internal(f), cx),
         None => t.repair(FaultKind::Internal, cx),
     })?;
-    match r.unwrap_or(Err(FaultError::None {
+    r.unwrap_or(Err(FaultError::None {
         kind: FaultKind::Internal,
-    })) {
-        Ok(()) => Ok(()),
-        Err(e @ FaultError::None { .. }) => Err(PyValueError::new_err(format!(
-            "{device}: {} {} device has {e}",
-            article(&d.kind),
-            d.kind
-        ))),
-        Err(e) => Err(PyValueError::new_err(format!("{device}: {e}"))),
-    }
+    }))
+    .map_err(|e| PyValueError::new_err(format!("{device}: {}", d.fault_message(&e))))
 }

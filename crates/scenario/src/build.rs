@@ -1,6 +1,7 @@
 //! Turning a scenario into a running simulation.
 
 use cantwin_bus::{BusConfig, BusId, PortId, Simulation};
+use cantwin_twin::{FaultError, SignalError};
 
 use crate::error::{Located, ScenarioError};
 use crate::model::Scenario;
@@ -17,6 +18,37 @@ pub struct BuiltDevice {
     pub port: PortId,
     /// Its CANopen node-ID, when its kind is a CANopen slave.
     pub node_id: Option<u8>,
+}
+
+impl BuiltDevice {
+    /// `e` as scripts report it: a signal the device does not have is named with the
+    /// device's kind ("a tm3 device has no signal …").
+    pub fn signal_message(&self, e: &SignalError) -> String {
+        match e {
+            SignalError::Unknown { .. } => self.has(e),
+            other => other.to_string(),
+        }
+    }
+
+    /// `e` as scripts report it: a device without such faults is named with its kind ("a
+    /// cia301 device has no internal faults to inject").
+    pub fn fault_message(&self, e: &FaultError) -> String {
+        match e {
+            FaultError::None { .. } => self.has(e),
+            other => other.to_string(),
+        }
+    }
+
+    /// "a KIND device has WHAT", with "an" before a kind that starts with a vowel.
+    fn has(&self, what: impl core::fmt::Display) -> String {
+        let kind = &self.kind;
+        let article = if kind.starts_with(['a', 'e', 'i', 'o', 'u']) {
+            "an"
+        } else {
+            "a"
+        };
+        format!("{article} {kind} device has {what}")
+    }
 }
 
 /// A scenario built into a simulation, with names resolved to ids.

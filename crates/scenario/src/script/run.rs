@@ -478,7 +478,7 @@ pub fn apply_action(
                 .unwrap_or(Err(FaultError::None {
                     kind: FaultKind::Internal,
                 }))
-                .map_err(|e| fault_message(d, &e));
+                .map_err(|e| d.fault_message(&e));
         }
         ActionKind::Set {
             device,
@@ -489,7 +489,7 @@ pub fn apply_action(
             let r = sim.with_twin(d.port, |t, cx| t.set_signal(signal, value, cx));
             return r
                 .unwrap_or_else(|| Err(SignalError::unknown(signal, Direction::Set, "")))
-                .map_err(|e| signal_message(d, &e));
+                .map_err(|e| d.signal_message(&e));
         }
     };
     r.map_err(|e| e.to_string())
@@ -503,32 +503,6 @@ fn device_named<'a>(devices: &'a [BuiltDevice], name: &str) -> Result<&'a BuiltD
         .ok_or_else(|| format!("no device {name:?}"))
 }
 
-/// "a" or "an" before a kind's name.
-fn article(kind: &str) -> &'static str {
-    if kind.starts_with(['a', 'e', 'i', 'o', 'u']) {
-        "an"
-    } else {
-        "a"
-    }
-}
-
-/// A signal error of device `d` as a script reports it: a signal the device does not have
-/// is named with the device's kind.
-fn signal_message(d: &BuiltDevice, e: &SignalError) -> String {
-    match e {
-        SignalError::Unknown { .. } => format!("{} {} device has {e}", article(&d.kind), d.kind),
-        other => other.to_string(),
-    }
-}
-
-/// A fault error of device `d` as a script reports it.
-fn fault_message(d: &BuiltDevice, e: &FaultError) -> String {
-    match e {
-        FaultError::None { .. } => format!("{} {} device has {e}", article(&d.kind), d.kind),
-        other => other.to_string(),
-    }
-}
-
 /// Reads signal `name` of device `d` through its twin (`None` when it is not one).
 fn read_signal(
     twin: Option<&dyn Twin>,
@@ -539,7 +513,7 @@ fn read_signal(
         || Err(SignalError::unknown(name, Direction::Read, "")),
         |t| t.read_signal(name),
     )
-    .map_err(|e| signal_message(d, &e))
+    .map_err(|e| d.signal_message(&e))
 }
 
 fn probe(
