@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used)]
 
 use cantwin_bus::{BoxedNode, BusConfig, PortConfig, Recorder, Simulation};
-use cantwin_can::{BitRate, Frame, Instant, Node, Outbox};
+use cantwin_can::{BitRate, Frame, Instant, ListenOnly, Node, Outbox};
 use cantwin_twin::{Context, Direction, SignalError, SignalId, SignalValue, Twin};
 
 /// Sends a frame with its switch's position whenever the switch is set.
@@ -46,24 +46,13 @@ impl Twin for Switch {
     }
 }
 
-/// Acknowledges frames.
-struct Listener;
-
-impl Node for Listener {
-    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-}
-
 #[test]
 fn a_twin_is_reached_by_port_and_its_frames_go_out() {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
     let b = sim.bus_mut(bus).unwrap();
     let switch = b.attach_node(BoxedNode::twin(Switch::default()), PortConfig::default());
-    let listener = b.attach_node(BoxedNode::plain(Listener), PortConfig::default());
+    let listener = b.attach_node(BoxedNode::plain(ListenOnly), PortConfig::default());
     let tap = b.add_tap(Recorder::new());
     assert!(sim.twin(listener).is_none());
     let id = SignalId::new("switch");
