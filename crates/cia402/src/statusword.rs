@@ -96,27 +96,18 @@ impl Statusword {
 
     /// The state bits 0–3, 5 and 6 encode, `None` for a pattern of no state.
     pub const fn state(self) -> Option<State> {
-        let sw = self.0;
-        // CiA 402-2, object 6041h, table "state coding": the masks leave out the x positions.
-        Some(if sw & 0x4F == 0x00 {
-            State::NotReadyToSwitchOn
-        } else if sw & 0x4F == 0x40 {
-            State::SwitchOnDisabled
-        } else if sw & 0x6F == 0x21 {
-            State::ReadyToSwitchOn
-        } else if sw & 0x6F == 0x23 {
-            State::SwitchedOn
-        } else if sw & 0x6F == 0x27 {
-            State::OperationEnabled
-        } else if sw & 0x6F == 0x07 {
-            State::QuickStopActive
-        } else if sw & 0x4F == 0x0F {
-            State::FaultReactionActive
-        } else if sw & 0x4F == 0x08 {
-            State::Fault
-        } else {
-            return None;
-        })
+        // CiA 402-2, object 6041h, table "state coding": each state's mask leaves out its x
+        // positions, and no statusword matches two states.
+        let mut i = 0;
+        while i < State::ALL.len() {
+            let state = State::ALL[i];
+            let (mask, bits) = state.statusword_pattern();
+            if self.0 & mask == bits {
+                return Some(state);
+            }
+            i += 1;
+        }
+        None
     }
 
     /// The name of the state it encodes (lower case, as a monitor shows it), or
