@@ -163,16 +163,6 @@ impl BoxedNode {
             twin: Some(TwinAccess::of::<N>()),
         }
     }
-
-    /// Whether the node is a twin.
-    pub fn is_twin(&self) -> bool {
-        self.twin.is_some()
-    }
-
-    /// The node, if it is a `T` (for tests of what was built).
-    pub fn downcast_ref<T: 'static>(&self) -> Option<&T> {
-        self.node.as_any().downcast_ref::<T>()
-    }
 }
 
 impl core::fmt::Debug for BoxedNode {
