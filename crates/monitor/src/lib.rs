@@ -15,6 +15,10 @@
 //! * per-device live values from PDOs, where the device's [`DeviceKind`] tells how its PDOs
 //!   read.
 //!
+//! [`dashboard`] is the model behind the web dashboard of a simulated network: one view per
+//! bus beside what only the simulator knows (power, controller state, the twins' live
+//! values), the frame stream and the charts' series.
+//!
 //! ```
 //! use cantwin_can::{Frame, Id, Instant};
 //! use cantwin_canopen::wire::NmtState;
@@ -40,6 +44,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod dashboard;
 pub mod filter;
 pub mod kind;
 pub mod load;
