@@ -14,9 +14,8 @@
 
 mod server;
 mod svg;
-mod tap;
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::mpsc;
@@ -24,26 +23,24 @@ use std::time::{Duration as WallDuration, Instant as WallInstant};
 
 use anyhow::Result;
 use cantwin_bus::{BusId, PortConfig, PortId, SimHandle, Simulation, TapId};
-use cantwin_can::{ErrorCounters, ErrorState, Frame, Instant};
+use cantwin_can::{ErrorState, Frame};
 use cantwin_canopen::master::sdo_client::{Mode, SdoEvent};
 use cantwin_canopen::master::{Master, MasterEvent, TransferId};
 use cantwin_canopen::sdo::wire::Mux;
-use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
-use cantwin_monitor::{Led, NetworkView};
+use cantwin_canopen::wire::NmtCs;
+use cantwin_monitor::Led;
+use cantwin_monitor::dashboard::{
+    BusSample, DashboardTap, Device, DeviceSample, Model, RowKind, Sample, Snapshot, WINDOW_S,
+};
 use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
 use cantwin_scenario::{BuiltDevice, Role, Scenario};
 use cantwin_twin::{SignalId, SignalValue};
 use serde_json::{Value, json};
 
 pub use server::Server;
-use tap::{Seen, WebTap};
 
 /// How often the dashboard takes a snapshot and publishes it.
 const PERIOD: WallDuration = WallDuration::from_millis(250);
-/// The window the charts show.
-const WINDOW_S: f64 = 60.0;
-/// Frames kept for the frame stream.
-const STREAM_LEN: usize = 200;
 /// How long a power cycle keeps the device off.
 const POWER_CYCLE_OFF: WallDuration = WallDuration::from_millis(500);
 
@@ -109,55 +106,6 @@ pub struct Request {
     pub reply: tokio::sync::oneshot::Sender<Outcome>,
 }
 
-/// What the sim loop knows about a device between snapshots.
-#[derive(Debug, Clone)]
-struct DeviceState {
-    info: BuiltDevice,
-    /// The index of its bus.
-    bus: usize,
-    bus_name: String,
-    /// Learned from the COB-IDs of the boot-up, heartbeat and EMCY messages its port sends.
-    node_id: Option<u8>,
-    /// How the monitor reads its PDOs, from the twin itself (an ADV200 in its active
-    /// personality), when it is a CANopen node.
-    monitor_kind: Option<cantwin_monitor::DeviceKind>,
-}
-
-#[derive(Debug, Clone)]
-struct StreamRow {
-    at: Instant,
-    bus: usize,
-    /// `None` for controller events.
-    frame: Option<Frame>,
-    from: String,
-    text: String,
-    flag: &'static str,
-}
-
-/// A sliding window of samples.
-#[derive(Debug, Default)]
-struct History(VecDeque<(WallInstant, f64)>);
-
-impl History {
-    fn push(&mut self, t: WallInstant, v: f64) {
-        self.0.push_back((t, v));
-        while self
-            .0
-            .front()
-            .is_some_and(|(s, _)| t.duration_since(*s).as_secs_f64() > WINDOW_S)
-        {
-            self.0.pop_front();
-        }
-    }
-
-    fn points(&self, now: WallInstant) -> Vec<(f64, f64)> {
-        self.0
-            .iter()
-            .map(|(t, v)| (now.duration_since(*t).as_secs_f64(), *v))
-            .collect()
-    }
-}
-
 struct PendingSdo {
     bus: BusId,
     id: TransferId,
@@ -174,22 +122,18 @@ struct Scheduled {
 pub struct Dashboard {
     scenario: Scenario,
     buses: Vec<(String, BusId)>,
-    devices: Vec<DeviceState>,
+    /// The devices, in the model's order.
+    devices: Vec<BuiltDevice>,
     taps: Vec<(BusId, TapId)>,
-    /// The CANopen model of each bus, fed with the frames of CANopen senders.
-    views: Vec<NetworkView>,
+    /// What the page shows, fed from the taps and the twins at each snapshot.
+    model: Model,
     masters: BTreeMap<String, PortId>,
     requests: mpsc::Receiver<Request>,
     sender: mpsc::Sender<Request>,
     publish: tokio::sync::watch::Sender<Arc<String>>,
-    stream: VecDeque<StreamRow>,
-    missed: u64,
-    bus_history: Vec<(History, History, u64)>,
-    value_history: BTreeMap<(usize, String), History>,
     pending: Vec<PendingSdo>,
     scheduled: Vec<Scheduled>,
     next_snapshot: WallInstant,
-    last_snapshot: Option<(WallInstant, Vec<u64>)>,
     started: WallInstant,
 }
 
@@ -203,28 +147,26 @@ impl Dashboard {
     ) -> Dashboard {
         let mut taps = Vec::new();
         let mut masters = BTreeMap::new();
-        let mut views = Vec::new();
+        let mut model_buses = Vec::new();
         for (name, id) in buses {
             if let Some(bus) = sim.bus_mut(*id) {
-                views.push(NetworkView::new(cantwin_monitor::Config {
-                    bit_rate: bus.bit_rate(),
-                    ring: STREAM_LEN,
-                    ..cantwin_monitor::Config::default()
-                }));
-                taps.push((*id, bus.add_tap(WebTap::default())));
+                model_buses.push((name.clone(), bus.bit_rate()));
+                taps.push((*id, bus.add_tap(DashboardTap::default())));
                 let port = bus.attach(Master::new(), PortConfig::default().with_queue_depth(64));
                 masters.insert(name.clone(), port);
             }
         }
-        let devices = devices
+        let model_devices = devices
             .iter()
             .map(|d| {
                 let bus = buses
                     .iter()
                     .position(|(_, id)| *id == d.port.bus())
                     .unwrap_or(0);
-                DeviceState {
-                    info: d.clone(),
+                Device {
+                    name: d.name.clone(),
+                    kind: d.kind.clone(),
+                    port: d.port,
                     bus,
                     bus_name: buses.get(bus).map(|b| b.0.clone()).unwrap_or_default(),
                     node_id: None,
@@ -232,30 +174,28 @@ impl Dashboard {
                 }
             })
             .collect();
+        let model = Model::new(
+            scenario.name.clone(),
+            model_buses,
+            model_devices,
+            masters.values().copied().collect(),
+        );
         let (sender, requests) = mpsc::channel();
         let (publish, _) = tokio::sync::watch::channel(Arc::new(String::from("{}")));
         let now = WallInstant::now();
         Dashboard {
             scenario: scenario.clone(),
             buses: buses.to_vec(),
-            devices,
+            devices: devices.to_vec(),
             taps,
-            views,
+            model,
             masters,
             requests,
             sender,
             publish,
-            stream: VecDeque::new(),
-            missed: 0,
-            bus_history: buses
-                .iter()
-                .map(|_| (History::default(), History::default(), 0))
-                .collect(),
-            value_history: BTreeMap::new(),
             pending: Vec::new(),
             scheduled: Vec::new(),
             next_snapshot: now,
-            last_snapshot: None,
             started: now,
         }
     }
@@ -307,9 +247,9 @@ impl Dashboard {
     fn device(&self, name: &str) -> Result<usize, Refusal> {
         self.devices
             .iter()
-            .position(|d| d.info.name == name)
+            .position(|d| d.name == name)
             .ok_or_else(|| {
-                let known: Vec<&str> = self.devices.iter().map(|d| d.info.name.as_str()).collect();
+                let known: Vec<&str> = self.devices.iter().map(|d| d.name.as_str()).collect();
                 Refusal::BadRequest(format!(
                     "no device {name:?} (devices: {})",
                     known.join(", ")
@@ -318,17 +258,8 @@ impl Dashboard {
     }
 
     fn apply(&self, handle: &SimHandle, action: &ActionKind) -> Result<(), String> {
-        let devices: Vec<BuiltDevice> = self.devices.iter().map(|d| d.info.clone()).collect();
         handle
-            .with(|sim| {
-                apply_action(
-                    sim,
-                    &self.buses,
-                    &devices,
-                    &self.masters,
-                    action,
-                )
-            })
+            .with(|sim| apply_action(sim, &self.buses, &self.devices, &self.masters, action))
             .map_err(|e| e.to_string())?
     }
 
@@ -368,7 +299,7 @@ impl Dashboard {
                 .map(|(bus, p)| (*p, 0, format!("all nodes on {bus}")))
                 .collect(),
             Some(name) => {
-                let d = &self.devices[self.device(name)?];
+                let d = &self.model.devices()[self.device(name)?];
                 let node = d.node_id.ok_or_else(|| {
                     Refusal::BadRequest(format!(
                         "{name} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
@@ -401,8 +332,7 @@ impl Dashboard {
     /// name (`[[at]] action = "set"` in scripts): a digital input takes 0 or 1, an analog
     /// input a number within its range.
     fn set_input(&mut self, handle: &SimHandle, device: &str, input: &str, value: f64) -> Outcome {
-        let d = &self.devices[self.device(device)?];
-        let port = d.info.port;
+        let port = self.devices[self.device(device)?].port;
         handle
             .with(|sim| {
                 let values = sim.twin(port).map(|t| t.live_values()).unwrap_or_default();
@@ -440,9 +370,11 @@ impl Dashboard {
                         ));
                     }
                 };
-                sim.with_twin(port, |t, cx| t.set_signal(&SignalId::new(input), &signal, cx))
-                    .ok_or_else(|| format!("{device} has no inputs"))?
-                    .map_err(|e| format!("{device}: {e}"))
+                sim.with_twin(port, |t, cx| {
+                    t.set_signal(&SignalId::new(input), &signal, cx)
+                })
+                .ok_or_else(|| format!("{device} has no inputs"))?
+                .map_err(|e| format!("{device}: {e}"))
             })
             .map_err(|e| Refusal::Failed(e.to_string()))?
             .map_err(Refusal::BadRequest)?;
@@ -490,7 +422,7 @@ impl Dashboard {
         sub: u8,
         data: Vec<u8>,
     ) -> Result<PendingSdo, Refusal> {
-        let d = &self.devices[self.device(device)?];
+        let d = &self.model.devices()[self.device(device)?];
         let node = d.node_id.ok_or_else(|| {
             Refusal::BadRequest(format!(
                 "{device} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
@@ -568,336 +500,181 @@ impl Dashboard {
         }
     }
 
-    fn name_of(&self, port: PortId) -> String {
-        if let Some(d) = self.devices.iter().find(|d| d.info.port == port) {
-            d.info.name.clone()
-        } else if self.masters.values().any(|p| *p == port) {
-            "dashboard".to_string()
-        } else {
-            format!("{port:?}")
-        }
-    }
-
-    fn absorb(&mut self, bus: usize, events: Vec<Seen>) {
-        for e in events {
-            match e {
-                Seen::Frame {
-                    at,
-                    frame,
-                    sender,
-                    dropped,
-                } => {
-                    let canopen = self.speaks_canopen(sender);
-                    let mut text = String::new();
-                    if canopen && !dropped {
-                        self.learn(&frame, sender);
-                        if let Some(view) = self.views.get_mut(bus) {
-                            view.push(at, &frame);
-                            text = view
-                                .frames()
-                                .next_back()
-                                .map(|e| e.text.clone())
-                                .unwrap_or_default();
-                        }
-                    }
-                    self.push_row(StreamRow {
-                        at,
-                        bus,
-                        frame: Some(frame),
-                        from: self.name_of(sender),
-                        text,
-                        flag: if dropped { "dropped" } else { "" },
-                    });
-                }
-                Seen::Error {
-                    at,
-                    frame,
-                    sender,
-                    kind,
-                } => self.push_row(StreamRow {
-                    at,
-                    bus,
-                    frame: Some(frame),
-                    from: self.name_of(sender),
-                    text: format!("error frame: {kind:?}"),
-                    flag: "error",
-                }),
-                Seen::Controller { at, port, event } => {
-                    let from = self.name_of(port);
-                    self.push_row(StreamRow {
-                        at,
-                        bus,
-                        frame: None,
-                        from,
-                        text: format!("controller: {event:?}"),
-                        flag: "controller",
-                    });
-                }
-            }
-        }
-    }
-
-    fn push_row(&mut self, row: StreamRow) {
-        self.stream.push_back(row);
-        while self.stream.len() > STREAM_LEN {
-            self.stream.pop_front();
-        }
-    }
-
-    /// Whether frames from `port` are CANopen (the dashboard's master, or a device of a
-    /// CANopen kind): other protocols on the same identifiers mean other things.
-    fn speaks_canopen(&self, port: PortId) -> bool {
-        if self.masters.values().any(|p| *p == port) {
-            return true;
-        }
-        self.devices
-            .iter()
-            .find(|d| d.info.port == port)
-            .is_some_and(|d| {
-                matches!(
-                    d.info.kind.as_str(),
-                    "cia301" | "eds" | "tm3" | "adv200" | "master"
-                )
-            })
-    }
-
-    /// Learns which node-ID a device has from the COB-IDs of what its port sends (CiA 301
-    /// §7.2.8.3.2 boot-up and heartbeat, §7.2.7 EMCY), and names the node in its bus's view.
-    fn learn(&mut self, frame: &Frame, sender: PortId) {
-        let Some(k) = self.devices.iter().position(|d| d.info.port == sender) else {
-            return;
-        };
-        let node = match wire::decode(frame) {
-            Message::ErrorControl(ErrorControl::State { node, .. }) => node,
-            Message::Emcy { node, .. } => node,
-            _ => return,
-        };
-        if self.devices[k].node_id != Some(node) {
-            self.name_node(k, node);
-        }
-    }
-
-    /// Records that device `k` is CANopen node `node` and names it in its bus's view.
-    fn name_node(&mut self, k: usize, node: u8) {
-        let Some(d) = self.devices.get_mut(k) else {
-            return;
-        };
-        d.node_id = Some(node);
-        if let Some(view) = self.views.get_mut(d.bus) {
-            view.declare(
-                node,
-                Some(d.info.name.clone()),
-                d.monitor_kind
-                    .clone()
-                    .or_else(|| cantwin_monitor::DeviceKind::builtin(&d.info.kind)),
-            );
-        }
-    }
-
     fn snapshot(&mut self, handle: &SimHandle, wall: WallInstant) {
         let taps = self.taps.clone();
         let devices = &self.devices;
+        let since_start = wall.duration_since(self.started);
         let grabbed = handle.with(|sim| {
             let now = sim.now();
-            let mut events = Vec::new();
-            for (bus, tap) in &taps {
-                let drained = sim
-                    .bus_mut(*bus)
-                    .and_then(|b| b.tap_mut::<WebTap>(*tap))
-                    .map(WebTap::drain)
-                    .unwrap_or_default();
-                events.push(drained);
-            }
-            let buses: Vec<(u64, u64, f64, String)> = sim
+            let events = taps
+                .iter()
+                .map(|(bus, tap)| {
+                    sim.bus_mut(*bus)
+                        .and_then(|b| b.tap_mut::<DashboardTap>(*tap))
+                        .map(DashboardTap::drain)
+                        .unwrap_or_default()
+                })
+                .collect();
+            let buses = sim
                 .buses()
                 .iter()
                 .map(|b| {
                     let s = b.stats();
-                    (
-                        s.frames(),
-                        s.error_frames(),
-                        s.window_load_percent(now),
-                        b.bit_rate().to_string(),
-                    )
+                    BusSample {
+                        frames: s.frames(),
+                        error_frames: s.error_frames(),
+                        load_percent: s.window_load_percent(now),
+                        bit_rate: b.bit_rate(),
+                    }
                 })
                 .collect();
-            let live: Vec<_> = devices
+            let live = devices
                 .iter()
                 .map(|d| {
-                    let twin = sim.twin(d.info.port);
-                    let status = sim
-                        .bus(d.info.port.bus())
-                        .and_then(|b| b.port_status(d.info.port).ok());
-                    let values = twin.map(|t| t.live_values()).unwrap_or_default();
-                    let register = twin
-                        .and_then(|t| t.read_object(0x1001, 0).ok())
-                        .and_then(|b| b.first().copied());
-                    let node_id = twin.and_then(|t| t.canopen_node_id());
-                    (status, values, register, node_id)
+                    let twin = sim.twin(d.port);
+                    DeviceSample {
+                        status: sim
+                            .bus(d.port.bus())
+                            .and_then(|b| b.port_status(d.port).ok()),
+                        values: twin.map(|t| t.live_values()).unwrap_or_default(),
+                        error_register: twin
+                            .and_then(|t| t.read_object(0x1001, 0).ok())
+                            .and_then(|b| b.first().copied()),
+                        node_id: twin.and_then(|t| t.canopen_node_id()),
+                    }
                 })
                 .collect();
-            (now, events, buses, live)
+            Sample {
+                now,
+                wall: since_start,
+                events,
+                buses,
+                devices: live,
+            }
         });
-        let Ok((now, events, bus_stats, live)) = grabbed else {
+        let Ok(sample) = grabbed else {
             return;
         };
-        // The node-IDs the kinds know (before any boot-up is seen, and for nodes that send
-        // no heartbeat).
-        for (k, l) in live.iter().enumerate() {
-            if let (Some(node), Some(d)) = (l.3, self.devices.get(k))
-                && d.node_id.is_none()
-            {
-                self.name_node(k, node);
-            }
-        }
-        for (i, (seen, missed)) in events.into_iter().enumerate() {
-            self.missed += missed;
-            self.absorb(i, seen);
-            if let Some(v) = self.views.get_mut(i) {
-                v.advance(now);
-            }
-        }
-        let elapsed = self
-            .last_snapshot
-            .as_ref()
-            .map(|(t, _)| wall.duration_since(*t).as_secs_f64());
-        let frames_now: Vec<u64> = bus_stats.iter().map(|b| b.0).collect();
-        let mut bus_json = Vec::new();
-        for (i, ((name, _), (frames, errors, load, rate))) in
-            self.buses.iter().zip(&bus_stats).enumerate()
-        {
-            let fps = match (&self.last_snapshot, elapsed) {
-                (Some((_, before)), Some(dt)) if dt > 0.0 => {
-                    frames.saturating_sub(before.get(i).copied().unwrap_or(0)) as f64 / dt
-                }
-                _ => 0.0,
-            };
-            if let Some(h) = self.bus_history.get_mut(i) {
-                h.0.push(wall, *load);
-                h.1.push(wall, fps);
-                h.2 = *frames;
-            }
-            let (load_chart, fps_chart) = self
-                .bus_history
-                .get(i)
-                .map(|h| {
-                    (
-                        svg::chart(
-                            &format!("{name} bus load"),
-                            "%",
-                            WINDOW_S,
-                            &[svg::Series {
-                                label: "load",
-                                points: &h.0.points(wall),
-                            }],
-                        ),
-                        svg::chart(
-                            &format!("{name} frames per second"),
-                            "1/s",
-                            WINDOW_S,
-                            &[svg::Series {
-                                label: "frames/s",
-                                points: &h.1.points(wall),
-                            }],
-                        ),
-                    )
-                })
-                .unwrap_or_default();
-            bus_json.push(json!({
-                "name": name,
-                "bit_rate": rate,
-                "frames": frames,
-                "error_frames": errors,
-                "load": round2(*load),
-                "fps": round2(fps),
-                "charts": [load_chart, fps_chart],
-            }));
-        }
-        self.last_snapshot = Some((wall, frames_now));
+        let snapshot = self.model.update(sample);
+        let json = self.encode(&snapshot);
+        self.publish.send_replace(Arc::new(json.to_string()));
+    }
 
-        let mut nodes = Vec::new();
-        let mut panels = Vec::new();
-        for (k, (d, (status, values, register, _))) in self.devices.iter().zip(live).enumerate() {
-            let powered = status.as_ref().is_none_or(|s| s.powered);
-            let counters = status.as_ref().map(|s| s.counters).unwrap_or_default();
-            let info = d
-                .node_id
-                .and_then(|n| self.views.get(d.bus).and_then(|v| v.node(n)));
-            let (run, err) = leds(powered, info.map(|i| i.leds(now)), &counters);
-            let emcy = info.and_then(|i| {
-                let e = i.last_emcy.as_ref()?;
-                Some(json!({
-                    "code": format!("0x{:04X}", e.code),
-                    "meaning": i.emcy_meaning().unwrap_or(""),
-                    "register": format!("0x{:02X}", e.register),
-                    "age_ms": (now.as_nanos().saturating_sub(e.at.as_nanos()) as f64 / 1e6).round(),
-                    "active": i.emcy_active,
-                }))
-            });
-            let register = register.or(info.and_then(|i| i.error_register));
-            nodes.push(json!({
-                "device": d.info.name,
-                "kind": d.info.kind,
-                "bus": d.bus_name,
-                "node_id": d.node_id,
-                "nmt": info.filter(|i| i.state.is_some()).map(|i| i.state_name()),
-                "heartbeat_age_ms": info
-                    .and_then(|i| i.heartbeat_age(now))
-                    .map(|a| (a.as_nanos() as f64 / 1e6).round()),
-                "error_register": register.map(|r| format!("0x{r:02X}")),
-                "emcy": emcy,
-                "powered": powered,
-                "connected": status.as_ref().is_none_or(|s| s.connected),
-                "controller": state_name(counters.state()),
-                "tec": counters.tec(),
-                "rec": counters.rec(),
-                "leds": { "run": run, "err": err },
-            }));
-            let mut charts = Vec::new();
-            let mut vals = Vec::new();
-            for v in &values {
-                let key = (k, v.name.clone());
-                let (min, max) = match v.role {
-                    Role::AnalogInput { min, max } => (Some(min), Some(max)),
-                    _ => (None, None),
-                };
-                vals.push(json!({
-                    "name": v.name,
-                    "value": round3(v.value),
-                    "unit": v.unit,
-                    "role": role_name(v.role),
-                    "min": min,
-                    "max": max,
-                }));
-                if v.role.is_analog() {
-                    let h = self.value_history.entry(key).or_default();
-                    h.push(wall, v.value);
-                    charts.push(svg::chart(
-                        &format!("{} {}", d.info.name, v.name),
-                        v.unit,
-                        WINDOW_S,
-                        &[svg::Series {
-                            label: &v.name,
-                            points: &h.points(wall),
-                        }],
-                    ));
-                }
-            }
-            panels.push(json!({
-                "name": d.info.name,
-                "kind": d.info.kind,
-                "values": vals,
-                "charts": charts,
-            }));
-        }
-        let stream: Vec<Value> = self
-            .stream
+    /// The snapshot as the page reads it, with the charts drawn.
+    fn encode(&self, snap: &Snapshot) -> Value {
+        let bus_json: Vec<Value> = snap
+            .buses
             .iter()
-            .rev()
+            .map(|b| {
+                let load_chart = svg::chart(
+                    &format!("{} bus load", b.name),
+                    "%",
+                    WINDOW_S,
+                    &[svg::Series {
+                        label: "load",
+                        points: &b.load_history,
+                    }],
+                );
+                let fps_chart = svg::chart(
+                    &format!("{} frames per second", b.name),
+                    "1/s",
+                    WINDOW_S,
+                    &[svg::Series {
+                        label: "frames/s",
+                        points: &b.fps_history,
+                    }],
+                );
+                json!({
+                    "name": b.name,
+                    "bit_rate": b.bit_rate.to_string(),
+                    "frames": b.frames,
+                    "error_frames": b.error_frames,
+                    "load": round2(b.load),
+                    "fps": round2(b.fps),
+                    "charts": [load_chart, fps_chart],
+                })
+            })
+            .collect();
+        let nodes: Vec<Value> = snap
+            .nodes
+            .iter()
+            .map(|n| {
+                let emcy = n.emcy.as_ref().map(|e| {
+                    json!({
+                        "code": format!("0x{:04X}", e.code),
+                        "meaning": e.meaning,
+                        "register": format!("0x{:02X}", e.register),
+                        "age_ms": (e.age.as_nanos() as f64 / 1e6).round(),
+                        "active": e.active,
+                    })
+                });
+                json!({
+                    "device": n.device,
+                    "kind": n.kind,
+                    "bus": n.bus,
+                    "node_id": n.node_id,
+                    "nmt": n.nmt,
+                    "heartbeat_age_ms": n
+                        .heartbeat_age
+                        .map(|a| (a.as_nanos() as f64 / 1e6).round()),
+                    "error_register": n.error_register.map(|r| format!("0x{r:02X}")),
+                    "emcy": emcy,
+                    "powered": n.powered,
+                    "connected": n.connected,
+                    "controller": state_name(n.counters.state()),
+                    "tec": n.counters.tec(),
+                    "rec": n.counters.rec(),
+                    "leds": { "run": led_name(n.leds.run), "err": led_name(n.leds.err) },
+                })
+            })
+            .collect();
+        let panels: Vec<Value> = snap
+            .devices
+            .iter()
+            .map(|p| {
+                let mut charts = Vec::new();
+                let mut vals = Vec::new();
+                for pv in &p.values {
+                    let v = &pv.value;
+                    let (min, max) = match v.role {
+                        Role::AnalogInput { min, max } => (Some(min), Some(max)),
+                        _ => (None, None),
+                    };
+                    vals.push(json!({
+                        "name": v.name,
+                        "value": round3(v.value),
+                        "unit": v.unit,
+                        "role": role_name(v.role),
+                        "min": min,
+                        "max": max,
+                    }));
+                    if let Some(points) = &pv.history {
+                        charts.push(svg::chart(
+                            &format!("{} {}", p.name, v.name),
+                            v.unit,
+                            WINDOW_S,
+                            &[svg::Series {
+                                label: &v.name,
+                                points,
+                            }],
+                        ));
+                    }
+                }
+                json!({
+                    "name": p.name,
+                    "kind": p.kind,
+                    "values": vals,
+                    "charts": charts,
+                })
+            })
+            .collect();
+        let stream: Vec<Value> = snap
+            .frames
+            .iter()
             .map(|r| {
                 json!({
                     "t_ms": round3(r.at.as_nanos() as f64 / 1e6),
-                    "bus": self.buses.get(r.bus).map(|b| b.0.as_str()).unwrap_or("?"),
+                    "bus": self.model.bus_name(r.bus).unwrap_or("?"),
                     "id": r.frame.as_ref().map(id_text).unwrap_or_default(),
                     "data": match &r.frame {
                         Some(f) if f.is_remote() => format!("R{}", f.dlc()),
@@ -906,21 +683,20 @@ impl Dashboard {
                     },
                     "from": r.from,
                     "text": r.text,
-                    "flag": r.flag,
+                    "flag": flag_name(r.kind),
                 })
             })
             .collect();
-        let snapshot = json!({
-            "scenario": self.scenario.name,
-            "time_ms": round3(now.as_nanos() as f64 / 1e6),
-            "uptime_s": round2(wall.duration_since(self.started).as_secs_f64()),
+        json!({
+            "scenario": snap.scenario,
+            "time_ms": round3(snap.now.as_nanos() as f64 / 1e6),
+            "uptime_s": round2(snap.uptime.as_secs_f64()),
             "buses": bus_json,
             "nodes": nodes,
             "devices": panels,
             "frames": stream,
-            "missed": self.missed,
-        });
-        self.publish.send_replace(Arc::new(snapshot.to_string()));
+            "missed": snap.missed,
+        })
     }
 }
 
@@ -1029,40 +805,42 @@ fn describe_action(a: &ActionKind) -> String {
     }
 }
 
-/// The indicator states (CiA 303-3 §3) as the page shows them: what the bus shows of the
-/// node (the view's RUN and ERROR LEDs), with what only the simulator knows on top: an
-/// unpowered device has both off, a controller that is bus-off lights ERROR, one whose error
-/// counters reached the warning limit flashes it once.
-fn leds(
-    powered: bool,
-    seen: Option<cantwin_monitor::Leds>,
-    c: &ErrorCounters,
-) -> (&'static str, &'static str) {
-    if !powered {
-        return ("off", "off");
+/// The page's word for a row of the frame stream.
+fn flag_name(k: RowKind) -> &'static str {
+    match k {
+        RowKind::Frame => "",
+        RowKind::Dropped => "dropped",
+        RowKind::Error => "error",
+        RowKind::Controller => "controller",
     }
-    let name = |l: Led| match l {
+}
+
+/// The page's word for an indicator state.
+fn led_name(l: Led) -> &'static str {
+    match l {
         Led::Off => "off",
         Led::On => "on",
         Led::Blinking => "blinking",
         Led::SingleFlash => "single-flash",
         Led::DoubleFlash => "double-flash",
         Led::Unknown => "unknown",
-    };
-    let run = seen.map_or("unknown", |l| name(l.run));
-    let err = match c.state() {
-        ErrorState::BusOff => "on",
-        _ if c.tec() >= ErrorCounters::WARNING_LIMIT || c.rec() >= ErrorCounters::WARNING_LIMIT => {
-            "single-flash"
-        }
-        _ => seen.map_or("off", |l| name(l.err)),
-    };
-    (run, err)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use cantwin_can::ErrorCounters;
+
+    /// The indicator states as the page names them.
+    fn leds(
+        powered: bool,
+        seen: Option<cantwin_monitor::Leds>,
+        c: &ErrorCounters,
+    ) -> (&'static str, &'static str) {
+        let l = cantwin_monitor::dashboard::leds(powered, seen, c);
+        (led_name(l.run), led_name(l.err))
+    }
 
     #[test]
     fn cia303_3_leds_add_power_and_controller_state_to_what_the_bus_shows() {
