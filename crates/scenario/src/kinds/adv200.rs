@@ -137,7 +137,7 @@ mod tests {
     use cantwin_bus::Recorder;
     use cantwin_can::{Frame, Instant};
 
-    use crate::kinds::common::testing::{build_error, built, recorded, shipped};
+    use crate::kinds::common::testing::{build_error, built, recorded, set_signal, shipped};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"adv200\"\nbus = \"can0\"\n";
 
@@ -271,12 +271,7 @@ mod tests {
                 .find(|v| v.name == name)
                 .map(|v| v.value)
         };
-        let set = |b: &mut crate::Built, name: &str, v: SignalValue| {
-            b.sim
-                .with_twin(port, |t, cx| t.set_signal(&name.into(), &v, cx))
-                .unwrap()
-                .map_err(|e| e.to_string())
-        };
+        let set = |b: &mut crate::Built, name: &str, v| set_signal(b, port, name, v);
         // The scenario wires digital input 4 and 2.5 V on analog input 2.
         assert_eq!(value(&b, "digital_input.4"), Some(1.0));
         assert_eq!(value(&b, "digital_input.2"), Some(0.0));

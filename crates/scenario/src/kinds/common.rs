@@ -62,8 +62,9 @@ pub(crate) fn canopen_device(
 /// Helpers for the kinds' unit tests.
 #[cfg(test)]
 pub(crate) mod testing {
-    use cantwin_bus::{BusId, Recorder, TapId};
+    use cantwin_bus::{BusId, PortId, Recorder, TapId};
     use cantwin_can::Frame;
+    use cantwin_twin::SignalValue;
 
     use crate::build::Built;
     use crate::error::ScenarioError;
@@ -99,6 +100,34 @@ pub(crate) mod testing {
         scenario
             .build(&Registry::builtin(), &Default::default())
             .unwrap()
+    }
+
+    /// Signal `name` of the twin on `port`, or why not as text.
+    pub(crate) fn read_signal(
+        built: &Built,
+        port: PortId,
+        name: &str,
+    ) -> Result<SignalValue, String> {
+        built
+            .sim
+            .twin(port)
+            .unwrap()
+            .read_signal(&name.into())
+            .map_err(|e| e.to_string())
+    }
+
+    /// Sets signal `name` of the twin on `port` to `value` now, or says why not as text.
+    pub(crate) fn set_signal(
+        built: &mut Built,
+        port: PortId,
+        name: &str,
+        value: SignalValue,
+    ) -> Result<(), String> {
+        built
+            .sim
+            .with_twin(port, |t, cx| t.set_signal(&name.into(), &value, cx))
+            .unwrap()
+            .map_err(|e| e.to_string())
     }
 
     /// The frames the recorder `tap` on `bus` has seen, in bus order.

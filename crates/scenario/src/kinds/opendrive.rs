@@ -219,7 +219,9 @@ mod tests {
     use cantwin_can::{Frame, Instant};
     use cantwin_opendrive::OpenDrive;
 
-    use crate::kinds::common::testing::{build_error, built, recorded, shipped, try_build};
+    use crate::kinds::common::testing::{
+        build_error, built, read_signal, recorded, set_signal, shipped, try_build,
+    };
     use crate::{Registry, Scenario};
 
     const DEVICE: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n[[device]]\nname = \"drive\"\nkind = \"opendrive\"\nbus = \"can0\"\n";
@@ -301,19 +303,8 @@ mod tests {
         use cantwin_twin::SignalValue as Value;
         let mut built = built(&(DEVICE.to_string() + "inputs = [4]\nreference_hz = 20.0\n"));
         let port = built.device("drive").unwrap().port;
-        let read = |b: &crate::Built, name: &str| {
-            b.sim
-                .twin(port)
-                .unwrap()
-                .read_signal(&name.into())
-                .map_err(|e| e.to_string())
-        };
-        let set = |b: &mut crate::Built, name: &str, value: Value| {
-            b.sim
-                .with_twin(port, |t, cx| t.set_signal(&name.into(), &value, cx))
-                .unwrap()
-                .map_err(|e| e.to_string())
-        };
+        let read = |b: &crate::Built, name: &str| read_signal(b, port, name);
+        let set = |b: &mut crate::Built, name: &str, value| set_signal(b, port, name, value);
         built.sim.run_until(Instant::from_nanos(2_000_000_000));
         assert_eq!(read(&built, "running"), Ok(Value::Bool(true)));
         assert_eq!(read(&built, "input.4"), Ok(Value::Bool(true)));

@@ -157,7 +157,7 @@ impl DeviceKind for Tm3Kind {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinds::common::testing::{shipped, try_build};
+    use crate::kinds::common::testing::{read_signal, set_signal, shipped, try_build};
     use cantwin_can::{Frame, Instant};
     use cantwin_canopen::nmt::State;
 
@@ -224,19 +224,8 @@ mod tests {
         built.sim.run_until(Instant::from_nanos(1_000_000));
         use cantwin_twin::SignalValue;
         let v = |s: &str| SignalValue::Text(s.into());
-        let read = |b: &crate::Built, name: &str| {
-            b.sim
-                .twin(port)
-                .unwrap()
-                .read_signal(&name.into())
-                .map_err(|e| e.to_string())
-        };
-        let set = |b: &mut crate::Built, name: &str, value: SignalValue| {
-            b.sim
-                .with_twin(port, |t, cx| t.set_signal(&name.into(), &value, cx))
-                .unwrap()
-                .map_err(|e| e.to_string())
-        };
+        let read = |b: &crate::Built, name: &str| read_signal(b, port, name);
+        let set = |b: &mut crate::Built, name: &str, value| set_signal(b, port, name, value);
         assert_eq!(read(&built, "nmt_state"), Ok(v("pre-operational")));
         set(&mut built, "module.2", v("pulled")).unwrap();
         built.sim.run_until(Instant::from_nanos(2_000_000));
