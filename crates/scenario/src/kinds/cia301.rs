@@ -54,7 +54,7 @@ use cantwin_canopen::device::{Device, Event};
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
-use cantwin_twin::{Context, ObjectError, Twin, write_through};
+use cantwin_twin::{Context, ObjectError, Twin};
 use std::sync::{Arc, Mutex};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
@@ -219,11 +219,11 @@ impl Node for Cia301Node {
     }
 }
 
-/// The device's dictionary and node-ID; writes go through the device's own checks, and
-/// the node reacts to them at once (a code written to 0x2001 raises its EMCY).
+/// The device's twin (its dictionary, node-ID and writes through its own checks), and the
+/// node reacts to a write at once (a code written to 0x2001 raises its EMCY).
 impl Twin for Cia301Node {
     fn dictionary(&self) -> Option<&cantwin_canopen::od::ObjectDictionary> {
-        Some(self.device.od())
+        self.device.dictionary()
     }
 
     fn write_object(
@@ -233,17 +233,17 @@ impl Twin for Cia301Node {
         data: &[u8],
         cx: &mut Context<'_>,
     ) -> Result<(), ObjectError> {
-        let r = write_through(&mut self.device, index, sub, data);
+        let r = self.device.write_object(index, sub, data, cx);
         self.after(cx.now, cx.out);
         r
     }
 
     fn canopen_node_id(&self) -> Option<u8> {
-        Some(self.device.node_id())
+        self.device.canopen_node_id()
     }
 
     fn dictionary_heap_bytes(&self) -> Option<usize> {
-        Some(self.device.heap_bytes())
+        self.device.dictionary_heap_bytes()
     }
 }
 
