@@ -92,14 +92,14 @@ pub fn diff(captured: &[Captured], replayed: &[Captured], tolerance: i64) -> Vec
                 // Both lists are in time order: within the tolerance only a window of the
                 // replayed frames can pair.
                 let range = if within {
-                    rep.partition_point(|(rt, _)| *rt < ct - tolerance)
-                        ..rep.partition_point(|(rt, _)| *rt <= ct + tolerance)
+                    rep.partition_point(|(rt, _)| *rt < ct.saturating_sub(tolerance))
+                        ..rep.partition_point(|(rt, _)| *rt <= ct.saturating_add(tolerance))
                 } else {
                     0..rep.len()
                 };
                 let best = range
                     .filter(|ri| !used[*ri] && ((rep[*ri].1 == *cf) == same_data))
-                    .min_by_key(|ri| (rep[*ri].0 - ct).abs());
+                    .min_by_key(|ri| rep[*ri].0.abs_diff(*ct));
                 if let Some(ri) = best {
                     used[ri] = true;
                     done[ci] = true;
@@ -175,5 +175,20 @@ mod tests {
                 ("unexpected", 50_000_000),
             ]
         );
+    }
+
+    #[test]
+    fn extreme_times_and_tolerances_saturate() {
+        let at = |t| Captured {
+            t,
+            ..c(0, "181#01")
+        };
+        let e = diff(&[at(i64::MAX)], &[at(i64::MAX - 10)], i64::MAX);
+        assert_eq!(e.len(), 1);
+        assert_eq!(e[0].kind, Kind::Matching);
+        // Further apart than any tolerance: the same data at another time.
+        let e = diff(&[at(i64::MAX)], &[at(-5)], i64::MAX);
+        assert_eq!(e.len(), 1);
+        assert_eq!(e[0].kind, Kind::Different);
     }
 }

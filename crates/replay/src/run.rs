@@ -91,7 +91,9 @@ impl Replayer<'_> {
         };
         let mut injected = 0;
         for c in self.captured.iter().filter(|c| is_master(c)) {
-            let start = anchor + c.t - to_eof(&c.frame, self.bit_ns[c.bus]);
+            let start = anchor
+                .saturating_add(c.t)
+                .saturating_sub(to_eof(&c.frame, self.bit_ns[c.bus]));
             let start = instant(start).max(built.sim.now());
             built.sim.run_until(start);
             let port = ports[c.bus].1;
@@ -105,7 +107,9 @@ impl Replayer<'_> {
                 })?;
             injected += 1;
         }
-        built.sim.run_until(instant(anchor + self.end));
+        built
+            .sim
+            .run_until(instant(anchor.saturating_add(self.end)));
         let mut ids = vec![BTreeSet::new(); ports.len()];
         let frames = twin_frames(&built)
             .into_iter()
@@ -200,7 +204,9 @@ pub fn replay(
             .iter()
             .map(|b| b.bit_rate.bit_time().as_nanos())
             .collect(),
-        end: last + tolerance + 1_000_000,
+        // Times and the tolerance come from outside (a capture file, a command line): the
+        // bounds saturate rather than overflow.
+        end: last.saturating_add(tolerance).saturating_add(1_000_000),
     };
     let owned = owned_ids(&replayer.build()?);
     let mut captured_ids = vec![BTreeSet::new(); buses];
@@ -256,7 +262,7 @@ pub fn replay(
     let replayed: Vec<Captured> = run
         .frames
         .iter()
-        .filter(|r| r.t <= last + tolerance)
+        .filter(|r| r.t <= last.saturating_add(tolerance))
         .copied()
         .collect();
     let entries = diff(&expected, &replayed, tolerance);
