@@ -190,4 +190,29 @@ mod tests {
         assert_eq!(m2s_channel(par::m2s_mon(16) + 10), None);
         assert_eq!(m2s_channel(par::DIG_RAMP_REF_1), None);
     }
+
+    #[test]
+    fn manual_1_4_the_write_hook_takes_one_to_four_bytes_for_any_parameter() {
+        let mut st = Station::default();
+        assert_eq!(st.take(par::DIG_RAMP_REF_1, &[0xE8, 0x03, 0, 0]), Ok(()));
+        assert_eq!(st.params.value(par::DIG_RAMP_REF_1), 1000);
+        assert_eq!(st.take(par::DIG_RAMP_REF_1, &[0xF6, 0xFF]), Ok(()));
+        assert_eq!(st.params.value(par::DIG_RAMP_REF_1), -10);
+        assert_eq!(st.take(par::ALARM_RESET, &[1]), Ok(()));
+        assert_eq!(st.params.value(par::ALARM_RESET), 1);
+        assert_eq!(
+            st.take(par::DIG_RAMP_REF_1, &[0x41, 0x23]),
+            Err(AbortCode::from_u32(0x0609_0031))
+        );
+        assert_eq!(
+            st.take(par::MOTOR_SPEED, &[1, 0]),
+            Err(AbortCode::from_u32(0x0601_0002))
+        );
+        // Process data: the M2S mon takes it, sign-extended, while M->S is enabled.
+        st.ms_enable = true;
+        assert_eq!(st.take(par::m2s_mon(2), &[0xDC, 0x05]), Ok(()));
+        assert_eq!(st.params.value(par::m2s_mon(2)), 1500);
+        assert_eq!(st.take(par::m2s_mon(2), &[0xFF, 0xFF]), Ok(()));
+        assert_eq!(st.params.value(par::m2s_mon(2)), -1);
+    }
 }
