@@ -216,8 +216,10 @@ impl SdoBenchClient {
     fn settle(&mut self, now: Instant, out: &mut Outbox) {
         while let Some(ev) = self.client.poll_event() {
             match ev {
-                SdoEvent::Completed { .. } => {
+                SdoEvent::Completed { data, .. } => {
                     self.completed += 1;
+                    // The next upload fills the same buffer rather than a new one.
+                    self.client.recycle(data);
                     if matches!(self.work, SdoWork::UploadLoop { .. }) {
                         self.start(now, out);
                     }

@@ -24,6 +24,10 @@
 //! * A server that stays silent for [`ClientConfig::timeout`] (default 1 s) after a
 //!   request is aborted with 0x05040000 on the bus (unless
 //!   [`ClientConfig::abort_on_timeout`] is off, as for a network scan).
+//!   [`SdoClient::next_deadline`] may be earlier than that timeout: transfers back to back
+//!   keep the instant of an earlier request while it is ahead, so that the driver's timer
+//!   moves once per timeout rather than at every request; the tick at that instant only
+//!   moves it on.
 //! * Block download sends a whole block into the outbox at once; the driver's transmit
 //!   queue must hold it (the [`crate::master::Master`] paces its frames itself).
 //! * Block upload acknowledges at the segment whose number is the block size or at the
@@ -200,6 +204,8 @@ pub struct SdoClient {
     mux: Mux,
     /// Download: the data; upload: what arrived so far.
     data: Vec<u8>,
+    /// A buffer handed back by [`Self::recycle`], for the next upload to fill.
+    spare: Vec<u8>,
     /// Download: bytes confirmed by the server (start of the current block or segment).
     offset: usize,
     /// Upload: the size the server indicated.
@@ -207,7 +213,11 @@ pub struct SdoClient {
     crc_on: bool,
     /// The transfer may still fall back to segmented.
     may_fall_back: bool,
+    /// When the server's response is due (the timeout).
     deadline: Option<Instant>,
+    /// The instant [`Self::next_deadline`] reports while a transfer runs: never later than
+    /// `deadline`, and kept from an earlier request when that is still ahead.
+    wake: Option<Instant>,
     reported: u32,
     events: VecDeque<SdoEvent>,
 }
@@ -222,11 +232,13 @@ impl SdoClient {
             state: State::Idle,
             mux: Mux::default(),
             data: Vec::new(),
+            spare: Vec::new(),
             offset: 0,
             size: None,
             crc_on: false,
             may_fall_back: false,
             deadline: None,
+            wake: None,
             reported: 0,
             events: VecDeque::new(),
         }
@@ -270,14 +282,25 @@ impl SdoClient {
         self.state == State::Idle
     }
 
-    /// When [`Self::on_tick`] must be called next (the response timeout).
+    /// When [`Self::on_tick`] must be called next: at the latest the response timeout,
+    /// possibly earlier (see [`Self::on_tick`]); `None` when no transfer runs.
     pub fn next_deadline(&self) -> Option<Instant> {
-        self.deadline
+        self.deadline.and(self.wake)
     }
 
     /// The next event, oldest first.
     pub fn poll_event(&mut self) -> Option<SdoEvent> {
         self.events.pop_front()
+    }
+
+    /// Hands back a buffer (typically the `data` of a [`SdoEvent::Completed`] that has
+    /// been read) for the next upload to fill: a client that reads again and again then
+    /// allocates once rather than at every transfer. Its contents are discarded; of two
+    /// buffers the larger is kept.
+    pub fn recycle(&mut self, buf: Vec<u8>) {
+        if buf.capacity() > self.spare.capacity() {
+            self.spare = buf;
+        }
     }
 
     /// Starts reading `index`/`sub`.
@@ -292,7 +315,9 @@ impl SdoClient {
         if !self.is_idle() {
             return Err(ClientError::Busy);
         }
-        self.begin(Mux::new(index, sub), Vec::new());
+        let mut buf = std::mem::take(&mut self.spare);
+        buf.clear();
+        self.begin(Mux::new(index, sub), buf);
         match mode {
             Mode::Block { blksize } => {
                 if !(1..=127).contains(&blksize) {
@@ -387,7 +412,7 @@ impl SdoClient {
         if self.is_idle() {
             return true;
         }
-        self.deadline = now.checked_add(self.config.timeout);
+        self.arm(now);
         if let State::BlkUpBlock { .. } = self.state {
             // Sequence number 0 with c = 1 cannot be a segment: it is the abort (0x80).
             if b[0] != 0x80 {
@@ -412,12 +437,27 @@ impl SdoClient {
         true
     }
 
-    /// The response timeout.
+    /// The response timeout. A tick before it only moves [`Self::next_deadline`] on to it.
     pub fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
         if self.deadline.is_some_and(|d| now >= d) && !self.is_idle() {
             let send = self.config.abort_on_timeout;
             self.abort_local(AbortCode::TIMEOUT, send, out);
+        } else if self.wake.is_some_and(|w| now >= w) {
+            self.wake = self.deadline;
         }
+    }
+
+    /// Starts the response timeout at `now`. Transfers back to back keep the instant
+    /// reported to the driver while it is still ahead: the driver then re-schedules its
+    /// timer once per timeout rather than at every request, and the early tick at that
+    /// instant re-arms to the real timeout.
+    fn arm(&mut self, now: Instant) {
+        let due = now.checked_add(self.config.timeout);
+        self.deadline = due;
+        self.wake = match (self.wake, due) {
+            (Some(w), Some(d)) if w > now && w <= d => Some(w),
+            _ => due,
+        };
     }
 
     fn begin(&mut self, mux: Mux, data: Vec<u8>) {
@@ -437,7 +477,7 @@ impl SdoClient {
 
     fn send(&mut self, req: Request, now: Instant, out: &mut Outbox) {
         out.push(Frame::data_array(self.tx, req.encode()));
-        self.deadline = now.checked_add(self.config.timeout);
+        self.arm(now);
     }
 
     fn finish(&mut self, event: SdoEvent) {
@@ -610,7 +650,7 @@ impl SdoClient {
                 self.check_mux(mux)?;
                 self.crc_on = crc && self.config.crc;
                 self.send_download_block(blksize, out)?;
-                self.deadline = now.checked_add(self.config.timeout);
+                self.arm(now);
                 Ok(())
             }
             (
@@ -639,7 +679,7 @@ impl SdoClient {
                         self.offset = (self.offset + acked).min(self.data.len());
                         self.progress(self.offset, Some(self.len32()));
                         self.send_download_block(blksize, out)?;
-                        self.deadline = now.checked_add(self.config.timeout);
+                        self.arm(now);
                     }
                 }
                 Ok(())
@@ -658,7 +698,9 @@ impl SdoClient {
                 match init {
                     Initiate::Expedited { data, len } => {
                         let n = usize::from(len.unwrap_or(4).min(4));
-                        self.data = data[..n].to_vec();
+                        // Into the buffer the upload started with (see `recycle`).
+                        self.data.clear();
+                        self.data.extend_from_slice(&data[..n]);
                         self.state = State::UpInitiate;
                         self.complete();
                     }
@@ -1013,6 +1055,32 @@ mod tests {
         assert!(events(&mut c).is_empty());
         c.on_tick(Instant::from_nanos(20_000_000), &mut out);
         assert!(out.is_empty());
+        assert_eq!(events(&mut c), [aborted(AbortCode::TIMEOUT, false)]);
+        assert_eq!(c.next_deadline(), None);
+    }
+
+    #[test]
+    fn back_to_back_transfers_keep_the_wake_up_and_time_out_on_time() {
+        let ms = |n: u64| Instant::from_nanos(n * 1_000_000);
+        let (mut c, mut out) = client();
+        c.start_upload(0x2003, 0, Mode::Auto, T0, &mut out).unwrap();
+        // The expedited answer at 10 ms (CiA 301 §7.2.4.3.6), the next request at once.
+        let answer = Frame::std(0x585, &[0x4F, 0x03, 0x20, 0, 7, 0, 0, 0]).unwrap();
+        assert!(c.on_frame(&answer, ms(10), &mut out));
+        let Some(SdoEvent::Completed { data, .. }) = c.poll_event() else {
+            panic!("not completed");
+        };
+        assert_eq!(data, [7]);
+        c.recycle(data);
+        c.start_upload(0x2003, 0, Mode::Auto, ms(10), &mut out)
+            .unwrap();
+        // The wake-up of the first request stays; the tick there moves it to the timeout.
+        assert_eq!(c.next_deadline(), Some(ms(1000)));
+        c.on_tick(ms(1000), &mut out);
+        assert!(events(&mut c).is_empty());
+        assert_eq!(c.next_deadline(), Some(ms(1010)));
+        out.clear();
+        c.on_tick(ms(1010), &mut out);
         assert_eq!(events(&mut c), [aborted(AbortCode::TIMEOUT, false)]);
         assert_eq!(c.next_deadline(), None);
     }
