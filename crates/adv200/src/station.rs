@@ -20,7 +20,7 @@
 //! speeds when they are read.
 
 use cantwin_canopen::AbortCode;
-use cantwin_canopen::od::{ObjectDictionary, OdHooks, ReadInfo, Value};
+use cantwin_canopen::od::{DataType, ObjectDictionary, OdHooks, ReadInfo, Value};
 use cantwin_cia402::objects as cia402;
 
 use crate::drive::Drive;
@@ -165,6 +165,51 @@ impl OdHooks for Station {
             return None;
         }
         Some(self.take(index - PARAMS_FIRST, data))
+    }
+
+    /// §1.4: a download of 1–4 bytes is accepted for any parameter and read as its value
+    /// (sign-extended for signed parameters); it stands for that value in the object's own
+    /// size. A value the object's size cannot hold is refused as the parameter's limits
+    /// refuse it, never cut to fit.
+    fn download_bytes(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        buf: &mut [u8; 8],
+    ) -> Option<Result<usize, AbortCode>> {
+        if !(PARAMS_FIRST..=PARAMS_LAST).contains(&index) || sub != 1 {
+            return None;
+        }
+        let p = index - PARAMS_FIRST;
+        let ty = od
+            .locate(index, sub)
+            .ok()
+            .map(|id| od.sub_object(id).data_type)?;
+        let width = ty.fixed_size().filter(|w| (1..=4).contains(w))?;
+        Some((|| {
+            let v = ParamDb::decode(p, data).map_err(|e| e.abort_code())?;
+            let bits = 8 * width as u32;
+            let signed = matches!(
+                ty,
+                DataType::Integer8 | DataType::Integer16 | DataType::Integer32
+            );
+            let (min, max) = if signed {
+                (-(1i64 << (bits - 1)), (1i64 << (bits - 1)) - 1)
+            } else {
+                (0, (1i64 << bits) - 1)
+            };
+            if !(min..=max).contains(&v) {
+                return Err(match self.params.check(p, v) {
+                    Err(e) => e.abort_code(),
+                    Ok(()) if v > max => AbortCode::VALUE_TOO_HIGH,
+                    Ok(()) => AbortCode::VALUE_TOO_LOW,
+                });
+            }
+            buf[..width].copy_from_slice(&v.to_le_bytes()[..width]);
+            Ok(width)
+        })())
     }
 
     fn written(&mut self, _od: &mut ObjectDictionary, index: u16, _sub: u8) {

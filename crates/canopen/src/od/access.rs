@@ -186,6 +186,26 @@ pub trait OdHooks {
         None
     }
 
+    /// The bytes an expedited download of `data` to the hooked application object
+    /// `index`/`sub` stands for, re-encoded into `buf` in the object's own size before the
+    /// dictionary checks them; `Some(Ok(len))` gives their length, `Some(Err(code))` refuses
+    /// the download with that abort code. CiA 301 aborts a length other than the object's
+    /// (0x06070010, 0x06070012, 0x06070013); a device whose manual accepts other lengths
+    /// decodes them here — the ADV200 card takes 1–4 bytes for any parameter and reads them
+    /// as the parameter's value (seed 000 §1.4). The default, `None`, checks `data` as it
+    /// came.
+    fn download_bytes(
+        &mut self,
+        od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        buf: &mut [u8; 8],
+    ) -> Option<Result<usize, AbortCode>> {
+        let _ = (od, index, sub, data, buf);
+        None
+    }
+
     /// A write landed (stored in the dictionary, or taken by [`OdHooks::write`]).
     fn written(&mut self, od: &mut ObjectDictionary, index: u16, sub: u8) {
         let _ = (od, index, sub);
@@ -266,6 +286,21 @@ impl<'a, H: OdHooks + ?Sized> Hooked<'a, H> {
         self.od
     }
 
+    /// Offers a download of a hooked application object to [`OdHooks::download_bytes`];
+    /// communication objects keep CiA 301's lengths.
+    fn download_bytes(
+        &mut self,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        buf: &mut [u8; 8],
+    ) -> Option<Result<usize, AbortCode>> {
+        if index < 0x2000 {
+            return None;
+        }
+        self.hooks.download_bytes(self.od, index, sub, data, buf)
+    }
+
     /// Offers a checked write of a hooked object to [`OdHooks::write`]; communication
     /// objects are the stack's and always stored.
     fn take_write(&mut self, index: u16, sub: u8, data: &[u8]) -> Option<Result<(), AbortCode>> {
@@ -304,6 +339,12 @@ impl<H: OdHooks + ?Sized> ObjectAccess for Hooked<'_, H> {
         if !hooked {
             return self.od.download(index, sub, data);
         }
+        let mut buf = [0u8; 8];
+        let data = match self.download_bytes(index, sub, data, &mut buf) {
+            // A length beyond the buffer is a hook's mistake: refused, never read past.
+            Some(len) => buf.get(..len?).ok_or(AbortCode::LENGTH_TOO_HIGH)?,
+            None => data,
+        };
         self.od.check_download(id, data)?;
         self.hooks.validate(self.od, index, sub, data)?;
         match self.take_write(index, sub, data) {
