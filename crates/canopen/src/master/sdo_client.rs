@@ -413,6 +413,21 @@ impl SdoClient {
             return true;
         }
         self.arm(now);
+        // The answer a client reading small objects gets most: an expedited initiate
+        // upload response (scs = 2, e = 1; CiA 301 §7.2.4.3.6) to the request in flight,
+        // taken here as `step` takes it, without building a `Response` first.
+        if self.state == State::UpInitiate && b[0] & 0xE2 == 0x42 && Mux::of_frame(b) == self.mux {
+            // s = 1: n bytes of the 4 do not contain data; s = 0: the size is not given.
+            let len = if b[0] & 0x01 != 0 {
+                4 - usize::from((b[0] >> 2) & 0x03)
+            } else {
+                4
+            };
+            self.data.clear();
+            self.data.extend_from_slice(&b[4..4 + len]);
+            self.complete();
+            return true;
+        }
         if let State::BlkUpBlock { .. } = self.state {
             // Sequence number 0 with c = 1 cannot be a segment: it is the abort (0x80).
             if b[0] != 0x80 {
