@@ -6,6 +6,10 @@
 //! each snapshot (JSON with the charts already drawn as SVG) into a watch channel that keeps
 //! only the newest. Neither side ever waits for the other.
 //!
+//! What the page shows is the monitor's dashboard model ([`cantwin_monitor::dashboard`]):
+//! this module reads the simulation for it, encodes its snapshots as JSON with the charts
+//! drawn as SVG, and carries out the page's commands.
+//!
 //! The dashboard owns one port per bus: a CANopen master ([`Master`]) from which NMT commands
 //! and SDO downloads go out on the wire, and from which the fault vocabulary's `send` action
 //! sends. Writing an object is an SDO download through the bus rather than a write into the
@@ -30,11 +34,11 @@ use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::NmtCs;
 use cantwin_monitor::Led;
 use cantwin_monitor::dashboard::{
-    BusSample, DashboardTap, Device, DeviceSample, Model, RowKind, Sample, Snapshot, WINDOW_S,
+    self, BusSample, DashboardTap, Device, DeviceSample, Model, RowKind, Sample, Snapshot, WINDOW_S,
 };
 use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
 use cantwin_scenario::{BuiltDevice, Role, Scenario};
-use cantwin_twin::{SignalId, SignalValue};
+use cantwin_twin::SignalId;
 use serde_json::{Value, json};
 
 pub use server::Server;
@@ -336,40 +340,7 @@ impl Dashboard {
         handle
             .with(|sim| {
                 let values = sim.twin(port).map(|t| t.live_values()).unwrap_or_default();
-                let inputs: Vec<&str> = values
-                    .iter()
-                    .filter(|v| v.role.is_input())
-                    .map(|v| v.name.as_str())
-                    .collect();
-                let role = values.iter().find(|v| v.name == input).map(|v| v.role);
-                let signal = match role {
-                    Some(Role::DigitalInput) if value == 0.0 || value == 1.0 => {
-                        SignalValue::Bool(value == 1.0)
-                    }
-                    Some(Role::DigitalInput) => {
-                        return Err(format!("{input} is a digital input: 0 or 1, not {value}"));
-                    }
-                    // Whole numbers go as integers: raw counts (TM3) take nothing else, and
-                    // the twins that take volts or hertz read integers as numbers too.
-                    Some(Role::AnalogInput { min, max })
-                        if (min..=max).contains(&value) && value.fract() == 0.0 =>
-                    {
-                        SignalValue::Integer(value as i64)
-                    }
-                    Some(Role::AnalogInput { min, max }) if (min..=max).contains(&value) => {
-                        SignalValue::Real(value)
-                    }
-                    Some(Role::AnalogInput { min, max }) => {
-                        return Err(format!("{input} is {min}–{max}, not {value}"));
-                    }
-                    _ if inputs.is_empty() => return Err(format!("{device} has no inputs")),
-                    _ => {
-                        return Err(format!(
-                            "{device} has no input {input:?} (inputs: {})",
-                            inputs.join(", ")
-                        ));
-                    }
-                };
+                let signal = dashboard::input_signal(&values, device, input, value)?;
                 sim.with_twin(port, |t, cx| {
                     t.set_signal(&SignalId::new(input), &signal, cx)
                 })

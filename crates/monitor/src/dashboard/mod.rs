@@ -27,7 +27,7 @@ use std::time::Duration as WallDuration;
 use cantwin_bus::{PortId, PortStatus};
 use cantwin_can::{BitRate, Duration, ErrorCounters, ErrorState, Frame, Instant};
 use cantwin_canopen::wire::{self, ErrorControl, Message};
-use cantwin_twin::LiveValue;
+use cantwin_twin::{LiveValue, Role, SignalValue};
 
 use crate::{Config, DeviceKind, Led, Leds, NetworkView};
 
@@ -608,6 +608,50 @@ pub fn leds(powered: bool, seen: Option<Leds>, c: &ErrorCounters) -> Leds {
         _ => seen.map_or(Led::Off, |l| l.err),
     };
     Leds { run, err }
+}
+
+/// The signal value that sets input `input` of `device` to `value` from its live values
+/// `values` (the device's signal of the same name): a digital input takes 0 or 1, an analog
+/// input a number within its range. The error says why the page's value does not fit.
+pub fn input_signal(
+    values: &[LiveValue],
+    device: &str,
+    input: &str,
+    value: f64,
+) -> Result<SignalValue, String> {
+    let role = values.iter().find(|v| v.name == input).map(|v| v.role);
+    match role {
+        Some(Role::DigitalInput) if value == 0.0 || value == 1.0 => {
+            Ok(SignalValue::Bool(value == 1.0))
+        }
+        Some(Role::DigitalInput) => Err(format!("{input} is a digital input: 0 or 1, not {value}")),
+        // Whole numbers go as integers: raw counts (TM3) take nothing else, and the twins
+        // that take volts or hertz read integers as numbers too.
+        Some(Role::AnalogInput { min, max })
+            if (min..=max).contains(&value) && value.fract() == 0.0 =>
+        {
+            Ok(SignalValue::Integer(value as i64))
+        }
+        Some(Role::AnalogInput { min, max }) if (min..=max).contains(&value) => {
+            Ok(SignalValue::Real(value))
+        }
+        Some(Role::AnalogInput { min, max }) => Err(format!("{input} is {min}–{max}, not {value}")),
+        _ => {
+            let inputs: Vec<&str> = values
+                .iter()
+                .filter(|v| v.role.is_input())
+                .map(|v| v.name.as_str())
+                .collect();
+            if inputs.is_empty() {
+                Err(format!("{device} has no inputs"))
+            } else {
+                Err(format!(
+                    "{device} has no input {input:?} (inputs: {})",
+                    inputs.join(", ")
+                ))
+            }
+        }
+    }
 }
 
 #[cfg(test)]

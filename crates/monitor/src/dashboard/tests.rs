@@ -137,3 +137,43 @@ fn a_history_forgets_what_left_the_window() {
     let now = WallDuration::from_secs(61);
     assert_eq!(h.points(now), [(31.0, 2.0), (0.0, 3.0)]);
 }
+
+#[test]
+fn inputs_take_values_of_their_role() {
+    let values = [
+        LiveValue {
+            name: "digital_input.4".into(),
+            value: 0.0,
+            unit: "",
+            role: Role::DigitalInput,
+        },
+        LiveValue {
+            name: "analog_input.3.0".into(),
+            value: 0.0,
+            unit: "V",
+            role: Role::AnalogInput {
+                min: -10.0,
+                max: 10.0,
+            },
+        },
+        LiveValue::measured("speed", 0.0, "rpm"),
+    ];
+    let set = |input: &str, value: f64| input_signal(&values, "island", input, value);
+    assert_eq!(set("digital_input.4", 1.0), Ok(SignalValue::Bool(true)));
+    assert!(set("digital_input.4", 2.0).unwrap_err().contains("0 or 1"));
+    assert_eq!(set("analog_input.3.0", 5.0), Ok(SignalValue::Integer(5)));
+    assert_eq!(set("analog_input.3.0", 2.5), Ok(SignalValue::Real(2.5)));
+    assert!(
+        set("analog_input.3.0", 11.0)
+            .unwrap_err()
+            .contains("-10–10")
+    );
+    assert_eq!(
+        set("speed", 1.0),
+        Err("island has no input \"speed\" (inputs: digital_input.4, analog_input.3.0)".into())
+    );
+    assert_eq!(
+        input_signal(&values[2..], "drive", "speed", 1.0),
+        Err("drive has no inputs".into())
+    );
+}
