@@ -20,6 +20,10 @@ pub struct PdoObjects {
     entries: u8,
     rx: Vec<(u16, u8, Vec<u32>)>,
     tx: Vec<(u16, u8, Vec<u32>)>,
+    /// Default COB-IDs given for TPDOs beyond the pre-defined connection set: (slot, id).
+    tx_ids: Vec<(u16, u32)>,
+    /// The default event timer (sub 5) of every TPDO, in ms.
+    event_timer_ms: u16,
 }
 
 impl PdoObjects {
@@ -31,7 +35,24 @@ impl PdoObjects {
             entries: 8,
             rx: Vec::new(),
             tx: Vec::new(),
+            tx_ids: Vec::new(),
+            event_timer_ms: 0,
         }
+    }
+
+    /// The default identifier of TPDO slot `n` (0x1800 + n sub 1, without `$NODEID`), for a
+    /// device whose application assigns TPDOs beyond the four of the pre-defined connection
+    /// set (CiA 301 §7.3.5); valid when the TPDO has a default mapping.
+    pub fn tpdo_cob_id(mut self, n: u16, id: u32) -> Self {
+        self.tx_ids.retain(|&(m, _)| m != n);
+        self.tx_ids.push((n, id));
+        self
+    }
+
+    /// The default event timer of every TPDO (0x1800 + n sub 5, CiA 301 §7.5.2.35), in ms.
+    pub fn event_timer(mut self, ms: u16) -> Self {
+        self.event_timer_ms = ms;
+        self
     }
 
     /// The number of mapping entries each mapping object has (1..=64).
@@ -89,14 +110,30 @@ impl PdoObjects {
             let def = self.tx.iter().find(|d| d.0 == n);
             let ttype = def.map_or(255, |d| d.1);
             let mapping = def.map_or(&[][..], |d| &d.2[..]);
+            let cob_id = match self.tx_ids.iter().find(|&&(m, _)| m == n) {
+                Some(&(_, id)) => {
+                    let invalid = if mapping.is_empty() {
+                        super::CobId::INVALID
+                    } else {
+                        0
+                    };
+                    SubObject::new("COB-ID used by PDO", DataType::Unsigned32, Access::Rw)
+                        .default(Value::Unsigned32(invalid | id))
+                }
+                None => cob(n, 0x180, !mapping.is_empty()),
+            };
             b = b.record(
                 TPDO_COMM + n,
                 format!("TPDO communication parameter {}", n + 1),
                 [
-                    (1, cob(n, 0x180, !mapping.is_empty())),
+                    (1, cob_id),
                     (2, u8_rw("Transmission type", ttype)),
                     (3, u16_rw("Inhibit time")),
-                    (5, u16_rw("Event timer")),
+                    (
+                        5,
+                        SubObject::new("Event timer", DataType::Unsigned16, Access::Rw)
+                            .default(Value::Unsigned16(self.event_timer_ms)),
+                    ),
                     (6, u8_rw("SYNC start value", 0)),
                 ],
             );
@@ -156,5 +193,29 @@ mod tests {
         assert_eq!(od.get_unsigned(0x1800, 0), Some(6));
         assert_eq!(od.get_unsigned(0x1400, 0), Some(5));
         assert!(od.description().is_hooked(0x1A04));
+    }
+
+    #[test]
+    fn tpdos_beyond_the_predefined_set_take_their_given_identifier_and_event_timer() {
+        let desc = PdoObjects::new(0, 6)
+            .tpdo(5, 255, &[0x6000_0110])
+            .tpdo_cob_id(5, 0x1C5)
+            .tpdo_cob_id(4, 0x1C4)
+            .event_timer(8)
+            .add_to(OdBuilder::new().array_of(
+                0x6000,
+                "Inputs",
+                1,
+                SubObject::new("Input", DataType::Unsigned16, Access::Ro).mappable(),
+            ))
+            .build()
+            .unwrap();
+        let od = ObjectDictionary::new(Arc::new(desc), 0x22);
+        // §7.5.2.35: valid (bit 31 clear) only with a mapping; no $NODEID for given ones.
+        assert_eq!(od.get_unsigned(0x1805, 1), Some(0x1C5));
+        assert_eq!(od.get_unsigned(0x1804, 1), Some(0x8000_01C4));
+        assert_eq!(od.get_unsigned(0x1800, 1), Some(0x8000_01A2));
+        assert_eq!(od.get_unsigned(0x1805, 5), Some(8));
+        assert_eq!(od.get_unsigned(0x1800, 5), Some(8));
     }
 }
