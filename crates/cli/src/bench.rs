@@ -730,7 +730,7 @@ fn bench_twin(args: &Args, name: &str) -> Result<()> {
          | frames on the bus per simulated second, twin | {frames:.0} |\n\
          | **CPU per simulated second, twin** (bus, twin and master) | **{twin:.0} µs** ({rt:.0}× real time) |\n\
          | CPU per simulated second, bare CiA 301 devices (same run) | {base:.1} µs ({base_frames:.0} frames/s) |\n\
-         | **twin / bare devices** | **{ratio:.1}**{floor} |",
+         | **twin / bare devices** | **{ratio:.1}**{floor} |{reference}",
         bus = duration.as_secs_f64(),
         frames = r.twin.frames_per_sim_second(),
         twin = us(&r.twin),
@@ -742,14 +742,30 @@ fn bench_twin(args: &Args, name: &str) -> Result<()> {
             Some(f) => format!(" (floor ≤ {f}: **not met**)"),
             None => String::new(),
         },
+        reference = match &r.reference {
+            Some((run, _)) => format!(
+                "\n| CPU per simulated second, second baseline (same run) | {:.1} µs ({:.0} frames/s) |\n\
+                 | twin / second baseline | {:.1} |",
+                us(run),
+                run.frames_per_sim_second(),
+                r.twin.ns_per_sim_second() / run.ns_per_sim_second().max(1.0),
+            ),
+            None => String::new(),
+        },
     );
     let intro = format!(
         "{what}. Measured after start-up and configuration, in chunks of {chunk} of bus \
          time: the median chunk's wall time per simulated second (chunks in which the thread \
          lost its core to other processes drop out, so it is the CPU time of one core). \
-         Baseline in the same run: {baseline}.",
+         Baseline in the same run: {baseline}.{second}",
         chunk = twins::CHUNK,
         baseline = r.baseline_what,
+        second = r
+            .reference
+            .as_ref()
+            .map_or(String::new(), |(_, what)| format!(
+                " Second baseline: {what}."
+            )),
     );
     record(args, name, "twin CPU per simulated second", &intro, &table)
 }
