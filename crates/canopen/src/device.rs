@@ -443,6 +443,13 @@ impl<H: OdHooks> Device<H> {
         }
     }
 
+    /// Whether EMCY error `code` is active. Unlike [`Device::emcy`] it changes nothing, so
+    /// the next deadline the device keeps stays valid: a device model that only asks pays
+    /// no recomputation of its timers.
+    pub fn emcy_active(&self, code: u16) -> bool {
+        self.core.emcy.is_active(code)
+    }
+
     /// Queues a TIME message with `time` into `out`, if the device is a TIME producer
     /// (0x1012 bit 30) and TIME is allowed in its NMT state. Returns whether it did.
     pub fn publish_time(&mut self, time: TimeOfDay, out: &mut Outbox) -> bool {

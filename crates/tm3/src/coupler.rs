@@ -627,7 +627,7 @@ impl Tm3Coupler {
     /// or, while the code is active for another module, another occurrence of it with its
     /// own EMCY and 0x1003 entry. A code already active for that module is not raised again.
     fn raise(&mut self, code: u16, module: u8) {
-        if self.raised.contains(&(code, module)) && self.device.emcy().is_active(code) {
+        if self.raised.contains(&(code, module)) && self.device.emcy_active(code) {
             return;
         }
         if matches!(code, 0x7000..=0x7FFF) {
@@ -646,6 +646,10 @@ impl Tm3Coupler {
     fn clear(&mut self, code: u16) {
         if code == diag::ANALOG_DISABLE {
             self.device.emcy().set_register_bits(0x20, false);
+        } else if !self.device.emcy_active(code) {
+            // Nothing to clear (the common case, e.g. 0x6102 after every frame sent): asked
+            // without `emcy()`, which would make the device recompute its timers.
+            return;
         }
         if self.device.emcy().clear(code) {
             self.flush = true;
@@ -697,9 +701,9 @@ impl Tm3Coupler {
     /// Runs `f` on the coupler and then everything that follows a call into the device.
     fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
         self.now = now;
-        let timed_out = self.device.emcy().is_active(diag::RPDO_TIMEOUT);
+        let timed_out = self.device.emcy_active(diag::RPDO_TIMEOUT);
         f(self, out);
-        if !timed_out && self.device.emcy().is_active(diag::RPDO_TIMEOUT) {
+        if !timed_out && self.device.emcy_active(diag::RPDO_TIMEOUT) {
             // Manual 1029H: an RPDO deadline is handled like a communication error.
             self.failure = true;
             self.device.error_detected(1, now, out);
@@ -710,7 +714,7 @@ impl Tm3Coupler {
             self.device.on_tick(now, out);
         }
         let device = &mut self.device;
-        self.raised.retain(|&(c, _)| device.emcy().is_active(c));
+        self.raised.retain(|&(c, _)| device.emcy_active(c));
     }
 
     fn events(&mut self, now: Instant, out: &mut Outbox) {
@@ -763,7 +767,7 @@ impl Tm3Coupler {
                 _ => {}
             }
         }
-        if self.device.emcy().is_active(diag::ANALOG_DISABLE)
+        if self.device.emcy_active(diag::ANALOG_DISABLE)
             && matches!(
                 self.device
                     .od()
@@ -792,7 +796,7 @@ impl Tm3Coupler {
                 diag::SYNC_TIMEOUT,
             ]
             .iter()
-            .any(|&c| self.device.emcy().is_active(c))
+            .any(|&c| self.device.emcy_active(c))
     }
 
     fn sync_period(&self) -> Duration {
@@ -821,7 +825,7 @@ impl Tm3Coupler {
         }
         if self.rx_level == 0 {
             self.rx_last = now;
-            if self.device.emcy().is_active(diag::RX_QUEUE_OVERRUN) {
+            if self.device.emcy_active(diag::RX_QUEUE_OVERRUN) {
                 self.clear(diag::RX_QUEUE_OVERRUN);
             }
         }
