@@ -8,8 +8,8 @@ use cantwin_can::{Duration, Instant, Outbox};
 use cantwin_opendrive::messages::{self, Code, CommandByte, message0_write};
 use cantwin_opendrive::params::Params;
 use cantwin_opendrive::{MESSAGE_0, MESSAGE_1};
-use cantwin_twin::{SignalId, SignalValue};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
+use cantwin_twin::{SignalId, SignalValue};
 
 const SCENARIO: &str = r#"
 name = "demo: OPEN DRIVE"

@@ -104,7 +104,12 @@ pub fn run() -> Result<()> {
     println!("  {:>12}  module 2 outputs 0..3: {outputs:?}", "");
 
     println!("\nInput 3 of module 1 switches on: TPDO1 follows within the inhibit time:");
-    set_signal(&mut net, island, "digital_input.1.3", SignalValue::Bool(true))?;
+    set_signal(
+        &mut net,
+        island,
+        "digital_input.1.3",
+        SignalValue::Bool(true),
+    )?;
     net.sim.run_until(ms(40));
     net.frames(2)?;
 
