@@ -336,14 +336,39 @@ fn bare_event_tpdos(frames_per_second: f64, duration: Duration) -> Result<TwinRu
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
     let device = cantwin_canopen::device::Device::new(desc, DeviceConfig::new(3))?;
-    sim.attach(bus, device, PortConfig::default())?;
+    // All 56 timers run out together: a transmit queue that holds them all, so that none
+    // is dropped and the bus carries the frames the timer gives.
+    sim.attach(bus, device, PortConfig::default().with_queue_depth(64))?;
     let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
     nmt_start(&mut sim, master)?;
     measure(&mut sim, bus, ms(100), duration, CYCLE, |_, _| Ok(()))
 }
 
-/// Run twin `name` and its baseline for `duration` of bus time each.
-pub fn run(name: &str, duration: Duration) -> Result<TwinReport> {
+/// Run twin `name` and its baselines for `duration` of bus time each, `trials` times (twin
+/// and baselines one after the other in each trial), keeping each one's fastest run: a
+/// trial in which the machine was busy with other work counts for none of them.
+pub fn best_of(name: &str, duration: Duration, trials: usize) -> Result<TwinReport> {
+    let fastest = |a: TwinRun, b: TwinRun| {
+        if b.ns_per_sim_second < a.ns_per_sim_second {
+            b
+        } else {
+            a
+        }
+    };
+    let mut best = run_once(name, duration)?;
+    for _ in 1..trials.max(1) {
+        let r = run_once(name, duration)?;
+        best.twin = fastest(best.twin, r.twin);
+        best.baseline = fastest(best.baseline, r.baseline);
+        if let (Some((a, _)), Some((b, _))) = (&mut best.reference, r.reference) {
+            *a = fastest(*a, b);
+        }
+    }
+    Ok(best)
+}
+
+/// Twin `name` and its baselines, once each.
+fn run_once(name: &str, duration: Duration) -> Result<TwinReport> {
     if name == "tm3-56" {
         let twin = tm3_full_island(duration)?;
         let baseline = bare_event_tpdos(twin.frames_per_sim_second(), duration)?;
@@ -382,7 +407,7 @@ mod tests {
     #[test]
     fn every_twin_runs_its_traffic_and_is_measured() {
         for (name, _) in TWINS {
-            let r = run(name, Duration::from_millis(200)).unwrap();
+            let r = best_of(name, Duration::from_millis(200), 1).unwrap();
             // Every master sends at least one frame per cycle and the twin answers: at least
             // 100 frames per simulated second.
             assert!(r.twin.frames >= 20, "{name}: {} frames", r.twin.frames);
