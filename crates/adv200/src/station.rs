@@ -146,12 +146,11 @@ impl OdHooks for Station {
         buf: &mut [u8],
     ) -> Option<Result<ReadInfo, AbortCode>> {
         let _ = od;
-        Some(self.serve(index, sub)?.map(|(bytes, size)| {
-            let start = offset.min(size);
-            let copied = (size - start).min(buf.len());
-            buf[..copied].copy_from_slice(&bytes[start..start + copied]);
-            ReadInfo { size, copied }
-        }))
+        let served = self.serve(index, sub)?;
+        Some(
+            served
+                .map(|(bytes, size)| ReadInfo::serve(&bytes[..size.min(bytes.len())], offset, buf)),
+        )
     }
 
     fn write(

@@ -12,6 +12,15 @@ pub struct ReadInfo {
     pub copied: usize,
 }
 
+impl ReadInfo {
+    /// Serves a read of `value` from `offset` into `buf`, as the dictionary serves its
+    /// stored values: for a hook that holds the value itself ([`OdHooks::read`]).
+    #[inline]
+    pub fn serve(value: &[u8], offset: usize, buf: &mut [u8]) -> ReadInfo {
+        read_from(value, offset, buf)
+    }
+}
+
 /// What an SDO server needs from a device: reads by offset (so that a large DOMAIN is
 /// uploaded segment by segment without a copy), whole writes for expedited downloads, and
 /// streamed writes for segmented and block downloads.
