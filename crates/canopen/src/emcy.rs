@@ -137,6 +137,19 @@ impl Producer {
             return false;
         }
         self.active.push(Active { code });
+        self.occurrence(code, manufacturer, send, entry);
+        true
+    }
+
+    /// One occurrence of active error `code`: its 0x1003 entry, made by `entry` from the
+    /// error register as it is now, and its EMCY if `send`.
+    fn occurrence(
+        &mut self,
+        code: u16,
+        manufacturer: [u8; 5],
+        send: bool,
+        entry: impl FnOnce(u8) -> u32,
+    ) {
         let register = self.register();
         self.record(entry(register));
         if send {
@@ -146,7 +159,6 @@ impl Producer {
                 manufacturer,
             });
         }
-        true
     }
 
     /// Reports error `code` with `manufacturer` bytes: raises it if it is not active,
@@ -167,15 +179,7 @@ impl Producer {
         if !self.is_active(code) {
             return self.raise_with(code, manufacturer, send, entry);
         }
-        let register = self.register();
-        self.record(entry(register));
-        if send {
-            self.enqueue(Emcy {
-                code,
-                register,
-                manufacturer,
-            });
-        }
+        self.occurrence(code, manufacturer, send, entry);
         send
     }
 
