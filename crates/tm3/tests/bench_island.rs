@@ -6,29 +6,25 @@
 //! `cargo test -p cantwin-tm3 --release --test bench_island -- --ignored --nocapture`
 #![allow(clippy::unwrap_used)]
 
-use cantwin_bus::{BusConfig, PortConfig, Recorder, Simulation};
-use cantwin_can::{BitRate, Frame, Instant, Node, Outbox};
+use cantwin_bus::{BusConfig, BusId, PortConfig, Recorder, Simulation, TapId};
+use cantwin_can::{BitRate, Instant, ListenOnly};
 use cantwin_tm3::full_island::FullIsland;
 
-struct Listener;
-
-impl Node for Listener {
-    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
-    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
-    fn next_deadline(&self) -> Option<Instant> {
-        None
-    }
-}
-
-#[test]
-#[ignore = "benchmark: run in release with --ignored --nocapture"]
-fn bench_14_modules_56_tpdos_1mbit() {
+/// The island and a listener on a 1 Mbit/s bus, every frame recorded.
+fn island_on_a_bus() -> (Simulation, BusId, TapId) {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
     let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
     sim.attach(bus, FullIsland::new(3).unwrap(), PortConfig::default())
         .unwrap();
-    sim.attach(bus, Listener, PortConfig::default()).unwrap();
+    sim.attach(bus, ListenOnly, PortConfig::default()).unwrap();
+    (sim, bus, tap)
+}
+
+#[test]
+#[ignore = "benchmark: run in release with --ignored --nocapture"]
+fn bench_14_modules_56_tpdos_1mbit() {
+    let (mut sim, bus, tap) = island_on_a_bus();
     // Warm-up, then the measured run.
     sim.run_until(Instant::from_nanos(100_000_000));
     let simulated_ms = 10_000u64;
@@ -48,12 +44,7 @@ fn bench_14_modules_56_tpdos_1mbit() {
 
 #[test]
 fn the_full_island_sends_every_tpdo_on_its_timer() {
-    let mut sim = Simulation::new();
-    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
-    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
-    sim.attach(bus, FullIsland::new(3).unwrap(), PortConfig::default())
-        .unwrap();
-    sim.attach(bus, Listener, PortConfig::default()).unwrap();
+    let (mut sim, bus, tap) = island_on_a_bus();
     sim.run_until(Instant::from_nanos(200_000_000));
     let rec = sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
     for n in 0..cantwin_tm3::full_island::TPDOS {
