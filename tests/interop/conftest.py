@@ -38,6 +38,17 @@ def cantwin_bin() -> str:
     pytest.fail("CANTWIN_BIN is not set and cantwin is not on PATH (run tests/interop/run.sh)")
 
 
+def export_eds(tmp_path: Path, scenario: str, device: str) -> Path:
+    """The EDS `cantwin eds export` writes for `device` of `scenarios/SCENARIO`."""
+    out = tmp_path / f"{device}.eds"
+    subprocess.run(
+        [cantwin_bin(), "eds", "export", "--scenario", str(SCENARIOS / scenario), "--device", device, "-o", str(out)],
+        check=True,
+        timeout=60,
+    )
+    return out
+
+
 @dataclass
 class Sim:
     """A running `cantwin sim`: where its gateways listen."""

@@ -3,28 +3,17 @@ python-canopen (`canopen.import_od`); python-canopen then reads every object of 
 with it, and `node.tpdo.read()` returns the device's real TPDO mapping."""
 
 import struct
-import subprocess
 
 import canopen
 import pytest
 
-from conftest import SCENARIOS, cantwin_bin, start_sim, stop_process
+from conftest import SCENARIOS, export_eds as export, start_sim, stop_process
 
 # (scenario, device, node-ID, bus)
 TWINS = [
     ("cia301-device.toml", "node5", 5, "can0"),
     ("tm3-island.toml", "island", 3, "can0"),
 ]
-
-
-def export(tmp_path, scenario, device):
-    out = tmp_path / f"{device}.eds"
-    subprocess.run(
-        [cantwin_bin(), "eds", "export", "--scenario", str(SCENARIOS / scenario), "--device", device, "-o", str(out)],
-        check=True,
-        timeout=60,
-    )
-    return out
 
 
 @pytest.fixture(params=TWINS, ids=[t[1] for t in TWINS])

@@ -15,14 +15,13 @@ start at 1500 rpm, then TPDO1's speed word reads 1500.
 """
 
 import queue
-import subprocess
 import time
 
 import can
 import canopen
 import pytest
 
-from conftest import SCENARIOS, cantwin_bin, start_sim, stop_process
+from conftest import SCENARIOS, export_eds as export, start_sim, stop_process
 
 # (scenario, device, node-ID)
 TWINS = [
@@ -44,16 +43,6 @@ BITS = {
     canopen.objectdictionary.UNSIGNED16: 16,
     canopen.objectdictionary.UNSIGNED32: 32,
 }
-
-
-def export(tmp_path, scenario, device):
-    out = tmp_path / f"{device}.eds"
-    subprocess.run(
-        [cantwin_bin(), "eds", "export", "--scenario", str(SCENARIOS / scenario), "--device", device, "-o", str(out)],
-        check=True,
-        timeout=60,
-    )
-    return out
 
 
 class Twin:
