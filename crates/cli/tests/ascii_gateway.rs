@@ -45,7 +45,7 @@ fn conversation() -> Vec<(String, String)> {
 
 #[test]
 fn cia309_3_gateway_on_stdin_reads_writes_aborts_and_sends_nmt() {
-    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "60");
+    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "300");
     let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
         .args(["gateway", "--ascii", "--socketcand", &addr])
         .stdin(Stdio::piped())
@@ -86,7 +86,7 @@ fn cia309_3_gateway_on_stdin_reads_writes_aborts_and_sends_nmt() {
 
 #[test]
 fn cia309_3_gateway_serves_tcp_clients() {
-    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "60");
+    let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "300");
     let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
         .args(["gateway", "--ascii", "--listen", "0", "--socketcand", &addr])
         .stdout(Stdio::piped())

@@ -565,7 +565,7 @@ fn eds_dcf_commissions_a_node_and_doc_renders_markdown() {
 
 #[test]
 fn cal_commands_drive_the_opendrive_twin_through_socketcand() {
-    let (mut child, addr) = sim_with_socketcand(&scenario_file("opendrive.toml"), "20");
+    let (mut child, addr) = sim_with_socketcand(&scenario_file("opendrive.toml"), "300");
     let cal = |args: &[&str]| {
         let mut full = vec!["cal", "--socketcand", addr.as_str()];
         full.extend_from_slice(args);
@@ -623,7 +623,7 @@ fn client_commands_need_a_target() {
 
 #[test]
 fn canopen_commands_against_the_cia301_twin_through_socketcand() {
-    let (mut child, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "30");
+    let (mut child, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "300");
     let run = |args: &[&str]| {
         let mut full = vec![args[0], "--socketcand", addr.as_str()];
         full.extend_from_slice(&args[1..]);

@@ -132,3 +132,38 @@ fn server_gone_is_reported_as_closed() {
     srv.shutdown();
     assert_eq!(c.recv_timeout(GUARD), Err(PortError::Closed));
 }
+
+#[test]
+fn a_client_closes_without_resetting_so_its_last_frames_are_not_lost() {
+    // A client that closes with bus traffic unread in its receive buffer must not reset
+    // the connection: a reset discards what the server has not read yet, such as the last
+    // segment of an SDO transfer. This server reads only after the client has gone.
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    let server = thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        s.set_read_timeout(Some(GUARD)).unwrap();
+        s.write_all(b"< hi >").unwrap();
+        let mut open = [0u8; b"< open vcan0 >".len()];
+        s.read_exact(&mut open).unwrap();
+        s.write_all(b"< ok >").unwrap();
+        let mut raw = [0u8; b"< rawmode >".len()];
+        s.read_exact(&mut raw).unwrap();
+        s.write_all(b"< ok >").unwrap();
+        for _ in 0..100 {
+            s.write_all(b"< frame 700 1700000000.000000 05 >").unwrap();
+        }
+        thread::sleep(Duration::from_millis(200));
+        let mut rest = Vec::new();
+        let read = s.read_to_end(&mut rest);
+        (read.map(|_| ()).map_err(|e| e.kind()), rest)
+    });
+    let c = Client::connect(addr, "vcan0", GUARD).unwrap();
+    thread::sleep(Duration::from_millis(50));
+    c.send(Frame::std(0x605, &[0x80, 0, 0x20, 0, 0, 0, 0, 0]).unwrap())
+        .unwrap();
+    drop(c);
+    let (read, rest) = server.join().unwrap();
+    assert_eq!(read, Ok(()));
+    assert_eq!(rest, b"< send 605 8 80 00 20 00 00 00 00 00 >");
+}

@@ -19,9 +19,33 @@ pub fn cantwin(args: &[&str]) -> (bool, String, String) {
     )
 }
 
+/// A child process that is killed when the test ends, passed or failed: a simulation's
+/// `--duration` is only a bound for a test that dies before it cleans up.
+pub struct Killed(pub Child);
+
+impl std::ops::Deref for Killed {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Killed {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
 /// Start `cantwin sim SCENARIO --socketcand 0 --duration SECONDS` and return the child and the
 /// address from the line it prints once it accepts connections.
-pub fn sim_with_socketcand(scenario: &str, seconds: &str) -> (Child, String) {
+pub fn sim_with_socketcand(scenario: &str, seconds: &str) -> (Killed, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
         .args(["sim", scenario, "--socketcand", "0", "--duration", seconds])
         .stdout(Stdio::piped())
@@ -33,7 +57,7 @@ pub fn sim_with_socketcand(scenario: &str, seconds: &str) -> (Child, String) {
         .read_line(&mut line)
         .unwrap();
     let addr = line.split_whitespace().nth(1).unwrap().to_string();
-    (child, addr)
+    (Killed(child), addr)
 }
 
 /// A scenario of the repository's `scenarios/`.

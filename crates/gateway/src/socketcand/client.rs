@@ -193,6 +193,40 @@ impl Client {
     }
 }
 
+/// How long a closing client waits for the server to take its last frames.
+const CLOSE_LINGER: Duration = Duration::from_millis(500);
+
+impl Drop for Client {
+    /// Closes so that the frames sent last reach the bus. Closing a socket with unread
+    /// data in its receive buffer (frames the bus carried meanwhile) makes the OS reset
+    /// the connection, and a reset discards what the server has not read yet: the last
+    /// SDO segment of a transfer, say, which leaves the device's SDO server waiting in the
+    /// middle of it. So: half-close, then read until the server closes its side, at most
+    /// [`CLOSE_LINGER`].
+    fn drop(&mut self) {
+        let writer = relock(&self.writer);
+        if writer.shutdown(std::net::Shutdown::Write).is_err() {
+            return;
+        }
+        let reader = relock(&self.reader);
+        let deadline = Instant::now() + CLOSE_LINGER;
+        let mut sink = [0u8; 4096];
+        let mut stream = &reader.stream;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() || stream.set_read_timeout(Some(left)).is_err() {
+                return;
+            }
+            match stream.read(&mut sink) {
+                Ok(0) => return,
+                Ok(_) => {}
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
+                Err(_) => return,
+            }
+        }
+    }
+}
+
 impl BusPort for Client {
     fn send(&self, frame: Frame) -> Result<(), PortError> {
         let mut out = Vec::with_capacity(40);
