@@ -470,6 +470,16 @@ impl OdBuilder {
         self
     }
 
+    /// Sets the object code of the object most recently added: a DEFTYPE object of an EDS
+    /// (CiA 301 §7.4.7.1, e.g. the dummy entries 0x0002..=0x0007) is held like a VAR but
+    /// keeps its code, so the EDS generated from the dictionary says DEFTYPE again.
+    pub fn code(mut self, code: ObjectCode) -> Self {
+        if let Some(o) = self.objects.last_mut() {
+            o.code = code;
+        }
+        self
+    }
+
     /// Routes reads and writes of the objects in `range` through the device's [`OdHooks`].
     pub fn hook(mut self, range: RangeInclusive<u16>) -> Self {
         self.hooks.push(range);
