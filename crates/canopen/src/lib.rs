@@ -32,6 +32,7 @@ pub mod error_behaviour;
 pub mod fuzz;
 pub mod guarding;
 pub mod heartbeat;
+pub mod lss;
 pub mod master;
 pub mod nmt;
 pub mod objects;

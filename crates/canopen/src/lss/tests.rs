@@ -1,0 +1,158 @@
+//! The master and slaves on one virtual bus: each frame one master or slave queues reaches
+//! every other one 250 µs later (about one 8-byte frame at 500 kbit/s), timers fire in
+//! virtual time.
+
+use cantwin_can::{BitRate, Duration, Instant, Node, Outbox};
+
+use super::*;
+
+/// A master and slaves exchanging frames in virtual time.
+struct Net {
+    now: Instant,
+    master: Master,
+    slaves: Vec<Slave>,
+    /// Frames in flight: (arrival, from the master?, frame).
+    wire: Vec<(Instant, bool, cantwin_can::Frame)>,
+}
+
+const HOP: Duration = Duration::from_micros(250);
+
+impl Net {
+    fn new(slaves: Vec<Slave>) -> Net {
+        Net {
+            now: Instant::ZERO,
+            master: Master::new(Duration::from_millis(10)),
+            slaves,
+            wire: Vec::new(),
+        }
+    }
+
+    fn queue(&mut self, out: &mut Outbox, from_master: bool) {
+        for f in out.drain() {
+            self.wire.push((self.now + HOP, from_master, f));
+        }
+    }
+
+    /// Runs `service` to its end, in virtual time.
+    fn run(&mut self, service: Service) -> Outcome {
+        let mut out = Outbox::new();
+        self.master.start(service, self.now, &mut out).unwrap();
+        self.queue(&mut out, true);
+        for _ in 0..100_000 {
+            if let Some(o) = self.master.poll() {
+                return o;
+            }
+            let next_frame = self.wire.iter().map(|w| w.0).min();
+            let next_tick = self
+                .slaves
+                .iter()
+                .filter_map(Slave::next_deadline)
+                .chain(self.master.next_deadline())
+                .min();
+            let Some(t) = next_frame.into_iter().chain(next_tick).min() else {
+                panic!("nothing left to happen and no outcome");
+            };
+            self.now = self.now.max(t);
+            if let Some(i) = self.wire.iter().position(|w| w.0 <= self.now) {
+                let (_, from_master, f) = self.wire.remove(i);
+                if from_master {
+                    for s in &mut self.slaves {
+                        s.on_frame(&f, self.now, &mut out);
+                    }
+                    self.queue(&mut out, false);
+                } else {
+                    self.master.on_frame(&f, self.now, &mut out);
+                    self.queue(&mut out, true);
+                }
+                continue;
+            }
+            for s in &mut self.slaves {
+                s.on_tick(self.now);
+            }
+            self.master.on_tick(self.now, &mut out);
+            self.queue(&mut out, true);
+        }
+        panic!("the service did not end");
+    }
+}
+
+fn slave(serial: u32, node_id: u8) -> Slave {
+    let address = Address {
+        vendor: 0x5A5A_0001,
+        product: 0x0000_0402,
+        revision: 0x0001_0000,
+        serial,
+    };
+    Slave::new(
+        address,
+        node_id,
+        BitRate::R500K,
+        Box::new(MemoryStore::new()),
+    )
+}
+
+#[test]
+fn cia305_master_commissions_two_unconfigured_slaves_by_fastscan() {
+    let mut net = Net::new(vec![
+        slave(0x0000_1234, UNCONFIGURED),
+        slave(0x8000_0001, UNCONFIGURED),
+    ]);
+    let mut found = Vec::new();
+    for node_id in [10u8, 11] {
+        let Outcome::Address(a) = net.run(Service::Fastscan) else {
+            panic!("fastscan found no slave");
+        };
+        found.push(a.serial);
+        assert_eq!(net.run(Service::ConfigureNodeId(node_id)), Outcome::Done);
+        assert_eq!(net.run(Service::StoreConfiguration), Outcome::Done);
+        assert_eq!(net.run(Service::SwitchGlobal(Mode::Waiting)), Outcome::Done);
+    }
+    // The lower serial wins the scan (a 0 bit is answered first).
+    assert_eq!(found, [0x0000_1234, 0x8000_0001]);
+    assert_eq!(net.run(Service::Fastscan), Outcome::Timeout);
+    for (s, id) in net.slaves.iter_mut().zip([10, 11]) {
+        assert_eq!(s.poll_event(), Some(SlaveEvent::ResetCommunication));
+        assert_eq!(s.reset_communication(), id);
+    }
+    assert_eq!(
+        net.run(Service::IdentifyNonConfigured),
+        Outcome::Identified(0)
+    );
+}
+
+#[test]
+fn cia305_master_selective_switch_inquiry_and_identify_remote() {
+    let mut net = Net::new(vec![slave(7, 3), slave(8, 4)]);
+    let a = net.slaves[1].address();
+    assert_eq!(net.run(Service::SwitchSelective(a)), Outcome::Done);
+    assert_eq!(net.run(Service::InquireNodeId), Outcome::NodeId(4));
+    assert_eq!(net.run(Service::InquireAddress), Outcome::Address(a));
+    assert_eq!(net.run(Service::Inquire(Part::Serial)), Outcome::Value(8));
+    assert_eq!(
+        net.run(Service::ConfigureNodeId(200)),
+        Outcome::Refused { error: 1, spec: 0 }
+    );
+    assert_eq!(
+        net.run(Service::ConfigureBitTiming { table: 0, index: 5 }),
+        Outcome::Refused { error: 1, spec: 0 }
+    );
+    assert_eq!(net.run(Service::SwitchGlobal(Mode::Waiting)), Outcome::Done);
+    let missing = Address { serial: 9, ..a };
+    assert_eq!(net.run(Service::SwitchSelective(missing)), Outcome::Timeout);
+    let both = Service::IdentifyRemote {
+        vendor: a.vendor,
+        product: a.product,
+        revision: (0, u32::MAX),
+        serial: (7, 8),
+    };
+    assert_eq!(net.run(both), Outcome::Identified(2));
+    // A master with a service running refuses another.
+    let mut out = Outbox::new();
+    net.master
+        .start(Service::InquireNodeId, net.now, &mut out)
+        .unwrap();
+    assert_eq!(
+        net.master.start(Service::Fastscan, net.now, &mut out),
+        Err(Busy)
+    );
+}
