@@ -62,6 +62,11 @@ pub struct Limits {
     /// A small buffer bounds the kernel memory a client that stops reading can hold, and
     /// makes it count as too slow sooner.
     pub send_buffer: Option<usize>,
+    /// socketcand broadcast-manager jobs per connection: cyclic transmission jobs, plus
+    /// receive operations counted once per mask they keep (a multiplex filter of N masks
+    /// counts N). A command that would set up one more is answered
+    /// `< error too many broadcast manager jobs >` and changes nothing. Default 4096.
+    pub bcm_jobs: usize,
 }
 
 impl Default for Limits {
@@ -75,6 +80,7 @@ impl Default for Limits {
             settle: Duration::from_millis(50),
             allow_remote: false,
             send_buffer: None,
+            bcm_jobs: 4096,
         }
     }
 }
@@ -178,6 +184,11 @@ impl Link<'_> {
             out.queue.clear();
             out.selector = selector;
         }
+    }
+
+    /// The server's limits.
+    pub(crate) fn limits(&self) -> &Limits {
+        self.limits
     }
 
     /// A handle on this connection for other threads (a session's timers).

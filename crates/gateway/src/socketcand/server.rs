@@ -251,7 +251,7 @@ impl ScSession {
         let engine = Arc::new(BcmEngine {
             gate: Mutex::new(()),
             state: Mutex::new(BcmState {
-                bcm: Bcm::default(),
+                bcm: Bcm::new(link.limits().bcm_jobs),
                 stop: false,
             }),
             changed: Condvar::new(),
@@ -280,26 +280,34 @@ impl ScSession {
         let engine = self.bcm(link)?;
         let now = Instant::now();
         let mut flushed = Vec::new();
-        match cmd {
+        let done = match cmd {
             Command::Add { interval, frame } => engine.with(|b| b.add(interval, frame, now)),
             Command::Update(frame) => engine.with(|b| b.update(frame)),
             Command::Delete(id) => {
                 engine.with(|b| b.delete(id));
+                Ok(())
             }
             Command::Subscribe { throttle, id } => {
-                engine.with(|b| b.subscribe(id, throttle, &mut flushed));
+                engine.with(|b| b.subscribe(id, throttle, &mut flushed))
             }
             Command::Filter { throttle, id, mask } => {
-                engine.with(|b| b.filter(id, throttle, &mask, &mut flushed));
+                engine.with(|b| b.filter(id, throttle, &mask, &mut flushed))
             }
             // Never throttled, as by the daemon (see the broadcast manager's module).
             Command::MuxFilter { id, masks, .. } => {
-                engine.with(|b| b.muxfilter(id, &masks, &mut flushed));
+                engine.with(|b| b.muxfilter(id, &masks, &mut flushed))
             }
             Command::Unsubscribe(id) => {
                 engine.with(|b| b.unsubscribe(id));
+                Ok(())
             }
-            _ => {}
+            _ => Ok(()),
+        };
+        if done.is_err() {
+            // The kernel refuses an operation it has no memory for (`ENOMEM`), which the
+            // daemon does not report; a client told why is better served, in the daemon's
+            // error element (`doc/protocol.md`, "< error ... >").
+            return error(link, "too many broadcast manager jobs");
         }
         let me: Arc<dyn Selector> = engine;
         let conn = link.handle();
