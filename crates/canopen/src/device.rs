@@ -94,6 +94,10 @@ pub const EMCY_ERROR_PASSIVE: u16 = 0x8120;
 pub const EMCY_LIFE_GUARD_HEARTBEAT: u16 = 0x8130;
 /// EMCY 0x8140: recovered from bus off.
 pub const EMCY_BUS_OFF_RECOVERED: u16 = 0x8140;
+/// EMCY 0x5000: device hardware (CiA 301 table 21), raised with the generic bit of the
+/// error register when stored parameters cannot be loaded (the memory that keeps them
+/// failed): see [`DeviceConfig::storage_fault`].
+pub const EMCY_STORED_PARAMETERS: u16 = 0x5000;
 
 /// At most this many unpolled [`Event`]s are kept; older ones are dropped.
 pub const MAX_EVENTS: usize = 32;
@@ -132,6 +136,12 @@ pub struct DeviceConfig {
     /// ([`SdoCapabilities`]; [`SdoCapabilities::EXPEDITED_ONLY`] for a CiA 301
     /// minimum-capability device).
     pub sdo: SdoCapabilities,
+    /// The error raised when stored parameters (0x1010) cannot be loaded at a reset: the
+    /// device runs on its defaults for the group and reports it with this EMCY code once
+    /// boot-up is done, its first manufacturer byte the 0x1010 sub-indices of the groups
+    /// that failed as bits (bit 2 communication, 3 application, 4 manufacturer). `None`
+    /// for a device whose application reports it its own way ([`Event::StorageLoadFailed`]).
+    pub storage_fault: Option<u16>,
 }
 
 impl DeviceConfig {
@@ -145,6 +155,7 @@ impl DeviceConfig {
             time_producer: true,
             acceptance_filter: true,
             sdo: SdoCapabilities::FULL,
+            storage_fault: Some(EMCY_STORED_PARAMETERS),
         }
     }
 }
@@ -227,6 +238,9 @@ struct Core<H> {
     /// Where 0x1010/0x1011 keep the parameters: in memory unless the device was given a
     /// backend.
     storage: Box<dyn Storage>,
+    /// The 0x1010 sub-indices, as bits, of the groups whose stored parameters could not be
+    /// loaded at the last reset that loaded them.
+    storage_faults: u8,
     events: VecDeque<Event>,
     error_passive: bool,
     overrun: bool,
@@ -320,6 +334,7 @@ impl<H: OdHooks> Device<H> {
             pdo,
             pdo_faults: Vec::new(),
             storage: Box::new(MemoryStorage::new()),
+            storage_faults: 0,
             events: VecDeque::new(),
             error_passive: false,
             overrun: false,
@@ -795,9 +810,13 @@ impl<H: OdHooks> Core<H> {
             Ok(None) => Ok(()),
             Err(e) => Err(e),
         };
+        let bit = storage_bit(group);
         if loaded.is_err() {
             self.od.restore_defaults(group.range());
+            self.storage_faults |= bit;
             self.push_event(Event::StorageLoadFailed(group));
+        } else {
+            self.storage_faults &= !bit;
         }
     }
 
@@ -849,6 +868,13 @@ impl<H: OdHooks> Core<H> {
         self.heartbeat.start(now);
         if self.error_passive {
             self.raise_sending(EMCY_ERROR_PASSIVE, [0; 5], true);
+        }
+        // The reset above cleared the errors; stored parameters that could not be loaded
+        // are still not in effect.
+        if self.storage_faults != 0
+            && let Some(code) = self.config.storage_fault
+        {
+            self.raise_sending(code, [self.storage_faults, 0, 0, 0, 0], true);
         }
     }
 
@@ -1283,10 +1309,27 @@ impl<H: OdHooks> Core<H> {
     /// 0x1010: "save" stores the selected groups.
     fn store(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
         let s = signed_storage(&mut self.storage, v, storage::SAVE)?;
-        for g in Group::for_sub(sub) {
-            let blob = storage::encode(&self.od, *g);
-            s.save(*g, &blob)
-                .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
+        let groups = Group::for_sub(sub);
+        let blobs: Vec<Vec<u8>> = groups
+            .iter()
+            .map(|g| storage::encode(&self.od, *g))
+            .collect();
+        let changes: Vec<storage::Change<'_>> = groups
+            .iter()
+            .zip(&blobs)
+            .map(|(g, b)| (*g, Some(b.as_slice())))
+            .collect();
+        // "Save all" replaces the groups as one (see `storage`).
+        s.commit(&changes)
+            .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
+        // The store is whole again for these groups.
+        for g in groups {
+            self.storage_faults &= !storage_bit(*g);
+        }
+        if self.storage_faults == 0
+            && let Some(code) = self.config.storage_fault
+        {
+            self.clear(code);
         }
         Ok(())
     }
@@ -1294,12 +1337,22 @@ impl<H: OdHooks> Core<H> {
     /// 0x1011: "load" erases the selected groups; defaults apply after the next reset.
     fn restore(&mut self, sub: u8, v: u32) -> Result<(), AbortCode> {
         let s = signed_storage(&mut self.storage, v, storage::LOAD)?;
-        for g in Group::for_sub(sub) {
-            s.erase(*g)
-                .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
-        }
+        let changes: Vec<storage::Change<'_>> =
+            Group::for_sub(sub).iter().map(|g| (*g, None)).collect();
+        s.commit(&changes)
+            .map_err(|_: StorageError| AbortCode::HARDWARE_ERROR)?;
         Ok(())
     }
+}
+
+/// The bit of [`Core::storage_faults`] for `group`: its own 0x1010 sub-index.
+fn storage_bit(group: Group) -> u8 {
+    let sub = match group {
+        Group::Communication => 2,
+        Group::Application => 3,
+        Group::Manufacturer => 4,
+    };
+    1 << sub
 }
 
 /// The storage behind a write of `v` to 0x1010 or 0x1011, which only the signature

@@ -153,14 +153,8 @@ fn file_storage_survives_a_power_cycle_and_leaves_no_temporary_file() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(
-        names,
-        [
-            "application.params",
-            "communication.params",
-            "manufacturer.params"
-        ]
-    );
+    // One file holds every group ("save all" replaces them as one).
+    assert_eq!(names, ["parameters.store"]);
     // A new device (a power cycle) with the same store.
     let mut h = Harness::new();
     h.dev.set_storage(Box::new(FileStorage::new(&dir).unwrap()));
@@ -211,11 +205,11 @@ fn file_storage_replaces_atomically() {
     let mut s = FileStorage::new(&dir).unwrap();
     s.save(Group::Communication, b"first").unwrap();
     // A stale temporary file from an interrupted save is neither read nor in the way.
-    std::fs::write(dir.join("communication.params.tmp"), b"half").unwrap();
+    std::fs::write(dir.join("parameters.store.tmp"), b"half").unwrap();
     assert_eq!(s.load(Group::Communication).unwrap().unwrap(), b"first");
     s.save(Group::Communication, b"second").unwrap();
     assert_eq!(s.load(Group::Communication).unwrap().unwrap(), b"second");
-    assert!(!dir.join("communication.params.tmp").exists());
+    assert!(!dir.join("parameters.store.tmp").exists());
     s.erase(Group::Communication).unwrap();
     assert_eq!(s.load(Group::Communication).unwrap(), None);
     s.erase(Group::Communication).unwrap();

@@ -115,7 +115,7 @@ fn file_storage_survives_a_kill_during_store() {
         }
         child.kill().unwrap();
         child.wait().unwrap();
-        if dir.join("manufacturer.params.tmp").exists() {
+        if dir.join("parameters.store.tmp").exists() {
             interrupted += 1;
         }
         let got = load(&dir).expect("the store vanished");
