@@ -68,6 +68,7 @@
 //! ```
 
 use crate::abort::AbortCode;
+use crate::cob_id;
 use crate::emcy;
 use crate::error_behaviour::Reaction;
 use crate::guarding::Guarding;
@@ -1191,8 +1192,7 @@ impl<H: OdHooks> Core<H> {
         let id = self.od.locate(index, sub)?;
         self.od.check_download(id, data)?;
         let v = u32_of(data);
-        let old = CobId(self.u32(index, sub).unwrap_or(0));
-        let new = CobId(v);
+        let old = self.u32(index, sub).unwrap_or(0);
         match (index, sub) {
             (0x1003, 0) => {
                 // §7.5.2.4: only 0 may be written, and it clears the field.
@@ -1207,22 +1207,21 @@ impl<H: OdHooks> Core<H> {
             (0x1011, 1..) => return self.restore(sub, v),
             _ => {}
         }
+        // Every COB-ID entry (SYNC, TIME, EMCY, EMCY consumers, SDO server and client
+        // parameters) follows one rule, CiA 301 §7.3.5 and the entries' tables; the PDO
+        // engine applies the same rule to the PDO COB-IDs below.
+        let entry = cob_id::Entry::of(
+            index,
+            sub,
+            self.config.node_id,
+            self.config.sync_producer,
+            self.config.time_producer,
+        );
+        if let Some(e) = entry.filter(|e| !e.is_pdo()) {
+            cob_id::check(e, old, v)?;
+        }
         let invalid = AbortCode::INVALID_VALUE;
         let refused = match (index, sub) {
-            // §7.5.2.5: bit 30 only if the device can produce SYNC; the identifier is
-            // fixed while the device produces.
-            (0x1005, 0) => (new.bit30() && !self.config.sync_producer
-                || old.bit30() && new.id_differs(old))
-            .then_some(invalid),
-            // §7.5.2.12: likewise for TIME, fixed while consumed or produced.
-            (0x1012, 0) => (new.bit30() && !self.config.time_producer
-                || (old.bit30() || old.bit31()) && new.id_differs(old))
-            .then_some(invalid),
-            // §7.5.2.15, §7.5.2.31: bit 30 reserved; the identifier is fixed while the
-            // object is valid (bit 31 = 0).
-            (0x1014, 0) | (0x1028, 1..) => {
-                (new.bit30() || !old.bit31() && new.id_differs(old)).then_some(invalid)
-            }
             // §7.5.2.21: one entry per monitored node.
             (0x1016, 1..) => self
                 .consumer
@@ -1233,11 +1232,8 @@ impl<H: OdHooks> Core<H> {
             (0x1019, 0) if !self.sync.period().is_zero() => Some(AbortCode::DEVICE_STATE),
             (0x1019, 0) => (v == 1 || v > 240).then_some(invalid),
             (0x1029, 1..) => Reaction::from_u8(v as u8).is_none().then_some(invalid),
-            // §7.5.2.33: the identifier is fixed while both directions are valid.
-            (0x1201..=0x127F, 1 | 2) => {
-                (!old.bit31() && !new.bit31() && new.id_differs(old)).then_some(invalid)
-            }
-            (0x1201..=0x127F, 3) => (v == 0 || v > 127).then_some(invalid),
+            // §7.5.2.33, §7.5.2.34: the node-ID of the SDO client (server) is 1..=127.
+            (0x1201..=0x12FF, 3) => (v == 0 || v > 127).then_some(invalid),
             (0x1400..=0x1BFF, _) => self
                 .pdo
                 .as_ref()

@@ -25,6 +25,7 @@
 
 pub mod abort;
 pub mod bench;
+pub mod cob_id;
 pub mod device;
 pub mod emcy;
 pub mod error_behaviour;

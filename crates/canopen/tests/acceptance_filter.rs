@@ -84,20 +84,21 @@ fn cia301_device_acceptance_filter_follows_cob_ids_written_through_sdo() {
     assert!(!h.dev.accepts(std_id(0x205)));
     assert_eq!(sdo_write(&mut h, 0x1400, 1, 0x305), 0x60);
     assert!(h.dev.accepts(std_id(0x305)));
-    // 0x1201: a second SDO server on 0x640 / 0x5C0, which then answers there.
-    assert!(!h.dev.accepts(std_id(0x640)));
-    assert_eq!(sdo_write(&mut h, 0x1201, 2, 0x5C0), 0x60);
-    assert_eq!(sdo_write(&mut h, 0x1201, 1, 0x640), 0x60);
-    assert!(h.dev.accepts(std_id(0x640)));
+    // 0x1201: a second SDO server on 0x6C0 / 0x6A0 (outside the restricted CAN-IDs of
+    // CiA 301 §7.3.5), which then answers there.
+    assert!(!h.dev.accepts(std_id(0x6C0)));
+    assert_eq!(sdo_write(&mut h, 0x1201, 2, 0x6A0), 0x60);
+    assert_eq!(sdo_write(&mut h, 0x1201, 1, 0x6C0), 0x60);
+    assert!(h.dev.accepts(std_id(0x6C0)));
     let t = h.now + Duration::from_millis(1);
-    h.rx(t, "640#4000100000000000");
+    h.rx(t, "6C0#4000100000000000");
     let answers = h.take();
     assert_eq!(answers.len(), 1);
-    assert!(answers[0].1.starts_with("5C0#43001000"), "{answers:?}");
+    assert!(answers[0].1.starts_with("6A0#43001000"), "{answers:?}");
     assert_eq!(
         accepted(&h.dev),
         [
-            0x000, 0x081, 0x087, 0x100, 0x185, 0x305, 0x605, 0x640, 0x705, 0x707
+            0x000, 0x081, 0x087, 0x100, 0x185, 0x305, 0x605, 0x6C0, 0x705, 0x707
         ]
     );
     // A refused write changes nothing: the SYNC identifier is fixed while produced.

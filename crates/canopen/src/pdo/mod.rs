@@ -78,6 +78,7 @@ pub use map::{Direction, MAX_ENTRIES, MAX_PDO_BITS, MapEntry, Plan, Refusal, che
 pub use objects::PdoObjects;
 
 use crate::abort::AbortCode;
+use crate::cob_id;
 use crate::od::{ObjectDictionary, OdDescription, OdHooks};
 use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
 use std::collections::VecDeque;
@@ -141,19 +142,6 @@ impl CobId {
             None
         }
     }
-
-    /// The identifier bits and frame format, without the valid and RTR bits.
-    const fn ident(self) -> u32 {
-        self.0 & 0x3FFF_FFFF & !Self::NO_RTR
-    }
-}
-
-/// Whether an 11-bit identifier is one CiA 301 §7.3.5 (table 43) reserves for NMT, SDO,
-/// error control and future use, and so may not be given to a PDO.
-pub const fn is_restricted_cob_id(id: u16) -> bool {
-    matches!(id,
-        0x000 | 0x001..=0x07F | 0x101..=0x180 | 0x581..=0x5FF | 0x601..=0x67F
-        | 0x6E0..=0x6FF | 0x701..=0x77F | 0x780..=0x7FF)
 }
 
 /// What the engine tells the device. RPDO numbers are slot numbers: `rpdo: n` is the
@@ -948,8 +936,15 @@ impl PdoEngine {
                 .unwrap_or(CobId(CobId::INVALID));
                 match sub {
                     1 => {
-                        let new = CobId(v);
-                        if !new.is_valid() {
+                        // §7.5.2.35, §7.5.2.37: the stack's one rule for COB-ID entries
+                        // (restricted CAN-IDs, frame bits, no change of the identifier of
+                        // a valid PDO: set bit 31 first).
+                        let entry = match dir {
+                            Direction::Rx => cob_id::Entry::Rpdo,
+                            Direction::Tx => cob_id::Entry::Tpdo,
+                        };
+                        cob_id::check(entry, cur.0, v)?;
+                        if !CobId(v).is_valid() {
                             return Ok(());
                         }
                         // A PDO whose stored mapping is invalid cannot be made valid until the
@@ -961,18 +956,7 @@ impl PdoEngine {
                         if mapped == Some(false) {
                             return Err(AbortCode::PARAMETER_INCOMPATIBLE);
                         }
-                        // §7.5.2.35: the identifier of a valid PDO cannot change; set bit 31
-                        // first.
-                        if cur.is_valid() && cur.ident() != new.ident() {
-                            return Err(AbortCode::INVALID_VALUE);
-                        }
-                        match new.id() {
-                            None => Err(AbortCode::INVALID_VALUE),
-                            Some(Id::Standard(s)) if is_restricted_cob_id(s.as_raw()) => {
-                                Err(AbortCode::INVALID_VALUE)
-                            }
-                            Some(_) => Ok(()),
-                        }
+                        Ok(())
                     }
                     2 => {
                         let ok = match dir {
@@ -1101,19 +1085,5 @@ mod tests {
         assert_eq!(CobId(0x0000_0985).id(), None);
         assert_eq!(CobId(0x2000_0985).id(), Some(Id::extended(0x985).unwrap()));
         assert!(!CobId(0x8000_0185).is_valid());
-    }
-
-    #[test]
-    fn restricted_identifiers_follow_table_43() {
-        for id in [
-            0x000, 0x07F, 0x101, 0x180, 0x581, 0x5FF, 0x601, 0x67F, 0x6E0, 0x701, 0x7FF,
-        ] {
-            assert!(is_restricted_cob_id(id), "{id:#X}");
-        }
-        for id in [
-            0x080, 0x100, 0x181, 0x1FF, 0x200, 0x580, 0x600, 0x680, 0x6DF, 0x700,
-        ] {
-            assert!(!is_restricted_cob_id(id), "{id:#X}");
-        }
     }
 }
