@@ -41,6 +41,8 @@ pub struct Args {
     /// address can then put frames on the simulated buses.
     #[arg(long)]
     allow_remote: bool,
+    #[command(flatten)]
+    web_options: crate::web::Options,
     /// Stop after this many seconds of wall time (default: run until Ctrl-C).
     #[arg(long, value_name = "SECONDS")]
     duration: Option<f64>,
@@ -176,8 +178,8 @@ pub fn run(args: &Args) -> Result<()> {
     let mut web_server = None;
     if let (Some(spec), Some(d)) = (&args.web, &dashboard) {
         let addr = parse_listen(spec, "--web")?;
-        let server = d.serve(addr, args.allow_remote)?;
-        let url = format!("http://{}/", server.local_addr());
+        let server = d.serve(addr, args.allow_remote, &args.web_options)?;
+        let url = server.url().to_string();
         crate::output::result(
             format_args!("web {url}"),
             || serde_json::json!({ "web": url }),

@@ -10,38 +10,74 @@ use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result, anyhow, bail};
 use axum::Router;
 use axum::body::Bytes;
-use axum::extract::State;
-use axum::http::{StatusCode, header};
+use axum::extract::{Request as HttpRequest, State};
+use axum::http::{HeaderName, HeaderValue, StatusCode, header};
+use axum::middleware::Next;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use cantwin_canopen::wire::NmtCs;
 use serde_json::{Value, json};
+use tokio::sync::Semaphore;
+use tower_http::set_header::SetResponseHeaderLayer;
 
-use super::{Command, Outcome, Refusal, Request};
+use super::guard::{self, Policy};
+use super::listen::{self, Limits};
+use super::{Command, Options, Outcome, Refusal, Request};
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
 const APP_JS: &str = include_str!("assets/app.js");
 const APP_CSS: &str = include_str!("assets/app.css");
 
+/// Where the page's template takes the run's token.
+const TOKEN_SLOT: &str = "{{token}}";
+
 /// How long a control waits for the simulation's answer (an SDO download waits for the
 /// device, at most its client timeout of 1 s).
 const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The page's own script, style and connections only, no inline code, no framing
+/// (CSP Level 3; `frame-ancestors` is the CSP form of X-Frame-Options). The charts are inline
+/// SVG elements styled by the stylesheet, which `style-src 'self'` allows.
+const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
+
+/// The headers every answer carries (RFC 7034 X-Frame-Options, Fetch's nosniff, the
+/// Referrer Policy spec's `no-referrer`, which keeps a `?token=` address out of Referer).
+const SECURITY_HEADERS: [(&str, &str); 4] = [
+    ("content-security-policy", CSP),
+    ("x-frame-options", "DENY"),
+    ("x-content-type-options", "nosniff"),
+    ("referrer-policy", "no-referrer"),
+];
 
 #[derive(Clone)]
 struct AppState {
     requests: mpsc::Sender<Request>,
     snapshots: tokio::sync::watch::Receiver<Arc<String>>,
+    /// The page, with the run's token in it.
+    index: Arc<String>,
+    /// Places for event streams.
+    streams: Arc<Semaphore>,
+    max_streams: usize,
 }
 
 /// The running server.
 pub struct Server {
-    addr: SocketAddr,
+    url: String,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<JoinHandle<()>>,
+}
+
+/// A positive number of seconds, at most an hour.
+fn seconds(v: f64, flag: &str) -> Result<Duration> {
+    if v.is_finite() && v > 0.0 && v <= 3600.0 {
+        Ok(Duration::from_secs_f64(v))
+    } else {
+        bail!("{flag} must be a number of seconds above 0 and at most 3600, not {v}")
+    }
 }
 
 impl Server {
@@ -49,6 +85,7 @@ impl Server {
     pub(super) fn start(
         addr: SocketAddr,
         allow_remote: bool,
+        options: &Options,
         requests: mpsc::Sender<Request>,
         snapshots: tokio::sync::watch::Receiver<Arc<String>>,
     ) -> Result<Server> {
@@ -57,20 +94,74 @@ impl Server {
                 "--web {addr}: not a loopback address; anyone who can reach it could control the simulated devices (add --allow-remote to allow it)"
             );
         }
+        if !allow_remote && !options.allow_host.is_empty() {
+            bail!(
+                "--allow-host needs --allow-remote: without it the dashboard answers to loopback names only"
+            );
+        }
+        if options.web_max_connections == 0 || options.web_max_streams == 0 {
+            bail!("--web-max-connections and --web-max-streams must be at least 1");
+        }
+        if options.web_max_streams >= options.web_max_connections {
+            bail!(
+                "--web-max-streams ({}) must be below --web-max-connections ({}): each open page needs a connection for its controls besides its event stream",
+                options.web_max_streams,
+                options.web_max_connections
+            );
+        }
+        let limits = Limits {
+            max_connections: options.web_max_connections,
+            header_timeout: seconds(options.web_header_timeout, "--web-header-timeout")?,
+            idle_timeout: seconds(options.web_idle_timeout, "--web-idle-timeout")?,
+        };
         let listener = std::net::TcpListener::bind(addr)
             .with_context(|| format!("starting the web dashboard on {addr}"))?;
         listener.set_nonblocking(true)?;
         let addr = listener.local_addr()?;
+        let token = guard::new_token().map_err(|e| anyhow!("starting the web dashboard: {e}"))?;
+        let policy = Policy::new(
+            addr.port(),
+            addr.ip(),
+            allow_remote,
+            &options.allow_host,
+            token.clone(),
+        )
+        .map_err(|e| anyhow!(e))?;
+        // The address to give the user: a name they allowed, else the bound address (its
+        // loopback form when bound to all addresses).
+        let shown = match options.allow_host.first() {
+            Some(name) => guard::allowed_host(name, addr.port()).map_err(|e| anyhow!(e))?,
+            None if addr.ip().is_unspecified() => format!("127.0.0.1:{}", addr.port()),
+            None => addr.to_string(),
+        };
+        let url = if allow_remote {
+            format!("http://{shown}/?token={token}")
+        } else {
+            format!("http://{shown}/")
+        };
+        if allow_remote {
+            eprintln!(
+                "cantwin sim: warning: --allow-remote: the web dashboard on {addr} obeys anyone who can reach it and has its address with the token ({url}); its controls power-cycle devices, write objects, inject faults and send NMT. It speaks plain HTTP: anyone on the network path can read the token. Host names accepted: {}",
+                policy.hosts().join(", ")
+            );
+        }
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_io()
             .enable_time()
             .build()
             .context("starting the web server's runtime")?;
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-        let app = router(AppState {
-            requests,
-            snapshots,
-        });
+        let app = router(
+            AppState {
+                requests,
+                snapshots,
+                index: Arc::new(INDEX_HTML.replace(TOKEN_SLOT, &token)),
+                streams: Arc::new(Semaphore::new(options.web_max_streams)),
+                max_streams: options.web_max_streams,
+            },
+            Arc::new(policy),
+        );
+        let refusal = over_capacity(options.web_max_connections);
         let thread = std::thread::Builder::new()
             .name("cantwin-web".into())
             .spawn(move || {
@@ -79,25 +170,24 @@ impl Server {
                         eprintln!("cantwin sim: the web dashboard could not take its socket");
                         return;
                     };
-                    let serve = axum::serve(listener, app).with_graceful_shutdown(async {
+                    listen::serve(listener, app, limits, refusal, async {
                         let _ = stopped.await;
-                    });
-                    if let Err(e) = serve.await {
-                        eprintln!("cantwin sim: the web dashboard stopped: {e}");
-                    }
+                    })
+                    .await;
                 });
+                // The runtime ends here, and with it every open connection.
             })
             .context("starting the web server thread")?;
         Ok(Server {
-            addr,
+            url,
             stop: Some(stop),
             thread: Some(thread),
         })
     }
 
-    /// The address it listens on.
-    pub fn local_addr(&self) -> SocketAddr {
-        self.addr
+    /// The page's address to give the user (with the token under `--allow-remote`).
+    pub fn url(&self) -> &str {
+        &self.url
     }
 
     /// Stops serving (open event streams end).
@@ -110,7 +200,7 @@ impl Server {
             let _ = s.send(());
         }
         if let Some(t) = self.thread.take() {
-            // Open SSE streams keep a graceful shutdown waiting; the process ends anyway.
+            // The thread ends with its runtime; a join would only wait for the last poll.
             if t.is_finished() {
                 let _ = t.join();
             }
@@ -124,12 +214,28 @@ impl Drop for Server {
     }
 }
 
-fn router(state: AppState) -> Router {
-    Router::new()
-        .route(
-            "/",
-            get(|| async { asset("text/html; charset=utf-8", INDEX_HTML) }),
-        )
+/// The whole answer to a connection over the cap, written before it is closed.
+fn over_capacity(max: usize) -> Arc<[u8]> {
+    let body = json!({
+        "ok": false,
+        "message": format!("the dashboard serves {max} connections at once (--web-max-connections); try again later"),
+    })
+    .to_string();
+    let mut head = format!(
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\ncontent-length: {}\r\nconnection: close\r\nretry-after: 1\r\n",
+        body.len()
+    );
+    for (k, v) in SECURITY_HEADERS {
+        head.push_str(&format!("{k}: {v}\r\n"));
+    }
+    head.push_str("\r\n");
+    head.push_str(&body);
+    head.into_bytes().into()
+}
+
+fn router(state: AppState, policy: Arc<Policy>) -> Router {
+    let mut app = Router::new()
+        .route("/", get(index))
         .route(
             "/app.js",
             get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
@@ -147,6 +253,40 @@ fn router(state: AppState) -> Router {
         .route("/api/fault", post(fault))
         .fallback(|| async { answer(StatusCode::NOT_FOUND, false, "no such page".into()) })
         .with_state(state)
+        .layer(axum::middleware::from_fn_with_state(policy, admit));
+    // Added last, so outermost: refusals carry the headers too.
+    for (name, value) in SECURITY_HEADERS {
+        app = app.layer(SetResponseHeaderLayer::overriding(
+            HeaderName::from_static(name),
+            HeaderValue::from_static(value),
+        ));
+    }
+    app
+}
+
+/// Lets a request through to its handler only if the [`Policy`] admits its head.
+async fn admit(State(policy): State<Arc<Policy>>, req: HttpRequest, next: Next) -> Response {
+    match policy.check(
+        req.method(),
+        req.uri().path(),
+        req.uri().query(),
+        req.headers(),
+    ) {
+        Ok(()) => next.run(req).await,
+        Err((status, reason)) => answer(status, false, reason),
+    }
+}
+
+async fn index(State(s): State<AppState>) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, "text/html; charset=utf-8"),
+            // The page holds the run's token: no cache keeps it.
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        s.index.as_str().to_owned(),
+    )
+        .into_response()
 }
 
 fn asset(content_type: &'static str, body: &'static str) -> Response {
@@ -173,17 +313,31 @@ async fn snapshot(State(s): State<AppState>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
-async fn events(State(s): State<AppState>) -> impl IntoResponse {
+async fn events(State(s): State<AppState>) -> Response {
+    // The stream holds its place until it ends (the client goes away or the connection
+    // is closed as idle).
+    let Ok(place) = s.streams.clone().try_acquire_owned() else {
+        return answer(
+            StatusCode::SERVICE_UNAVAILABLE,
+            false,
+            format!(
+                "the dashboard serves {} event streams at once (--web-max-streams); close another page",
+                s.max_streams
+            ),
+        );
+    };
     let mut rx = s.snapshots.clone();
     // The newest snapshot goes out at once, then each new one.
     rx.mark_changed();
-    let stream = futures_util::stream::unfold(rx, |mut rx| async move {
+    let stream = futures_util::stream::unfold((rx, place), |(mut rx, place)| async move {
         rx.changed().await.ok()?;
         let data = rx.borrow_and_update().clone();
         let event = Event::default().event("snapshot").data(data.as_str());
-        Some((Ok::<_, Infallible>(event), rx))
+        Some((Ok::<_, Infallible>(event), (rx, place)))
     });
-    Sse::new(stream).keep_alive(KeepAlive::default())
+    Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response()
 }
 
 /// Sends `command` to the simulation and turns its outcome into a response.

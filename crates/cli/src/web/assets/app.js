@@ -4,6 +4,10 @@
 
 const $ = (sel) => document.querySelector(sel);
 
+// This run's secret, put in the page by the server: controls send it as a header, the event
+// stream (which cannot send headers) as ?token=, needed when the dashboard serves remotely.
+const TOKEN = document.querySelector('meta[name="cantwin-token"]').content;
+
 function esc(v) {
   return String(v ?? "").replace(/[&<>"']/g, (c) => ({
     "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;",
@@ -130,7 +134,7 @@ function render(s) {
 }
 
 function connect() {
-  const es = new EventSource("/events");
+  const es = new EventSource(`/events?token=${encodeURIComponent(TOKEN)}`);
   es.addEventListener("snapshot", (e) => {
     $("#link").className = "link up";
     $("#link").textContent = "live";
@@ -146,7 +150,7 @@ async function post(path, body) {
   try {
     const r = await fetch(path, {
       method: "POST",
-      headers: { "Content-Type": "application/json" },
+      headers: { "Content-Type": "application/json", "X-Cantwin-Token": TOKEN },
       body: JSON.stringify(body),
     });
     const a = await r.json().catch(() => ({ ok: false, message: `HTTP ${r.status}` }));
