@@ -221,14 +221,20 @@ fn manual_1200_1201_sdo_servers() {
     assert_eq!(read(&mut c, t, 0x1201, 3), Ok(vec![0]));
     // Nothing answers on the second server until it is configured.
     assert_eq!(
-        send(&mut c, t, 0x643, &[0x40, 0x18, 0x10, 2, 0, 0, 0, 0]),
+        send(&mut c, t, 0x6C3, &[0x40, 0x18, 0x10, 2, 0, 0, 0, 0]),
         Vec::<String>::new()
     );
-    assert_eq!(write(&mut c, t, 0x1201, 1, &0x643u32.to_le_bytes()), Ok(()));
-    assert_eq!(write(&mut c, t, 0x1201, 2, &0x5C3u32.to_le_bytes()), Ok(()));
+    // Its identifiers cannot be restricted CAN-IDs (CiA 301 §7.3.5), such as the default
+    // SDO ranges 0x601..=0x67F and 0x581..=0x5FF.
     assert_eq!(
-        send(&mut c, t, 0x643, &[0x40, 0x18, 0x10, 2, 0, 0, 0, 0]),
-        ["5C3#4318100224600C00"]
+        write(&mut c, t, 0x1201, 1, &0x643u32.to_le_bytes()),
+        Err(INVALID)
+    );
+    assert_eq!(write(&mut c, t, 0x1201, 1, &0x6C3u32.to_le_bytes()), Ok(()));
+    assert_eq!(write(&mut c, t, 0x1201, 2, &0x6A3u32.to_le_bytes()), Ok(()));
+    assert_eq!(
+        send(&mut c, t, 0x6C3, &[0x40, 0x18, 0x10, 2, 0, 0, 0, 0]),
+        ["6A3#4318100224600C00"]
     );
 }
 
