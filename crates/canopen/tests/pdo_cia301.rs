@@ -660,3 +660,45 @@ fn cia301_7_2_2_4_rpdo_on_a_29_bit_cob_id_and_foreign_frames() {
     assert_eq!(h.od.get(0x6201, 0).unwrap(), Value::Unsigned8(9));
     assert_eq!(h.events(), [PdoEvent::Received { rpdo: 0 }]);
 }
+
+#[test]
+fn cia301_7_5_2_36_a_count_above_the_entries_the_object_holds_is_0x06040042_in_any_state() {
+    let t = Instant::ZERO;
+    let mut h = Harness::new(
+        PdoObjects::new(4, 4)
+            .rpdo(2, 255, &[OUT16])
+            .tpdo(0, 1, &[IN16]),
+    );
+    for (comm, map, id) in [(0x1402u16, 0x1602u16, 0x405u32), (0x1800, 0x1A00, 0x185)] {
+        // Valid PDO: the count is out of range before the state matters.
+        for n in [9u8, 31, 64, 65, 255] {
+            assert_eq!(
+                h.write_u8(map, 0, n, t),
+                Err(AbortCode::PDO_LENGTH_EXCEEDED),
+                "{map:04X} = {n}"
+            );
+        }
+        // A count in range is refused while the PDO is valid (0x06010000), as is an entry.
+        assert_eq!(h.write_u8(map, 0, 1, t), Err(AbortCode::UNSUPPORTED_ACCESS));
+        assert_eq!(
+            h.write_u32(map, 1, IN8, t),
+            Err(AbortCode::UNSUPPORTED_ACCESS)
+        );
+        h.write_u32(comm, 1, 0x8000_0000 | id, t).unwrap();
+        for n in [9u8, 31, 65] {
+            assert_eq!(
+                h.write_u8(map, 0, n, t),
+                Err(AbortCode::PDO_LENGTH_EXCEEDED),
+                "{map:04X} = {n}"
+            );
+        }
+        assert_eq!(h.od.get_unsigned(map, 0), Some(1));
+        h.write_u8(map, 0, 0, t).unwrap();
+        assert_eq!(
+            h.write_u8(map, 0, 31, t),
+            Err(AbortCode::PDO_LENGTH_EXCEEDED)
+        );
+        h.write_u8(map, 0, 1, t).unwrap();
+        h.write_u32(comm, 1, id, t).unwrap();
+    }
+}

@@ -42,11 +42,15 @@
 //!   (0..=240) ignore remote requests.
 //! * **Dynamic mapping** (§7.5.2.36, §7.5.2.38): a mapping object can be written only while
 //!   the PDO is invalid, and its entries only while sub-index 0 is 0; otherwise the write
-//!   is refused with 0x06010000 "unsupported access to an object" (the code CANopenNode 1.x
-//!   and its Go port give; CANopenNode 4 answers 0x06090030). Entries are checked when
-//!   written and again, with the total length, when sub-index 0 enables them. A PDO whose
-//!   stored mapping is invalid (see [`PdoEngine::load`]) cannot be made valid until the
-//!   mapping is repaired (0x06040043).
+//!   is refused with 0x06010000 "unsupported access to an object" (the code CANopenNode's
+//!   `OD_write_PDO_mapping` and its Go port give; lely answers 0x06090030; CiA 301 names
+//!   no code for it, and 0x08000022 is for the NMT state, which mapping does not depend
+//!   on). Entries are checked when written (0x06020000 for a missing object, 0x06040041
+//!   for one that cannot be mapped, 0x06040042 for more than 64 bits) and again, with the
+//!   total length, when sub-index 0 enables them (0x06040042). A count above the entries
+//!   the object holds is 0x06040042 whatever the state, checked first. A PDO whose stored
+//!   mapping is invalid (see [`PdoEngine::load`]) cannot be made valid until the mapping
+//!   is repaired (0x06040043).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -976,6 +980,22 @@ impl PdoEngine {
                 }
             }
             PdoObject::Map(dir, n) => {
+                // §7.5.2.36, §7.5.2.38: sub-index 0 counts the enabled entries. More than
+                // the object holds (or than 64) is a mapping longer than the PDO can have,
+                // 0x06040042, in any state: the value is out of the object's range before
+                // the state matters.
+                let mut entries = [MapEntry::from_u32(0); MAX_ENTRIES as usize];
+                if sub == 0 {
+                    if v > u32::from(MAX_ENTRIES) {
+                        return Err(AbortCode::PDO_LENGTH_EXCEEDED);
+                    }
+                    for (i, e) in entries.iter_mut().take(v as usize).enumerate() {
+                        let raw = od
+                            .get_unsigned(index, i as u8 + 1)
+                            .ok_or(AbortCode::PDO_LENGTH_EXCEEDED)?;
+                        *e = MapEntry::from_u32(raw as u32);
+                    }
+                }
                 let valid = match dir {
                     Direction::Rx => self.rpdos.get(n).is_some_and(|r| r.cob.is_valid()),
                     Direction::Tx => self.tpdos.get(n).is_some_and(|t| t.cob.is_valid()),
@@ -984,16 +1004,6 @@ impl PdoEngine {
                     return Err(AbortCode::UNSUPPORTED_ACCESS);
                 }
                 if sub == 0 {
-                    if v > u32::from(MAX_ENTRIES) {
-                        return Err(AbortCode::PDO_LENGTH_EXCEEDED);
-                    }
-                    let mut entries = [MapEntry::from_u32(0); MAX_ENTRIES as usize];
-                    for (i, e) in entries.iter_mut().take(v as usize).enumerate() {
-                        let raw = od
-                            .get_unsigned(index, i as u8 + 1)
-                            .ok_or(AbortCode::PDO_LENGTH_EXCEEDED)?;
-                        *e = MapEntry::from_u32(raw as u32);
-                    }
                     Plan::build(
                         od.description(),
                         dir,
