@@ -91,6 +91,9 @@ pub fn run(args: &Args) -> Result<()> {
         state_dir: args.state_dir.clone(),
     };
     let mut built = scenario.build(&Registry::builtin(), &env)?;
+    for w in &built.warnings {
+        eprintln!("cantwin sim: warning: {w}");
+    }
     let mut captures = Captures::new();
     let pcap = args.pcap.as_ref().map(|p| {
         let ng = p

@@ -59,6 +59,10 @@ pub struct Built {
     pub buses: Vec<(String, BusId)>,
     /// Devices in file order.
     pub devices: Vec<BuiltDevice>,
+    /// What the build found that does not stop the scenario but that the user must hear
+    /// of, each naming its device (e.g. stored parameters that cannot be read: the device
+    /// starts on its defaults and raises its alarm). Front ends print them.
+    pub warnings: Vec<String>,
 }
 
 impl Built {
@@ -86,6 +90,7 @@ impl Scenario {
             buses.push((b.name.clone(), id));
         }
         let mut devices = Vec::new();
+        let mut warnings = Vec::new();
         for d in &self.devices {
             let kind = registry.get(&d.kind).ok_or_else(|| {
                 let known: Vec<&str> = registry.kinds().map(|k| k.name()).collect();
@@ -119,6 +124,12 @@ impl Scenario {
             let settings = Settings::new(d, &self.file);
             let (node, port_config) = kind.build(&settings, spec, env)?;
             settings.finish()?;
+            warnings.extend(
+                settings
+                    .take_warnings()
+                    .into_iter()
+                    .map(|w| format!("device {:?}: {w}", d.name)),
+            );
             let bus = sim.bus_mut(bus_id).ok_or_else(|| ScenarioError::Invalid {
                 at: Located {
                     file: self.file.clone(),
@@ -160,6 +171,7 @@ impl Scenario {
             sim,
             buses,
             devices,
+            warnings,
         })
     }
 }

@@ -73,6 +73,7 @@ pub struct Settings<'a> {
     device: &'a DeviceSpec,
     file: &'a std::path::Path,
     read: RefCell<BTreeSet<String>>,
+    warnings: RefCell<Vec<String>>,
 }
 
 impl<'a> Settings<'a> {
@@ -81,6 +82,7 @@ impl<'a> Settings<'a> {
             device,
             file,
             read: RefCell::new(BTreeSet::new()),
+            warnings: RefCell::new(Vec::new()),
         }
     }
 
@@ -115,6 +117,18 @@ impl<'a> Settings<'a> {
     /// The value of `key`, or `default`.
     pub fn get_or<T: DeserializeOwned>(&self, key: &str, default: T) -> Result<T, ScenarioError> {
         Ok(self.get(key)?.unwrap_or(default))
+    }
+
+    /// Reports something that does not stop the device from being built but that the user
+    /// must hear of (stored parameters that cannot be read, so the device starts on its
+    /// defaults): it reaches [`Built::warnings`](crate::Built::warnings).
+    pub fn warn(&self, message: impl Into<String>) {
+        self.warnings.borrow_mut().push(message.into());
+    }
+
+    /// The warnings reported so far, taken.
+    pub(crate) fn take_warnings(&self) -> Vec<String> {
+        self.warnings.take()
     }
 
     /// An error about `key` (at its line, or the device's line when the key is absent).
