@@ -6,7 +6,8 @@
 //!
 //! | key | default | object |
 //! |---|---|---|
-//! | `node_id` | required, 1–127 | |
+//! | `node_id` | required, 1–127 | with `lss`, also 0xFF or `"unconfigured"`: waits for LSS |
+//! | `lss` | false | answer LSS (CiA 305) with the address of 0x1018 sub 1–4 |
 //! | `heartbeat_ms` | 0 | 0x1017 producer heartbeat time at power-on |
 //! | `device_name` | `"cantwin CiA 301 device"` | 0x1008 (any length) |
 //! | `hardware_version`, `software_version` | `"1.0"`, the crate version | 0x1009, 0x100A |
@@ -38,6 +39,10 @@
 //! With `--state-dir`, the device keeps what 0x1010 stores in the directory
 //! `STATE_DIR/<device name>/`.
 //!
+//! With `lss = true` an LSS slave stands in front of the device (see [`super::lss`]): an
+//! LSS master can give it a node-ID and a bit rate, and store them (`lss.params` in the same
+//! directory with `--state-dir`); a node without node-ID boots only once it has one.
+//!
 //! Devices whose settings differ only in `node_id`, `heartbeat_ms` and `sdo_timeout_ms`
 //! share one object dictionary description (each keeps its own values), so a scenario of
 //! many alike devices builds the description, with its DOMAIN default, once.
@@ -50,7 +55,7 @@
 use cantwin_bus::{BoxedNode, PortConfig};
 use cantwin_can::{ControllerEvent, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::ObjectAccess;
-use cantwin_canopen::device::{Device, Event};
+use cantwin_canopen::device::{Device, DeviceConfig, Event};
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
@@ -175,6 +180,12 @@ impl Cia301Node {
             // Raised and cleared errors are sent at the device's next tick.
             self.device.on_tick(now, out);
         }
+    }
+}
+
+impl super::lss::Commissionable for Cia301Node {
+    fn device_mut(&mut self) -> &mut Device {
+        &mut self.device
     }
 }
 
@@ -329,11 +340,12 @@ impl DeviceKind for Cia301 {
     fn build(
         &self,
         s: &Settings<'_>,
-        _bus: &BusSpec,
+        bus: &BusSpec,
         env: &BuildEnv,
     ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
-        let node_id: u8 = s.require("node_id")?;
-        check_node_id(s, node_id)?;
+        let lss: bool = s.get_or("lss", false)?;
+        let node_id = super::lss::node_id(s, lss)?
+            .ok_or_else(|| s.error("node_id", "a cia301 device needs `node_id`"))?;
         let heartbeat_ms: u16 = s.get_or("heartbeat_ms", 0)?;
         let defaults = Cia301Options::default();
         let options = Cia301Options {
@@ -390,13 +402,6 @@ impl DeviceKind for Cia301 {
                 format!("the device's dictionary is invalid: {e}"),
             )
         })?;
-        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
-        let node = Cia301Node {
-            device,
-            heartbeat_ms,
-            emcy_code: 0,
-            syncs: 0,
-        };
         // The SDO server queues a whole upload block (up to 127 segments, CiA 301
         // §7.2.4.3.10) at once, on top of heartbeat, EMCY and TPDOs; a controller queue of
         // the default depth would drop most of the block.
@@ -404,7 +409,26 @@ impl DeviceKind for Cia301 {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
         };
-        Ok((BoxedNode::twin(node), port))
+        let node = move |device| Cia301Node {
+            device,
+            heartbeat_ms,
+            emcy_code: 0,
+            syncs: 0,
+        };
+        if lss {
+            let make: super::lss::Make<Cia301Node> = Box::new(move |id| {
+                let config = DeviceConfig {
+                    sdo_timeout,
+                    ..DeviceConfig::new(id)
+                };
+                Device::new(Arc::clone(&desc), config).ok().map(node)
+            });
+            let lss_node = super::lss::build(s, env, bus, node_id, make)?;
+            return Ok((BoxedNode::twin(lss_node), port));
+        }
+        check_node_id(s, node_id)?;
+        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
+        Ok((BoxedNode::twin(node(device)), port))
     }
 }
 

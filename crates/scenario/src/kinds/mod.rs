@@ -3,6 +3,7 @@
 pub mod adv200;
 pub mod cia301;
 mod common;
+pub mod lss;
 pub mod eds;
 pub mod generator;
 pub mod master;
