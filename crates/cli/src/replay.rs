@@ -9,7 +9,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use cantwin_can::{Frame, Id};
-use cantwin_replay::{CapturedFrames, Kind, ReplayError, id_key, key_text, seconds};
+use cantwin_replay::{
+    CapturedFrames, GapBound, Kind, Progress, ReplayError, id_key, key_text, seconds,
+};
 use cantwin_scenario::{Registry, Scenario};
 use serde_json::json;
 
@@ -45,6 +47,16 @@ pub struct Args {
     /// 7FF are extended identifiers. Replaces the rule of `--help`.
     #[arg(long, value_name = "IDS", value_delimiter = ',')]
     master_ids: Option<Vec<String>>,
+    /// The longest gap (in seconds) between two consecutive frames the capture may have. The
+    /// twins run through every gap, so a capture with a corrupt timestamp would otherwise cost
+    /// time and memory in proportion to the span it claims; a longer gap is refused, naming
+    /// its records.
+    #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+    max_gap: f64,
+    /// Shorten each gap longer than --max-gap to --max-gap (every later frame moves earlier)
+    /// instead of refusing the capture.
+    #[arg(long)]
+    clamp_gaps: bool,
     /// Also list the frames that matched.
     #[arg(long)]
     verbose: bool,
@@ -74,19 +86,57 @@ pub fn run(args: &Args) -> Result<()> {
             args.tolerance_ms
         );
     }
+    // Up to a year: beyond, the bound bounds nothing a run could afford.
+    if !(args.max_gap.is_finite() && args.max_gap > 0.0 && args.max_gap <= 31_536_000.0) {
+        bail!(
+            "--max-gap must be a positive number of seconds up to 31536000, not {}",
+            args.max_gap
+        );
+    }
+    let max_gap = (args.max_gap * 1e9) as i64;
     let tolerance = (args.tolerance_ms * 1e6) as i64;
+    // The twins run on for the tolerance after the capture's last frame.
+    if tolerance > max_gap {
+        bail!(
+            "--tolerance-ms {} is longer than --max-gap {} s",
+            args.tolerance_ms,
+            args.max_gap
+        );
+    }
     let scenario = Scenario::load(&args.scenario)?;
-    let records = cantwin_capture::read_all(&args.capture)
-        .with_context(|| format!("reading {}", args.capture.display()))?;
     let bus_names: Vec<&str> = scenario.buses.iter().map(|b| b.name.as_str()).collect();
     let capture = args.capture.display();
+    // Records are read one at a time and only their frames kept.
+    let reader =
+        cantwin_capture::open(&args.capture).with_context(|| format!("reading {capture}"))?;
+    let gaps = GapBound {
+        max_ns: max_gap,
+        clamp: args.clamp_gaps,
+    };
     let CapturedFrames {
         frames: captured,
         error_frames,
-    } = CapturedFrames::from_records(&records, &bus_names).map_err(|e| match e {
-        ReplayError::UnknownChannel { .. } => anyhow::anyhow!("{capture}: {e}"),
+        clamped,
+    } = CapturedFrames::read(reader, &bus_names, gaps).map_err(|e| match e {
+        ReplayError::UnknownChannel { .. } | ReplayError::Read { .. } => {
+            anyhow::anyhow!("{capture}: {e}")
+        }
+        ReplayError::Gap { .. } => anyhow::anyhow!(
+            "{capture} {e}; a corrupt timestamp? Raise the bound with --max-gap SECONDS, or \
+             shorten such gaps with --clamp-gaps"
+        ),
         e => anyhow::anyhow!("{capture} {e}"),
     })?;
+    for g in &clamped {
+        eprintln!(
+            "warning: {capture}: the gap of {} s between record {} and record {} is \
+             shortened to {} s (--clamp-gaps)",
+            seconds(g.gap_ns),
+            g.before,
+            g.after,
+            seconds(max_gap)
+        );
+    }
     let master_ids = match &args.master_ids {
         Some(list) => Some(
             list.iter()
@@ -95,19 +145,13 @@ pub fn run(args: &Args) -> Result<()> {
         ),
         None => None,
     };
-    let report = cantwin_replay::replay(
-        &scenario,
-        &Registry::builtin(),
-        &captured,
-        tolerance,
-        master_ids.as_ref(),
-    )
-    .map_err(|e| match e {
-        ReplayError::Unsettled => {
-            anyhow::anyhow!("{e}; give them with --master-ids")
-        }
-        e => anyhow::Error::new(e),
-    })?;
+    let report = replay_showing_progress(&scenario, &captured, tolerance, master_ids.as_ref())
+        .map_err(|e| match e {
+            ReplayError::Unsettled => {
+                anyhow::anyhow!("{e}; give them with --master-ids")
+            }
+            e => anyhow::Error::new(e),
+        })?;
     let entries = &report.entries;
     let (matching, missing, unexpected, different) = (
         report.count(Kind::Matching),
@@ -142,6 +186,7 @@ pub fn run(args: &Args) -> Result<()> {
             "passes": passes,
             "master_frames": report.injected,
             "error_frames_skipped": error_frames,
+            "gaps_clamped": clamped.len(),
             "matching": matching,
             "missing": missing,
             "unexpected": unexpected,
@@ -201,6 +246,43 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The replay, with a progress bar of capture time on standard error when both standard
+/// output and standard error are terminals (and neither `--json` nor `--quiet` was given).
+fn replay_showing_progress(
+    scenario: &Scenario,
+    captured: &[cantwin_replay::Captured],
+    tolerance: i64,
+    master_ids: Option<&BTreeSet<u32>>,
+) -> Result<cantwin_replay::Report, ReplayError> {
+    use std::io::IsTerminal as _;
+    let end_ms = captured.last().map(|c| c.t / 1_000_000).unwrap_or(0);
+    let bar = if std::io::stdout().is_terminal() {
+        output::steps(
+            u64::try_from(end_ms).unwrap_or(0),
+            "replay: run 1, capture ms",
+        )
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut run = 0;
+    let result = cantwin_replay::replay_with_progress(
+        scenario,
+        &Registry::builtin(),
+        captured,
+        tolerance,
+        master_ids,
+        &mut |p: Progress| {
+            if p.run != run {
+                run = p.run;
+                bar.set_message(format!("replay: run {run}, capture ms"));
+            }
+            bar.set_position(u64::try_from(p.at / 1_000_000).unwrap_or(0));
+        },
+    );
+    bar.finish_and_clear();
+    result
 }
 
 #[cfg(test)]

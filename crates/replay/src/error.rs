@@ -30,6 +30,29 @@ pub enum ReplayError {
         /// How many buses the scenario has.
         buses: usize,
     },
+    /// A record of the capture could not be read.
+    #[error("record {record}: {source}")]
+    Read {
+        /// The record, counted from 1.
+        record: u64,
+        /// Why it could not be read.
+        source: cantwin_capture::Error,
+    },
+    /// Two consecutive frames (in time order) are further apart than the bound allows.
+    #[error(
+        "has a gap of {gap} s between record {before} and record {after} (counted from 1, in \
+         time order), more than the bound of {bound} s"
+    )]
+    Gap {
+        /// The record before the gap.
+        before: u64,
+        /// The record after it.
+        after: u64,
+        /// The gap, in seconds.
+        gap: String,
+        /// The bound, in seconds.
+        bound: String,
+    },
     /// The capture holds no frames.
     #[error("holds no frames to replay")]
     NoFrames,

@@ -52,5 +52,5 @@ mod run;
 
 pub use diff::{Entry, Kind, diff};
 pub use error::ReplayError;
-pub use frames::{Captured, CapturedFrames, id_key, key_text, seconds};
-pub use run::{Report, replay};
+pub use frames::{Captured, CapturedFrames, ClampedGap, GapBound, id_key, key_text, seconds};
+pub use run::{Progress, Report, replay, replay_with_progress};

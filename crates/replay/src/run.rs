@@ -30,6 +30,17 @@ fn instant(ns: i64) -> Instant {
     Instant::from_nanos(u64::try_from(ns).unwrap_or(0))
 }
 
+/// How far a replay has come, for a progress display.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// The run under way, from 1 (learning the master's identifiers takes several).
+    pub run: usize,
+    /// The capture time reached in this run, in nanoseconds.
+    pub at: i64,
+    /// The capture's last time, in nanoseconds.
+    pub end: i64,
+}
+
 struct Replayer<'a> {
     scenario: &'a Scenario,
     registry: &'a Registry,
@@ -45,7 +56,21 @@ impl Replayer<'_> {
     }
 
     /// One run injecting the captured frames whose identifiers are in `master`.
-    fn run(&self, master: &[BTreeSet<u32>]) -> Result<Run, ReplayError> {
+    fn run(
+        &self,
+        master: &[BTreeSet<u32>],
+        number: usize,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Run, ReplayError> {
+        let last = self.captured.last().map(|c| c.t).unwrap_or(0);
+        let mut report = |at: i64| {
+            progress(Progress {
+                run: number,
+                at,
+                end: last,
+            })
+        };
+        report(0);
         let mut built = self.build()?;
         let mut ports: Vec<(BusId, PortId, TapId)> = Vec::new();
         for (_, id) in built.buses.clone() {
@@ -106,10 +131,12 @@ impl Replayer<'_> {
                     reason: e.to_string(),
                 })?;
             injected += 1;
+            report(c.t);
         }
         built
             .sim
             .run_until(instant(anchor.saturating_add(self.end)));
+        report(last);
         let mut ids = vec![BTreeSet::new(); ports.len()];
         let frames = twin_frames(&built)
             .into_iter()
@@ -189,6 +216,25 @@ pub fn replay(
     tolerance: i64,
     master_ids: Option<&BTreeSet<u32>>,
 ) -> Result<Report, ReplayError> {
+    replay_with_progress(
+        scenario,
+        registry,
+        captured,
+        tolerance,
+        master_ids,
+        &mut |_| {},
+    )
+}
+
+/// [`replay`], telling `progress` how far it has come after each master frame it injects.
+pub fn replay_with_progress(
+    scenario: &Scenario,
+    registry: &Registry,
+    captured: &[Captured],
+    tolerance: i64,
+    master_ids: Option<&BTreeSet<u32>>,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Report, ReplayError> {
     let buses = scenario.buses.len();
     // Every run indexes its buses by the frames' positions.
     if let Some(c) = captured.iter().find(|c| c.bus >= buses) {
@@ -217,12 +263,12 @@ pub fn replay(
     let (master, run, passes) = match master_ids {
         Some(ids) => {
             let master = vec![ids.clone(); buses];
-            let run = replayer.run(&master)?;
+            let run = replayer.run(&master, 1, progress)?;
             (master, run, 1)
         }
         None => {
             let mut master = vec![BTreeSet::new(); buses];
-            let mut run = replayer.run(&master)?;
+            let mut run = replayer.run(&master, 1, progress)?;
             let mut seen: Vec<BTreeSet<u32>> = run.ids.clone();
             let mut passes = 1;
             loop {
@@ -243,7 +289,7 @@ pub fn replay(
                     return Err(ReplayError::Unsettled);
                 }
                 master = next;
-                run = replayer.run(&master)?;
+                run = replayer.run(&master, passes + 1, progress)?;
                 for (s, ids) in seen.iter_mut().zip(&run.ids) {
                     s.extend(ids.iter().copied());
                 }
