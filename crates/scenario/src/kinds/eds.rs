@@ -9,6 +9,7 @@
 //! | `node_id` | the DCF's `[DeviceComissioning] NodeID` | 1–127; required when the file gives none |
 //! | `heartbeat_ms` | the file's 0x1017 default | overrides the default of 0x1017 |
 //! | `sdo_timeout_ms` | 1000 | SDO server timeout |
+//! | `lss` | false | answer LSS (CiA 305, see [`super::lss`]); `node_id` may then be 0xFF or `"unconfigured"` |
 //!
 //! The file is the device's truth: every VAR, ARRAY and RECORD object of the file becomes an
 //! object of the dictionary with the file's data type, access, limits and default value
@@ -69,7 +70,7 @@ impl DeviceKind for EdsKind {
     fn build(
         &self,
         s: &Settings<'_>,
-        _bus: &BusSpec,
+        bus: &BusSpec,
         env: &BuildEnv,
     ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let file: String = s.require("file")?;
@@ -80,7 +81,8 @@ impl DeviceKind for EdsKind {
             parse_bytes(&bytes).map_err(|e| s.error("file", format!("{}: {e}", path.display())))?;
 
         let from_dcf = eds.commissioning.as_ref().and_then(|c| c.node_id);
-        let node_id: u8 = match (s.get::<u8>("node_id")?, from_dcf) {
+        let lss: bool = s.get_or("lss", false)?;
+        let node_id: u8 = match (super::lss::node_id(s, lss)?, from_dcf) {
             (Some(n), _) | (None, Some(n)) => n,
             (None, None) => {
                 return Err(s.error(
@@ -92,7 +94,9 @@ impl DeviceKind for EdsKind {
                 ));
             }
         };
-        check_node_id(s, node_id)?;
+        if !lss {
+            check_node_id(s, node_id)?;
+        }
 
         // A DCF's ParameterValues are the values the device is configured with: they become
         // the power-on values, so that resets come back to them too.
@@ -124,11 +128,23 @@ impl DeviceKind for EdsKind {
                 format!("{}: not a usable object dictionary: {e}", path.display()),
             )
         })?;
-        let device = canopen_device(s, env, std::sync::Arc::new(desc), node_id, sdo_timeout)?;
         let port = PortConfig {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
         };
+        let desc = std::sync::Arc::new(desc);
+        if lss {
+            let make: super::lss::Make<cantwin_canopen::device::Device> = Box::new(move |id| {
+                let config = cantwin_canopen::device::DeviceConfig {
+                    sdo_timeout,
+                    ..cantwin_canopen::device::DeviceConfig::new(id)
+                };
+                cantwin_canopen::device::Device::new(std::sync::Arc::clone(&desc), config).ok()
+            });
+            let node = super::lss::build(s, env, bus, node_id, make)?;
+            return Ok((BoxedNode::twin(node), port));
+        }
+        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
         Ok((BoxedNode::twin(device), port))
     }
 }
