@@ -423,6 +423,26 @@ fn cia301_7_2_7_emcy_raise_and_clear_with_error_register_and_error_field() {
 }
 
 #[test]
+fn cia301_7_5_2_4_an_error_entry_beyond_the_number_of_errors_is_0x08000024() {
+    let mut h = Harness::booted();
+    // Empty history: sub 0 reads 0, sub 1 has no data, on the wire too.
+    assert_eq!(h.read_u32(0x1003, 0).unwrap(), 0);
+    assert_eq!(h.read_u32(0x1003, 1), Err(AbortCode::NO_DATA));
+    h.rx(ms(1), "605#4003100100000000");
+    assert_eq!(h.take(), at_ms(&[(1, "585#8003100124000008")]));
+    h.dev.emcy().raise(0x3210, [0; 5]);
+    h.run_until(ms(2));
+    h.take();
+    assert_eq!(h.read_u32(0x1003, 1).unwrap(), 0x3210);
+    assert_eq!(h.read_u32(0x1003, 2), Err(AbortCode::NO_DATA));
+    assert_eq!(h.read_u32(0x1003, 8), Err(AbortCode::NO_DATA));
+    // A sub-index the object does not have is still 0x06090011.
+    assert_eq!(h.read_u32(0x1003, 9), Err(AbortCode::NO_SUB_INDEX));
+    h.write(ms(3), 0x1003, 0, &[0]).unwrap();
+    assert_eq!(h.read_u32(0x1003, 1), Err(AbortCode::NO_DATA));
+}
+
+#[test]
 fn cia301_7_5_2_4_error_field_cleared_by_writing_zero_other_values_abort() {
     let mut h = Harness::booted();
     for code in [0x1000, 0x2000, 0x3000] {
@@ -439,7 +459,7 @@ fn cia301_7_5_2_4_error_field_cleared_by_writing_zero_other_values_abort() {
     );
     h.write(ms(1), 0x1003, 0, &[0]).unwrap();
     assert_eq!(h.read_u32(0x1003, 0).unwrap(), 0);
-    assert_eq!(h.read_u32(0x1003, 1).unwrap(), 0);
+    assert_eq!(h.read_u32(0x1003, 1), Err(AbortCode::NO_DATA));
     // The errors themselves are still active.
     assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x07);
 }
@@ -699,17 +719,18 @@ fn cia301_7_2_4_default_sdo_server_on_0x600_0x580() {
 #[test]
 fn cia301_7_5_2_33_additional_sdo_server_with_configured_cob_ids() {
     let mut h = Harness::booted();
-    h.write(ms(0), 0x1201, 1, &u32le(0x641)).unwrap();
-    h.write(ms(0), 0x1201, 2, &u32le(0x5C1)).unwrap();
-    h.rx(ms(1), "641#4018100100000000");
-    assert_eq!(h.take(), at_ms(&[(1, "5C1#431810015A000005")]));
+    // Outside the restricted CAN-IDs (CiA 301 §7.3.5).
+    h.write(ms(0), 0x1201, 1, &u32le(0x6C1)).unwrap();
+    h.write(ms(0), 0x1201, 2, &u32le(0x6A1)).unwrap();
+    h.rx(ms(1), "6C1#4018100100000000");
+    assert_eq!(h.take(), at_ms(&[(1, "6A1#431810015A000005")]));
     assert_eq!(
-        h.write(ms(2), 0x1201, 1, &u32le(0x642)),
+        h.write(ms(2), 0x1201, 1, &u32le(0x6C2)),
         Err(AbortCode::INVALID_VALUE)
     );
     // Invalidated, it is silent; the default server still answers.
-    h.write(ms(2), 0x1201, 1, &u32le(0x8000_0641)).unwrap();
-    h.rx(ms(3), "641#4018100100000000");
+    h.write(ms(2), 0x1201, 1, &u32le(0x8000_06C1)).unwrap();
+    h.rx(ms(3), "6C1#4018100100000000");
     h.rx(ms(4), "605#4018100100000000");
     assert_eq!(h.take(), at_ms(&[(4, "585#431810015A000005")]));
 }
