@@ -1374,6 +1374,15 @@ impl<H: OdHooks> ObjectAccess for Core<H> {
         offset: usize,
         buf: &mut [u8],
     ) -> Result<ReadInfo, AbortCode> {
+        if index == 0x1003 && sub > 0 {
+            // §7.5.2.4: sub-index 0 holds the number of errors recorded; a sub-index beyond
+            // it holds no error. Reading one is answered with 0x0800 0024 "no data
+            // available" (what conformance tools accept), not a made-up 0.
+            self.od.locate(index, sub)?;
+            if self.u32(0x1003, 0).unwrap_or(0) < u32::from(sub) {
+                return Err(AbortCode::NO_DATA);
+            }
+        }
         Hooked::new(&mut self.od, &mut self.hooks).read(index, sub, offset, buf)
     }
 
