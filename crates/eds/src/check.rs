@@ -1,17 +1,23 @@
 //! Consistency checks of a parsed file (CiA 306 object lists and object descriptions): what a tool should refuse
 //! (errors) and what it should point out (warnings).
 
+use crate::judge::judge;
 use crate::model::{Eds, Entry, ObjectList};
-use crate::value::{EdsValue, integer_range};
+use crate::value::EdsValue;
 use cantwin_canopen::od::DataType;
 use core::fmt;
 
 /// How serious an [`Issue`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Severity {
-    /// Worth fixing; readers will cope.
+    /// Something read with a guess, or left as it is; worth knowing.
+    Note,
+    /// Not what CiA 306 asks for, but harmless: readers cope and the dictionary is the one
+    /// the file evidently means.
     Warning,
-    /// The file does not describe a valid device.
+    /// What CiA 306 does not allow, with a consequence: a value or key is ignored (the
+    /// diagnostic says how the dictionary is built instead), or, for an entry without a
+    /// data type, the file cannot become a dictionary at all.
     Error,
 }
 
@@ -20,6 +26,9 @@ pub enum Severity {
 pub struct Issue {
     /// How serious it is.
     pub severity: Severity,
+    /// The line (1-based) of the key, or of the section, where the file has one (set by
+    /// [`crate::load`]; [`Eds::check`] of a model alone knows no lines).
+    pub line: Option<usize>,
     /// The section it concerns (e.g. `1018sub1`, `MandatoryObjects`).
     pub section: String,
     /// The key it concerns, if one.
@@ -31,10 +40,15 @@ pub struct Issue {
 impl fmt::Display for Issue {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let sev = match self.severity {
+            Severity::Note => "note",
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
-        write!(f, "{sev}: [{}]", self.section)?;
+        write!(f, "{sev}: ")?;
+        if let Some(l) = self.line {
+            write!(f, "line {l} ")?;
+        }
+        write!(f, "[{}]", self.section)?;
         if let Some(k) = &self.key {
             write!(f, " {k}")?;
         }
@@ -62,14 +76,30 @@ impl Report {
             .filter(|i| i.severity == Severity::Warning)
     }
 
+    /// The notes.
+    pub fn notes(&self) -> impl Iterator<Item = &Issue> {
+        self.issues.iter().filter(|i| i.severity == Severity::Note)
+    }
+
     /// Whether there is no error.
     pub fn is_ok(&self) -> bool {
         self.errors().next().is_none()
     }
 
+    pub(crate) fn push_parse(&mut self, severity: Severity, e: &crate::ParseError) {
+        self.issues.push(Issue {
+            severity,
+            line: Some(e.line),
+            section: e.section.clone().unwrap_or_default(),
+            key: e.key.clone(),
+            message: e.kind.to_string(),
+        });
+    }
+
     fn push(&mut self, severity: Severity, section: &str, key: Option<&str>, message: String) {
         self.issues.push(Issue {
             severity,
+            line: None,
             section: section.to_owned(),
             key: key.map(str::to_owned),
             message,
@@ -95,13 +125,31 @@ impl Eds {
     /// valid, values within their type's range and within the limits.
     pub fn check(&self) -> Report {
         let mut r = Report::default();
+        match self.file_info.eds_version.as_deref() {
+            Some("4.0") => {}
+            Some(v) => r.push(
+                Severity::Note,
+                "FileInfo",
+                Some("EDSVersion"),
+                format!("{v:?} is not a CiA 306 version (4.0); read as 4.0"),
+            ),
+            None => r.push(
+                Severity::Note,
+                "FileInfo",
+                Some("EDSVersion"),
+                "missing; read as 4.0".to_owned(),
+            ),
+        }
         for m in [0x1000u16, 0x1001, 0x1018] {
             if !self.objects.contains_key(&m) {
                 r.push(
-                    Severity::Error,
+                    Severity::Warning,
                     &format!("{m:04X}"),
                     None,
-                    format!("mandatory object {m:#06X} is missing (CiA 301 object dictionary)"),
+                    format!(
+                        "mandatory object {m:#06X} is missing (CiA 301 object dictionary); \
+                         the device answers it with 0x06020000"
+                    ),
                 );
             }
         }
@@ -127,7 +175,7 @@ impl Eds {
                 let key = (i + 1).to_string();
                 if !self.objects.contains_key(index) {
                     r.push(
-                        Severity::Error,
+                        Severity::Warning,
                         name,
                         Some(&key),
                         format!("lists {index:#06X}, which has no section"),
@@ -143,7 +191,7 @@ impl Eds {
                 }
                 if list[..i].contains(index) {
                     r.push(
-                        Severity::Error,
+                        Severity::Warning,
                         name,
                         Some(&key),
                         format!("lists {index:#06X} twice"),
@@ -156,7 +204,7 @@ impl Eds {
             let listed = lists.iter().any(|(_, l, _)| l.contains(&index));
             if !listed && index >= 0x1000 {
                 r.push(
-                    Severity::Warning,
+                    Severity::Note,
                     &sec,
                     None,
                     "not named in any object list".to_owned(),
@@ -168,7 +216,7 @@ impl Eds {
                     Severity::Error,
                     &sec,
                     Some("ObjectType"),
-                    format!("{code:#04X} is not an object code"),
+                    format!("{code:#04X} is not an object code; the object is left out"),
                 );
             }
             let composite = code == crate::ARRAY || code == crate::RECORD;
@@ -182,36 +230,52 @@ impl Eds {
             }
             if composite && o.subs.is_empty() {
                 r.push(
-                    Severity::Error,
+                    Severity::Warning,
                     &sec,
                     None,
-                    "an ARRAY or RECORD without sub-objects".to_owned(),
+                    "an ARRAY or RECORD without sub-objects; held with sub-index 0 = 0 only"
+                        .to_owned(),
                 );
             }
-            if !composite && !o.subs.is_empty() {
+            if composite && !o.subs.is_empty() && !o.subs.contains_key(&0) {
                 r.push(
                     Severity::Warning,
                     &sec,
                     None,
-                    "sub-objects on an object that is not ARRAY or RECORD".to_owned(),
+                    "no sub-index 0; held with one (UNSIGNED8 ro, the highest sub-index)"
+                        .to_owned(),
                 );
             }
+            if !composite && !o.subs.is_empty() && OBJECT_CODES.contains(&code) {
+                r.push(
+                    Severity::Warning,
+                    &sec,
+                    Some("ObjectType"),
+                    "sub-objects on an object that is not ARRAY or RECORD; held as a RECORD"
+                        .to_owned(),
+                );
+            }
+            // CiA 306: SubNumber counts the sub-objects there are (sparse sub-indices are
+            // allowed); a count that disagrees is taken to mean the sub-objects listed.
             if let Some(n) = o.sub_number
                 && usize::from(n) != o.subs.len()
             {
                 r.push(
-                    Severity::Error,
+                    Severity::Warning,
                     &sec,
                     Some("SubNumber"),
-                    format!("says {n}, the object has {} sub-objects", o.subs.len()),
+                    format!(
+                        "says {n}, the object has {} sub-objects; the ones there are taken",
+                        o.subs.len()
+                    ),
                 );
             }
-            if o.subs.is_empty() || o.compact_sub_obj.is_some() {
+            if o.subs.is_empty() {
                 check_entry(
                     &mut r,
                     &sec,
                     &o.entry,
-                    code == crate::VAR || code == crate::DOMAIN || o.compact_sub_obj.is_some(),
+                    code == crate::VAR || code == crate::DOMAIN,
                 );
             }
             for (sub, e) in &o.subs {
@@ -280,34 +344,9 @@ impl Eds {
 }
 
 fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
-    let ty = match e.data_type {
-        None if needs_type => {
-            r.push(Severity::Error, sec, Some("DataType"), "missing".to_owned());
-            None
-        }
-        None => None,
-        Some(t) => match DataType::from_index(t) {
-            Some(ty) => Some(ty),
-            None if t <= 0x25F => {
-                r.push(
-                    Severity::Warning,
-                    sec,
-                    Some("DataType"),
-                    format!("{t:#06X} is not a basic data type"),
-                );
-                None
-            }
-            None => {
-                r.push(
-                    Severity::Error,
-                    sec,
-                    Some("DataType"),
-                    format!("{t:#06X} is not a data type index"),
-                );
-                None
-            }
-        },
-    };
+    for (severity, key, message) in judge(e, needs_type).findings {
+        r.push(severity, sec, Some(key), message);
+    }
     if e.parameter_name.contains(';') {
         r.push(
             Severity::Warning,
@@ -316,53 +355,11 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
             "contains `;`, which some INI readers take for an inline comment".to_owned(),
         );
     }
-    if needs_type && e.access_type.is_none() {
-        r.push(
-            Severity::Error,
-            sec,
-            Some("AccessType"),
-            "missing".to_owned(),
-        );
-    }
-    let mut range_check = |key: &str, v: &Option<EdsValue>| {
-        let Some(v) = v else { return };
-        if let (Some(ty), EdsValue::Integer(x)) = (ty, v)
-            && let Some((lo, hi)) = integer_range(ty)
-            && (*x < lo || *x > hi)
-        {
-            r.push(
-                Severity::Error,
-                sec,
-                Some(key),
-                format!("{x} is outside the range of {ty}"),
-            );
-        }
-        if let (Some(ty), EdsValue::NodeId(off)) = (ty, v) {
-            match integer_range(ty) {
-                None => r.push(
-                    Severity::Error,
-                    sec,
-                    Some(key),
-                    format!("$NODEID on a value of type {ty}"),
-                ),
-                // CiA 301: node-IDs are 1..=127; the value must fit for each of them.
-                Some((lo, hi)) if off.saturating_add(1) < lo || off.saturating_add(127) > hi => r
-                    .push(
-                        Severity::Error,
-                        sec,
-                        Some(key),
-                        format!("$NODEID+{off} leaves the range of {ty} for some node-ID 1..=127"),
-                    ),
-                Some(_) => {}
-            }
-        }
-        if let EdsValue::Raw(s) = v
-            && s.is_empty()
-            && ty.is_some()
-        {
-            r.push(Severity::Warning, sec, Some(key), "empty".to_owned());
-        }
-        if let EdsValue::Text(s) = v
+    for (key, v) in [
+        ("DefaultValue", &e.default_value),
+        ("ParameterValue", &e.parameter_value),
+    ] {
+        if let Some(EdsValue::Text(s)) = v
             && s.contains(';')
         {
             r.push(
@@ -370,46 +367,6 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
                 sec,
                 Some(key),
                 "contains `;`, which some INI readers take for an inline comment".to_owned(),
-            );
-        }
-    };
-    range_check("DefaultValue", &e.default_value);
-    range_check("LowLimit", &e.low_limit);
-    range_check("HighLimit", &e.high_limit);
-    range_check("ParameterValue", &e.parameter_value);
-    let num = |v: &Option<EdsValue>| -> Option<f64> {
-        match v.as_ref()? {
-            EdsValue::Integer(x) => Some(*x as f64),
-            EdsValue::Real32(x) => Some(f64::from(*x)),
-            EdsValue::Real64(x) => Some(*x),
-            _ => None,
-        }
-    };
-    let (lo, hi) = (num(&e.low_limit), num(&e.high_limit));
-    if let (Some(l), Some(h)) = (lo, hi)
-        && l > h
-    {
-        r.push(
-            Severity::Error,
-            sec,
-            Some("LowLimit"),
-            "above HighLimit".to_owned(),
-        );
-    }
-    for (key, v) in [
-        ("DefaultValue", &e.default_value),
-        ("ParameterValue", &e.parameter_value),
-    ] {
-        let Some(x) = num(v) else { continue };
-        if lo.is_some_and(|l| x < l) {
-            r.push(Severity::Error, sec, Some(key), "below LowLimit".to_owned());
-        }
-        if hi.is_some_and(|h| x > h) {
-            r.push(
-                Severity::Error,
-                sec,
-                Some(key),
-                "above HighLimit".to_owned(),
             );
         }
     }

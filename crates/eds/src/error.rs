@@ -23,7 +23,7 @@ pub enum ParseErrorKind {
     /// The key already appeared in this section (key names are case-insensitive).
     #[error("duplicate key, first defined at line {0}")]
     DuplicateKey(usize),
-    /// A key CiA 306 requires is absent.
+    /// A key CiA 306 requires is absent (or a count key of a list).
     #[error("missing required key")]
     MissingKey,
     /// The value does not have the form the key needs.
@@ -34,16 +34,29 @@ pub enum ParseErrorKind {
         /// What was expected.
         expected: String,
     },
-    /// A sub-object or helper section for an index that has no object section.
-    #[error("no object section [{0:04X}] for this section")]
+    /// A sub-object section for an index that has no object section.
+    #[error("no object section [{0:04X}] for this section; the object is taken as a RECORD")]
     NoObject(u16),
     /// Sub-object sections next to `CompactSubObj`, which already defines the sub-objects.
-    #[error("object {0:04X} uses CompactSubObj and also has sub-object sections")]
+    #[error(
+        "object {0:04X} uses CompactSubObj and also has sub-object sections; the sections are taken as written"
+    )]
     CompactWithSubs(u16),
-    /// An object list names a number past its `SupportedObjects` (or `ObjectLinks`,
-    /// `NrOfEntries`, `Lines`) count, or leaves one out.
-    #[error("entry {0} is outside the count or missing")]
-    ListEntry(u32),
+    /// A count (`SupportedObjects`, `ObjectLinks`, `NrOfEntries`, `Lines`) that disagrees
+    /// with the entries listed.
+    #[error("says {stated}, {listed} entries are listed; the listed entries are taken")]
+    Count {
+        /// The count the file states.
+        stated: u32,
+        /// The entries it lists.
+        listed: usize,
+    },
+    /// A line starting with `#` (CiA 306 comments start with `;`); read as a comment.
+    #[error("a line starting with `#` (CiA 306 comments start with `;`); read as a comment")]
+    HashComment,
+    /// A value read with a guess at what the file means.
+    #[error("{0}")]
+    Interpreted(String),
 }
 
 /// An error in an EDS or DCF file, at a line (1-based), in a section and key where known.

@@ -1,6 +1,7 @@
 //! The INI layer of CiA 306 (basic structure): sections, `key=value` lines and comments, with the line
 //! number of everything so that later errors can point at it.
 
+use crate::check::Severity;
 use crate::error::{ParseError, ParseErrorKind};
 use std::collections::HashMap;
 
@@ -30,38 +31,64 @@ impl RawSection {
     }
 }
 
-/// Splits a file into sections.
+/// What the INI layer found wrong, with how serious it is; the line is skipped.
+pub(crate) type Found = Vec<(Severity, ParseError)>;
+
+/// Splits a file into sections, reading past what is malformed.
 ///
-/// * A line whose first non-blank character is `;` is a comment (CiA 306 basic structure); a `;` later
-///   in a line is part of the value.
-/// * Leading and trailing white space of names, keys and values is not significant.
-/// * A line before the first section, a line without `=`, an empty key, a duplicate section or
-///   a duplicate key in one section is an error naming the line (and the earlier line for
-///   duplicates): a file that says two things about one key has no single meaning, and
-///   common readers (Python's `configparser` in strict mode) reject it too.
-pub(crate) fn tokenize(text: &str) -> Result<Vec<RawSection>, ParseError> {
+/// * A line whose first non-blank character is `;` or `#` is a comment (CiA 306 basic
+///   structure names `;`; `#` lines are common in the field and are read the same way, with
+///   a note); a `;` later in a line is part of the value.
+/// * Leading and trailing white space (tabs too) of names, keys and values is not
+///   significant; CR LF and LF line ends are both read.
+/// * A line before the first section (warning), a line without `=` or with an empty key
+///   (error) is skipped. A malformed section header is an error and the lines up to the next
+///   header are skipped with it, since they belong to a section of unknown name.
+/// * A duplicate section or a duplicate key in one section is an error naming the earlier
+///   line; the first one is kept, as a file that says two things about one key has no single
+///   meaning and the first is what a reader that stops at it (Python's `configparser` in
+///   strict mode) would have seen.
+pub(crate) fn tokenize(text: &str) -> (Vec<RawSection>, Found) {
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut sections: Vec<RawSection> = Vec::new();
+    let mut found: Found = Vec::new();
     let mut seen: HashMap<String, usize> = HashMap::new();
+    // Whether lines go to the last section (false after a malformed or duplicate header).
+    let mut open = false;
+    let mut hash_comment = false;
     for (i, raw) in text.split('\n').enumerate() {
         let line = i + 1;
         let l = raw.trim();
         if l.is_empty() || l.starts_with(';') {
             continue;
         }
-        if let Some(rest) = l.strip_prefix('[') {
-            let Some(name) = rest.strip_suffix(']') else {
-                return Err(ParseError::at(line, ParseErrorKind::BadHeader));
-            };
-            let name = name.trim();
-            if name.is_empty() || name.contains(['[', ']']) {
-                return Err(ParseError::at(line, ParseErrorKind::BadHeader));
+        if l.starts_with('#') {
+            if !hash_comment {
+                hash_comment = true;
+                found.push((
+                    Severity::Note,
+                    ParseError::at(line, ParseErrorKind::HashComment),
+                ));
             }
+            continue;
+        }
+        if let Some(rest) = l.strip_prefix('[') {
+            open = false;
+            let name = rest.strip_suffix(']').map(str::trim);
+            let Some(name) = name.filter(|n| !n.is_empty() && !n.contains(['[', ']'])) else {
+                found.push((
+                    Severity::Error,
+                    ParseError::at(line, ParseErrorKind::BadHeader),
+                ));
+                continue;
+            };
             // Keyed by the lower-case name: a large EDS has thousands of sections.
             if let Some(&first) = seen.get(&name.to_ascii_lowercase()) {
-                return Err(
+                found.push((
+                    Severity::Error,
                     ParseError::at(line, ParseErrorKind::DuplicateSection(first)).in_section(name),
-                );
+                ));
+                continue;
             }
             seen.insert(name.to_ascii_lowercase(), line);
             sections.push(RawSection {
@@ -69,24 +96,43 @@ pub(crate) fn tokenize(text: &str) -> Result<Vec<RawSection>, ParseError> {
                 line,
                 entries: Vec::new(),
             });
+            open = true;
             continue;
         }
-        let Some(section) = sections.last_mut() else {
-            return Err(ParseError::at(line, ParseErrorKind::OutsideSection));
+        let section = match sections.last_mut() {
+            Some(s) if open => s,
+            Some(_) => continue,
+            None => {
+                found.push((
+                    Severity::Warning,
+                    ParseError::at(line, ParseErrorKind::OutsideSection),
+                ));
+                continue;
+            }
         };
         let Some((key, value)) = l.split_once('=') else {
-            return Err(ParseError::at(line, ParseErrorKind::NotKeyValue).in_section(&section.name));
+            found.push((
+                Severity::Error,
+                ParseError::at(line, ParseErrorKind::NotKeyValue).in_section(&section.name),
+            ));
+            continue;
         };
         let key = key.trim();
         if key.is_empty() {
-            return Err(ParseError::at(line, ParseErrorKind::EmptyKey).in_section(&section.name));
+            found.push((
+                Severity::Error,
+                ParseError::at(line, ParseErrorKind::EmptyKey).in_section(&section.name),
+            ));
+            continue;
         }
         if let Some(first) = section.get(key) {
-            return Err(
+            found.push((
+                Severity::Error,
                 ParseError::at(line, ParseErrorKind::DuplicateKey(first.line))
                     .in_section(&section.name)
                     .with_key(key),
-            );
+            ));
+            continue;
         }
         section.entries.push(RawEntry {
             key: key.to_owned(),
@@ -94,7 +140,7 @@ pub(crate) fn tokenize(text: &str) -> Result<Vec<RawSection>, ParseError> {
             line,
         });
     }
-    Ok(sections)
+    (sections, found)
 }
 
 #[cfg(test)]
@@ -103,7 +149,10 @@ mod tests {
 
     #[test]
     fn sections_keys_comments_and_crlf() {
-        let s = tokenize("\u{feff}; header\r\n[FileInfo]\r\n FileName = a.eds \r\n;x=1\r\n\r\n[1000]\r\nDataType=0x0007\r\n").unwrap();
+        let (s, found) = tokenize(
+            "\u{feff}; header\r\n[FileInfo]\r\n FileName = a.eds \t\r\n;x=1\r\n\r\n[1000]\r\nDataType=0x0007\r\n",
+        );
+        assert!(found.is_empty());
         assert_eq!(s.len(), 2);
         assert_eq!(s[0].name, "FileInfo");
         assert_eq!(s[0].line, 2);
@@ -115,32 +164,36 @@ mod tests {
 
     #[test]
     fn semicolon_inside_a_value_is_data() {
-        let s = tokenize("[A]\nK=a;b\n").unwrap();
+        let (s, _) = tokenize("[A]\nK=a;b\n");
         assert_eq!(s[0].entries[0].value, "a;b");
     }
 
+    fn first(text: &str) -> (Severity, ParseError) {
+        tokenize(text).1.remove(0)
+    }
+
     #[test]
-    fn errors_name_the_line() {
-        let e = tokenize("[A]\nK=1\nk=2\n").unwrap_err();
-        assert_eq!(e.line, 3);
-        assert_eq!(e.kind, ParseErrorKind::DuplicateKey(2));
-        let e = tokenize("[A]\n[a]\n").unwrap_err();
-        assert_eq!((e.line, e.kind), (2, ParseErrorKind::DuplicateSection(1)));
+    fn malformed_lines_are_skipped_and_named() {
+        let (s, found) = tokenize("[A]\nK=1\nk=2\n");
+        assert_eq!(s[0].entries.len(), 1);
+        assert_eq!(s[0].entries[0].value, "1");
+        assert_eq!(found[0].1.line, 3);
+        assert_eq!(found[0].1.kind, ParseErrorKind::DuplicateKey(2));
+        let (sev, e) = first("[A]\n[a]\n");
         assert_eq!(
-            tokenize("K=1\n").unwrap_err().kind,
-            ParseErrorKind::OutsideSection
+            (sev, e.line, e.kind),
+            (Severity::Error, 2, ParseErrorKind::DuplicateSection(1))
         );
-        assert_eq!(
-            tokenize("[A\n").unwrap_err().kind,
-            ParseErrorKind::BadHeader
-        );
-        assert_eq!(
-            tokenize("[A]\nnothing\n").unwrap_err().kind,
-            ParseErrorKind::NotKeyValue
-        );
-        assert_eq!(
-            tokenize("[A]\n=1\n").unwrap_err().kind,
-            ParseErrorKind::EmptyKey
-        );
+        assert_eq!(first("K=1\n[A]\n").1.kind, ParseErrorKind::OutsideSection);
+        let (s, found) = tokenize("[A\nK=1\n[B]\nL=2\n");
+        assert_eq!(found[0].1.kind, ParseErrorKind::BadHeader);
+        assert_eq!(s.len(), 1);
+        assert_eq!(s[0].entries[0].key, "L");
+        assert_eq!(first("[A]\nnothing\n").1.kind, ParseErrorKind::NotKeyValue);
+        assert_eq!(first("[A]\n=1\n").1.kind, ParseErrorKind::EmptyKey);
+        let (s, found) = tokenize("# made by a tool\n[A]\n# note\nK=1\n");
+        assert_eq!(s[0].entries.len(), 1);
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].0, Severity::Note);
     }
 }

@@ -1,6 +1,10 @@
 //! CiA 306 EDS and DCF files.
 //!
-//! * [`parse`] reads a file into the typed model [`Eds`]: every section and key of CiA 306
+//! * [`load`] reads any file, as the files in the field are written, into the typed model
+//!   [`Eds`] and a [`Report`] of diagnostics (error, warning, note) naming line, section and
+//!   key: nothing is refused, and [`to_od`] builds the dictionary the file evidently means
+//!   from the same judgement of every value that [`Eds::check`] reports.
+//! * [`parse`] reads a file into the typed model [`Eds`], refusing it at the first error: every section and key of CiA 306
 //!   (`FileInfo`, `DeviceInfo` with bit rates and granularity, `DummyUsage`, `Comments`, the
 //!   object lists, objects and sub-objects, `CompactSubObj` with its `Name`/`Value`/
 //!   `Denotation` sections, `ObjectLinks`, DCF `ParameterValue`, `Denotation` and
@@ -15,8 +19,9 @@
 //!   values as a DCF and [`apply_parameter_values`] loads a DCF's values into a device.
 //!
 //! Parsing decisions (CiA 306 leaves them open): section and key names are matched without
-//! regard to case; a `;` starts a comment only at the start of a line; a duplicate section,
-//! or a duplicate key in a section, is an error naming both lines. Files that are not UTF-8
+//! regard to case; a `;` (or, with a note, `#`) starts a comment only at the start of a
+//! line; a duplicate section, or a duplicate key in a section, is an error naming both
+//! lines, and the first is kept. Files that are not UTF-8
 //! are read as ISO 8859-1 ([`parse_bytes`]).
 //!
 //! What is written is what python-canopen's importer reads: keys in CiA 306 spelling (its
@@ -59,7 +64,12 @@
 //! assert_eq!(parse(&write(&eds))?, eds);
 //!
 //! let err = parse("[1000]\nParameterName=x\nDataType=0x0007\nAccessType=rx\n").unwrap_err();
-//! assert_eq!(err.to_string(), "line 4 [1000] AccessType: invalid value \"rx\": expected ro, wo, rw, rwr, rww or const");
+//! assert_eq!(err.to_string(), "line 4 [1000] AccessType: invalid value \"rx\": expected ro, wo, rw, rwr, rww or const; held as ro");
+//!
+//! // `load` reads what `parse` refuses, and reports.
+//! let loaded = cantwin_eds::load("[1000]\nParameterName=x\nDataType=0x0007\nAccessType=rx\n");
+//! assert!(loaded.eds.objects.contains_key(&0x1000));
+//! assert_eq!(loaded.report.errors().count(), 1);
 //! # Ok::<(), cantwin_eds::ParseError>(())
 //! ```
 #![forbid(unsafe_code)]
@@ -70,6 +80,7 @@ mod error;
 #[doc(hidden)]
 pub mod fuzz;
 mod ini;
+mod judge;
 mod model;
 mod od;
 mod parse;
@@ -82,8 +93,8 @@ pub use error::{ParseError, ParseErrorKind};
 pub use model::{
     DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, ObjectList, Section,
 };
-pub use od::{ConvertError, apply_parameter_values, from_od, to_dcf, to_od};
-pub use parse::{decode, parse};
+pub use od::{ConvertError, apply_parameter_values, commission, from_od, to_dcf, to_od};
+pub use parse::{Loaded, decode, load, load_bytes, parse};
 pub use value::{EdsValue, parse_integer, parse_node_id_expr};
 pub use write::write;
 

@@ -66,8 +66,9 @@ macro_rules! keyed_section {
         #[derive(Debug, Clone, Default, PartialEq)]
         pub struct $name {
             $( $(#[$fm])* pub $field: Option<$ty>, )*
-            /// Keys CiA 306 does not define for this section, in file order. Keys that shadow
-            /// a typed field are not written.
+            /// Keys CiA 306 does not define for this section, and defined keys whose value
+            /// could not be read, in file order. A key a typed field writes is not written
+            /// twice.
             pub extra: Vec<(String, String)>,
         }
 
@@ -75,23 +76,29 @@ macro_rules! keyed_section {
             /// The CiA 306 names of the typed keys, in the order they are written.
             pub const KEYS: &'static [&'static str] = &[$($key),*];
 
-            pub(crate) fn from_raw(sec: &RawSection) -> Result<Self, ParseError> {
+            /// Reads the section; a key whose value cannot be read is kept among the extra
+            /// keys (so that it is written back as found) and returned as an error.
+            pub(crate) fn from_raw(sec: &RawSection) -> (Self, Vec<ParseError>) {
                 let mut out = Self::default();
+                let mut bad = Vec::new();
                 for e in &sec.entries {
                     $(
                         if e.key.eq_ignore_ascii_case($key) {
-                            let v = <$ty as Field>::parse(&e.value).ok_or_else(|| {
-                                ParseError::invalid(
-                                    e.line, &sec.name, &e.key, &e.value, <$ty as Field>::EXPECTED,
-                                )
-                            })?;
-                            out.$field = Some(v);
+                            match <$ty as Field>::parse(&e.value) {
+                                Some(v) => out.$field = Some(v),
+                                None => {
+                                    bad.push(ParseError::invalid(
+                                        e.line, &sec.name, &e.key, &e.value, <$ty as Field>::EXPECTED,
+                                    ));
+                                    out.extra.push((e.key.clone(), e.value.clone()));
+                                }
+                            }
                             continue;
                         }
                     )*
                     out.extra.push((e.key.clone(), e.value.clone()));
                 }
-                Ok(out)
+                (out, bad)
             }
 
             pub(crate) fn to_entries(&self) -> Vec<(String, String)> {
@@ -101,8 +108,9 @@ macro_rules! keyed_section {
                         v.push(($key.to_owned(), Field::write(x)));
                     }
                 )*
+                // An extra key is written unless a typed field already wrote one of its name.
                 for (k, val) in &self.extra {
-                    if !Self::KEYS.iter().any(|t| t.eq_ignore_ascii_case(k)) {
+                    if !v.iter().any(|(w, _)| w.eq_ignore_ascii_case(k)) {
                         v.push((k.clone(), val.clone()));
                     }
                 }
@@ -308,6 +316,15 @@ impl Entry {
             access_type: Some(access),
             ..Entry::default()
         }
+    }
+
+    /// The text of a key kept among [`Entry::extra`] (case-insensitive): also where a key
+    /// CiA 306 defines is kept when its value could not be read.
+    pub fn extra_value(&self, key: &str) -> Option<&str> {
+        self.extra
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(key))
+            .map(|(_, v)| v.as_str())
     }
 
     /// The object code: `ObjectType`, or VAR when absent (CiA 306 object descriptions).

@@ -2,20 +2,22 @@
 //! generated from its dictionary ([`from_od`]), and a dictionary description can be built
 //! from an EDS ([`to_od`]) and configured from a DCF ([`apply_parameter_values`]).
 
+use crate::check::{Issue, Severity};
+use crate::judge::{Default, judge, value_of};
 use crate::model::{DeviceInfo, Eds, Entry, FileInfo, Object};
 use crate::parse::expand_compact;
 use crate::value::EdsValue;
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::{
-    DataType, ObjectCode, ObjectDictionary, OdBuildError, OdBuilder, OdDescription, SubObject,
-    Value,
+    Access, DataType, ObjectCode, ObjectDictionary, OdBuildError, OdBuilder, OdDescription,
+    SubObject, Value,
 };
 use std::collections::BTreeMap;
 
 /// Why an EDS cannot become an object dictionary (or a DCF value cannot be applied).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ConvertError {
-    /// `DataType` is absent or not a basic data type the dictionary supports.
+    /// `DataType` is absent from an entry that holds a value: no dictionary can hold it.
     #[error("{index:#06X}:{sub}: data type {data_type:?} is not supported")]
     DataType {
         /// Index.
@@ -24,26 +26,6 @@ pub enum ConvertError {
         sub: u8,
         /// The `DataType` given, if any.
         data_type: Option<u16>,
-    },
-    /// `AccessType` is absent.
-    #[error("{index:#06X}:{sub}: AccessType is missing")]
-    Access {
-        /// Index.
-        index: u16,
-        /// Sub-index.
-        sub: u8,
-    },
-    /// A value does not fit its type.
-    #[error("{index:#06X}:{sub}: {key} {value:?} does not fit the data type")]
-    Value {
-        /// Index.
-        index: u16,
-        /// Sub-index.
-        sub: u8,
-        /// `DefaultValue`, `LowLimit`, `HighLimit` or `ParameterValue`.
-        key: &'static str,
-        /// The value as written.
-        value: String,
     },
     /// The dictionary refused the definitions.
     #[error(transparent)]
@@ -58,27 +40,6 @@ pub enum ConvertError {
         /// The device's answer.
         abort: AbortCode,
     },
-}
-
-/// A typed value from an EDS value; `node_id` resolves `$NODEID` (when `None`, `$NODEID`
-/// values are refused).
-fn to_value(ty: DataType, v: &EdsValue, node_id: Option<u8>) -> Option<Value> {
-    match v {
-        EdsValue::Integer(x) => Value::from_integer(ty, *x).ok(),
-        EdsValue::NodeId(off) => {
-            Value::from_integer(ty, off.checked_add(i128::from(node_id?))?).ok()
-        }
-        EdsValue::Real32(x) if ty == DataType::Real32 => Some(Value::Real32(*x)),
-        EdsValue::Real64(x) if ty == DataType::Real64 => Some(Value::Real64(*x)),
-        EdsValue::Text(s) if ty == DataType::VisibleString => Some(Value::VisibleString(s.clone())),
-        EdsValue::Text(s) if ty == DataType::UnicodeString => {
-            Some(Value::UnicodeString(s.encode_utf16().collect()))
-        }
-        EdsValue::Bytes(b) if ty == DataType::OctetString => Some(Value::OctetString(b.clone())),
-        EdsValue::Bytes(b) if ty == DataType::Domain => Some(Value::Domain(b.clone())),
-        EdsValue::Raw(s) => Value::parse(ty, s).ok(),
-        _ => None,
-    }
 }
 
 fn from_value(v: &Value) -> EdsValue {
@@ -96,74 +57,96 @@ fn from_value(v: &Value) -> EdsValue {
 }
 
 fn sub_object(index: u16, sub: u8, e: &Entry) -> Result<SubObject, ConvertError> {
-    let ty = e
-        .data_type
-        .and_then(DataType::from_index)
-        .ok_or(ConvertError::DataType {
-            index,
-            sub,
-            data_type: e.data_type,
-        })?;
-    let access = e.access_type.ok_or(ConvertError::Access { index, sub })?;
-    let mut d = SubObject::new(e.parameter_name.clone(), ty, access);
-    d.pdo_mappable = e.pdo_mapping.unwrap_or(false);
-    let bad = |key: &'static str, v: &EdsValue| ConvertError::Value {
+    let j = judge(e, true);
+    let ty = j.ty.ok_or(ConvertError::DataType {
         index,
         sub,
-        key,
-        value: v.to_text(e.data_type),
-    };
-    match &e.default_value {
+        data_type: e.data_type,
+    })?;
+    let mut d = SubObject::new(e.parameter_name.clone(), ty, j.access);
+    d.pdo_mappable = e.pdo_mapping.unwrap_or(false);
+    match j.default {
         None => {}
-        Some(EdsValue::Raw(s)) if s.is_empty() => {}
-        Some(EdsValue::NodeId(off)) => {
-            let base = to_value(ty, &EdsValue::Integer(*off), None)
-                .ok_or_else(|| bad("DefaultValue", &EdsValue::NodeId(*off)))?;
-            d = d.default_node_id_plus(base);
-        }
-        Some(v) => d.default = Some(to_value(ty, v, None).ok_or_else(|| bad("DefaultValue", v))?),
+        Some(Default::NodeId(base)) => d = d.default_node_id_plus(base),
+        Some(Default::Value(v)) => d.default = Some(v),
     }
-    for (key, src, dst) in [
-        ("LowLimit", &e.low_limit, &mut d.low_limit),
-        ("HighLimit", &e.high_limit, &mut d.high_limit),
-    ] {
-        match src {
-            None => {}
-            Some(EdsValue::Raw(s)) if s.is_empty() => {}
-            Some(v) => *dst = Some(to_value(ty, v, None).ok_or_else(|| bad(key, v))?),
-        }
-    }
+    d.low_limit = j.low;
+    d.high_limit = j.high;
     Ok(d)
 }
 
-/// Builds an object dictionary description from an EDS.
+/// The sub-objects of an ARRAY or RECORD as the dictionary holds them: a missing sub-index 0
+/// is added as CiA 301 defines it (UNSIGNED8, read-only, the highest sub-index), and an
+/// object without sub-objects gets that sub-index 0 alone.
+fn composite_subs(index: u16, o: &Object) -> Result<Vec<(u8, SubObject)>, ConvertError> {
+    let mut subs = o
+        .subs
+        .iter()
+        .map(|(&s, e)| sub_object(index, s, e).map(|d| (s, d)))
+        .collect::<Result<Vec<_>, _>>()?;
+    if !o.subs.contains_key(&0) {
+        let highest = o.subs.keys().next_back().copied().unwrap_or(0);
+        let s0 = SubObject::new(
+            "Highest sub-index supported",
+            DataType::Unsigned8,
+            Access::Ro,
+        )
+        .default(Value::Unsigned8(highest));
+        subs.insert(0, (0, s0));
+    }
+    Ok(subs)
+}
+
+/// The length in bits of a basic data type, the value a DEFTYPE entry holds (CiA 301
+/// §7.4.7.1); variable-length types hold 0.
+fn type_bits(index: u16) -> u32 {
+    DataType::from_index(index)
+        .and_then(DataType::fixed_size)
+        .map_or(0, |n| if index == 0x0001 { 1 } else { n as u32 * 8 })
+}
+
+/// Builds an object dictionary description from an EDS, as the file evidently means it
+/// (the judgement [`crate::Eds::check`] reports is the one applied here).
 ///
-/// VAR and DOMAIN objects become VARs, ARRAY and RECORD objects keep their sub-objects,
-/// `ObjFlags` and `CompactSubObj` carry over. Type definitions (NULL, DEFTYPE, DEFSTRUCT)
-/// are not values a device holds and are left out. `ParameterValue`s are not part of a
-/// description; see [`apply_parameter_values`].
+/// VAR and DOMAIN objects become VARs, ARRAY and RECORD objects keep their sub-objects (a
+/// VAR with sub-objects is held as a RECORD), `ObjFlags` and `CompactSubObj` carry over.
+/// DEFTYPE objects of the basic types (the dummy entries 0x0001..=0x0007 among them) are
+/// held as read-only UNSIGNED32 values with the type's length in bits (CiA 301 §7.4.7.1) and
+/// keep their object code. Values that do not fit their type, and limits that contradict
+/// each other, are left out; an undefined data type is held as DOMAIN; a missing or
+/// unreadable access type as read-only. Only an entry without any data type makes a
+/// dictionary impossible. NULL and DEFSTRUCT objects, and objects with an unknown object
+/// code, are left out. `ParameterValue`s are not part of a description; see
+/// [`apply_parameter_values`].
 pub fn to_od(eds: &Eds) -> Result<OdDescription, ConvertError> {
     let mut b = OdBuilder::new();
     for (&index, o) in &eds.objects {
         let code = o.object_code();
-        let composite = code == crate::ARRAY || code == crate::RECORD;
-        if !composite && code != crate::VAR && code != crate::DOMAIN {
+        if code == 0x5 {
+            if DataType::from_index(index).is_none() {
+                continue;
+            }
+            let mut d =
+                SubObject::unsigned32(o.entry.parameter_name.clone(), Access::Ro, type_bits(index));
+            d.access = Access::Const;
+            b = b.var(index, d).code(ObjectCode::DefType);
             continue;
         }
-        if composite {
-            let subs = o
-                .subs
-                .iter()
-                .map(|(&s, e)| sub_object(index, s, e).map(|d| (s, d)))
-                .collect::<Result<Vec<_>, _>>()?;
-            let name = o.entry.parameter_name.clone();
-            b = if code == crate::ARRAY {
-                b.array(index, name, subs)
-            } else {
-                b.record(index, name, subs)
-            };
+        let composite = code == crate::ARRAY || code == crate::RECORD;
+        let var_like = code == crate::VAR || code == crate::DOMAIN;
+        if !composite && !var_like {
+            continue;
+        }
+        let name = o.entry.parameter_name.clone();
+        if code == crate::ARRAY {
+            b = b.array(index, name, composite_subs(index, o)?);
+        } else if composite || !o.subs.is_empty() {
+            b = b.record(index, name, composite_subs(index, o)?);
         } else {
             b = b.var(index, sub_object(index, 0, &o.entry)?);
+            if code == crate::DOMAIN {
+                b = b.code(ObjectCode::Domain);
+            }
         }
         if let Some(f) = o.entry.obj_flags {
             b = b.flags(f);
@@ -177,7 +160,8 @@ pub fn to_od(eds: &Eds) -> Result<OdDescription, ConvertError> {
 
 /// Sets the DCF `ParameterValue`s into a device's values, `$NODEID` taken as the device's
 /// node-ID, as the device itself would (type and length checked, access not); returns how
-/// many were set.
+/// many were set. A value [`crate::Eds::check`] reports as not fitting its entry is left
+/// out, as [`to_od`] leaves out such a default; one the device refuses is an error.
 pub fn apply_parameter_values(eds: &Eds, od: &mut ObjectDictionary) -> Result<usize, ConvertError> {
     let node_id = od.node_id();
     let mut n = 0;
@@ -186,20 +170,23 @@ pub fn apply_parameter_values(eds: &Eds, od: &mut ObjectDictionary) -> Result<us
             let Some(v) = &e.parameter_value else {
                 continue;
             };
-            let bad = || ConvertError::Value {
-                index,
-                sub,
-                key: "ParameterValue",
-                value: v.to_text(e.data_type),
+            let Some(value) = judged_value(e, v, node_id) else {
+                continue;
             };
-            let ty = e.data_type.and_then(DataType::from_index).ok_or_else(bad)?;
-            let value = to_value(ty, v, Some(node_id)).ok_or_else(bad)?;
             od.set(index, sub, &value)
                 .map_err(|abort| ConvertError::Apply { index, sub, abort })?;
             n += 1;
         }
     }
     Ok(n)
+}
+
+/// `v` (a value of entry `e`) as the dictionary holds it on node `node_id`, if the judgement
+/// of the entry keeps it.
+fn judged_value(e: &Entry, v: &EdsValue, node_id: u8) -> Option<Value> {
+    DataType::from_index(e.data_type?)?;
+    let ty = judge(e, true).ty?;
+    value_of(ty, v, node_id).ok().flatten()
 }
 
 fn entry_of(code: Option<u8>, d: &SubObject) -> Entry {
@@ -348,4 +335,69 @@ pub fn to_dcf(eds: &Eds, od: &ObjectDictionary, commissioning: crate::DeviceComm
     }
     dcf.commissioning = Some(commissioning);
     dcf
+}
+
+/// The DCF of node `node_id` made from an EDS or a DCF, without a device: each entry's
+/// `ParameterValue` is its value on that node — the file's own `ParameterValue` where it has
+/// one (a DCF given as input keeps its configuration), else its `DefaultValue` — with
+/// `$NODEID` resolved, as [`crate::Eds::check`] judges it. An entry with neither, or whose
+/// value the judgement leaves out, gets no `ParameterValue` and a note: a value is never
+/// invented (a zero could lie outside the entry's limits). Text is kept as written.
+pub fn commission(
+    eds: &Eds,
+    node_id: u8,
+    commissioning: crate::DeviceCommissioning,
+) -> (Eds, Vec<Issue>) {
+    let mut dcf = eds.clone();
+    let mut notes = Vec::new();
+    for (&index, o) in dcf.objects.iter_mut() {
+        let code = o.object_code();
+        if !matches!(
+            code,
+            crate::VAR | crate::DOMAIN | crate::ARRAY | crate::RECORD
+        ) {
+            continue;
+        }
+        let single = o.subs.is_empty();
+        let entries: Vec<(u8, &mut Entry)> = if single {
+            vec![(0, &mut o.entry)]
+        } else {
+            o.subs.iter_mut().map(|(s, e)| (*s, e)).collect()
+        };
+        for (sub, e) in entries {
+            let section = if single {
+                format!("{index:04X}")
+            } else {
+                format!("{index:04X}sub{sub:X}")
+            };
+            let source = e
+                .parameter_value
+                .clone()
+                .or_else(|| e.default_value.clone());
+            let value = source.as_ref().and_then(|v| {
+                let resolved = judged_value(e, v, node_id)?;
+                Some(match v {
+                    EdsValue::NodeId(_) => from_value(&resolved),
+                    other => other.clone(),
+                })
+            });
+            if value.is_none() {
+                let why = if source.is_some() {
+                    "the value does not fit the entry; left unset"
+                } else {
+                    "no DefaultValue and no ParameterValue; left unset"
+                };
+                notes.push(Issue {
+                    severity: Severity::Note,
+                    line: None,
+                    section,
+                    key: Some("ParameterValue".to_owned()),
+                    message: why.to_owned(),
+                });
+            }
+            e.parameter_value = value;
+        }
+    }
+    dcf.commissioning = Some(commissioning);
+    (dcf, notes)
 }

@@ -1,11 +1,12 @@
 //! From INI sections to the typed model (CiA 306 EDS, with the DCF additions).
 
+use crate::check::{Report, Severity};
 use crate::error::{ParseError, ParseErrorKind};
 use crate::ini::{RawEntry, RawSection, tokenize};
 use crate::model::{DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, Section};
 use crate::value::{EdsValue, parse_integer};
 use cantwin_canopen::od::Access;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// What a section name says the section is.
 enum Kind {
@@ -93,14 +94,37 @@ fn classify(name: &str) -> Kind {
     }
 }
 
-fn int_of<T: TryFrom<i128>>(
+/// What the parser found, in file order.
+struct Found(crate::ini::Found);
+
+impl Found {
+    fn push(&mut self, severity: Severity, e: ParseError) {
+        self.0.push((severity, e));
+    }
+}
+
+fn int_of<T: TryFrom<i128>>(e: &RawEntry) -> Option<T> {
+    parse_integer(&e.value).and_then(|v| T::try_from(v).ok())
+}
+
+/// Reads an integer key; what cannot be read is an error, kept among the extra keys so that
+/// it is written back as found.
+fn int_key<T: TryFrom<i128>>(
+    f: &mut Found,
     sec: &RawSection,
     e: &RawEntry,
     expected: &str,
-) -> Result<T, ParseError> {
-    parse_integer(&e.value)
-        .and_then(|v| T::try_from(v).ok())
-        .ok_or_else(|| ParseError::invalid(e.line, &sec.name, &e.key, &e.value, expected))
+    extra: &mut Vec<(String, String)>,
+) -> Option<T> {
+    let v = int_of(e);
+    if v.is_none() {
+        f.push(
+            Severity::Error,
+            ParseError::invalid(e.line, &sec.name, &e.key, &e.value, expected),
+        );
+        extra.push((e.key.clone(), e.value.clone()));
+    }
+    v
 }
 
 fn missing(sec: &RawSection, key: &str) -> ParseError {
@@ -109,19 +133,29 @@ fn missing(sec: &RawSection, key: &str) -> ParseError {
         .with_key(key)
 }
 
-/// Parses a section of `count_key=n` and numbered entries into the entries by number; the
-/// numbers must be exactly `first..first+n` when `dense`, or any `n` distinct numbers.
+/// Reads a section of `count_key=n` and numbered entries into the entries by number.
+///
+/// CiA 306 wants exactly `n` entries numbered `1..=n`; files in the field state counts that
+/// disagree with what they list (`SupportedObjects=0` followed by `1=0x2000`). What is
+/// listed is what the file means: every numbered entry is taken, and a missing or
+/// disagreeing count is a warning. A key that is not a number is a warning and skipped.
 fn numbered<'a>(
+    f: &mut Found,
     sec: &'a RawSection,
     count_key: &str,
     key_prefix: &str,
-    dense: bool,
-) -> Result<BTreeMap<u32, &'a RawEntry>, ParseError> {
-    let mut count: Option<u32> = None;
+) -> BTreeMap<u32, &'a RawEntry> {
+    let mut count: Option<(u32, usize)> = None;
     let mut out = BTreeMap::new();
     for e in &sec.entries {
         if e.key.eq_ignore_ascii_case(count_key) {
-            count = Some(int_of(sec, e, "a count")?);
+            match int_of::<u32>(e) {
+                Some(n) => count = Some((n, e.line)),
+                None => f.push(
+                    Severity::Warning,
+                    ParseError::invalid(e.line, &sec.name, &e.key, &e.value, "a count"),
+                ),
+            }
             continue;
         }
         let num = e
@@ -132,55 +166,78 @@ fn numbered<'a>(
             .filter(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
             .and_then(|n| n.parse::<u32>().ok());
         let Some(num) = num else {
-            let what = format!("`{count_key}` or `{key_prefix}<number>`");
-            return Err(ParseError::invalid(
-                e.line, &sec.name, &e.key, &e.key, &what,
-            ));
+            let what = format!("`{count_key}` or `{key_prefix}<number>`; skipped");
+            f.push(
+                Severity::Warning,
+                ParseError::invalid(e.line, &sec.name, &e.key, &e.key, &what),
+            );
+            continue;
         };
         out.insert(num, e);
     }
-    let Some(count) = count else {
-        return Err(missing(sec, count_key));
-    };
-    if dense {
-        if let Some((&k, e)) = out.iter().find(|(k, _)| **k == 0 || **k > count) {
-            return Err(ParseError::at(e.line, ParseErrorKind::ListEntry(k))
-                .in_section(&sec.name)
-                .with_key(&e.key));
-        }
-        if let Some(k) = (1..=count).find(|k| !out.contains_key(k)) {
-            return Err(ParseError::at(sec.line, ParseErrorKind::ListEntry(k))
-                .in_section(&sec.name)
-                .with_key(count_key));
-        }
-    } else if out.len() != count as usize {
-        let e = sec.get(count_key).map_or(sec.line, |e| e.line);
-        return Err(ParseError::invalid(
-            e,
-            &sec.name,
-            count_key,
-            &count.to_string(),
-            &format!("the number of entries ({})", out.len()),
-        ));
+    match count {
+        None => f.push(Severity::Warning, missing(sec, count_key)),
+        Some((n, line)) if n as usize != out.len() => f.push(
+            Severity::Warning,
+            ParseError::at(
+                line,
+                ParseErrorKind::Count {
+                    stated: n,
+                    listed: out.len(),
+                },
+            )
+            .in_section(&sec.name)
+            .with_key(count_key),
+        ),
+        Some(_) => {}
     }
-    Ok(out)
+    out
 }
 
-fn index_value(sec: &RawSection, e: &RawEntry) -> Result<u16, ParseError> {
-    int_of(sec, e, "an object index 0x0000..=0xFFFF")
+/// The object indices of an object list or `ObjectLinks` section, in listed order; an entry
+/// that is not an index is an error and skipped.
+fn index_list(f: &mut Found, sec: &RawSection, count_key: &str) -> Vec<u16> {
+    let entries = numbered(f, sec, count_key, "");
+    entries
+        .into_values()
+        .filter_map(|e| {
+            let v = int_of::<u16>(e);
+            if v.is_none() {
+                f.push(
+                    Severity::Error,
+                    ParseError::invalid(
+                        e.line,
+                        &sec.name,
+                        &e.key,
+                        &e.value,
+                        "an object index 0x0000..=0xFFFF; skipped",
+                    ),
+                );
+            }
+            v
+        })
+        .collect()
 }
 
-fn parse_entry(sec: &RawSection) -> Result<(Entry, Option<u8>, Option<u8>), ParseError> {
+fn parse_entry(f: &mut Found, sec: &RawSection) -> (Entry, Option<u8>, Option<u8>) {
     let mut entry = Entry::default();
-    let data_type: Option<u16> = match sec.get("DataType") {
-        Some(e) => Some(int_of(sec, e, "a data type index")?),
-        None => None,
-    };
+    let mut extra = Vec::new();
+    let data_type: Option<u16> = sec
+        .get("DataType")
+        .and_then(|e| int_key(f, sec, e, "a data type index", &mut extra));
     let mut name = None;
     let (mut sub_number, mut compact) = (None, None);
-    let value = |e: &RawEntry| {
-        EdsValue::parse(data_type, &e.value)
-            .map_err(|exp| ParseError::invalid(e.line, &sec.name, &e.key, &e.value, exp))
+    let value = |f: &mut Found, e: &RawEntry| {
+        let (v, note) = EdsValue::read(data_type, &e.value);
+        if let Some(note) = note {
+            f.push(
+                Severity::Note,
+                ParseError::at(e.line, ParseErrorKind::Interpreted(note.to_owned()))
+                    .in_section(&sec.name)
+                    .with_key(&e.key),
+            );
+        }
+        Some(v)
     };
     for e in &sec.entries {
         let k = e.key.as_str();
@@ -188,39 +245,47 @@ fn parse_entry(sec: &RawSection) -> Result<(Entry, Option<u8>, Option<u8>), Pars
         if is("ParameterName") {
             name = Some(e.value.clone());
         } else if is("ObjectType") {
-            entry.object_type = Some(int_of(sec, e, "an object code")?);
+            entry.object_type = int_key(f, sec, e, "an object code", &mut extra);
         } else if is("DataType") {
             entry.data_type = data_type;
         } else if is("AccessType") {
-            entry.access_type = Some(Access::from_eds_name(&e.value).ok_or_else(|| {
-                ParseError::invalid(
-                    e.line,
-                    &sec.name,
-                    k,
-                    &e.value,
-                    "ro, wo, rw, rwr, rww or const",
-                )
-            })?);
+            entry.access_type = Access::from_eds_name(&e.value);
+            if entry.access_type.is_none() {
+                f.push(
+                    Severity::Error,
+                    ParseError::invalid(
+                        e.line,
+                        &sec.name,
+                        k,
+                        &e.value,
+                        "ro, wo, rw, rwr, rww or const; held as ro",
+                    ),
+                );
+                extra.push((e.key.clone(), e.value.clone()));
+            }
         } else if is("DefaultValue") {
-            entry.default_value = Some(value(e)?);
+            entry.default_value = value(f, e);
         } else if is("LowLimit") {
-            entry.low_limit = Some(value(e)?);
+            entry.low_limit = value(f, e);
         } else if is("HighLimit") {
-            entry.high_limit = Some(value(e)?);
+            entry.high_limit = value(f, e);
         } else if is("ParameterValue") {
-            entry.parameter_value = Some(value(e)?);
+            entry.parameter_value = value(f, e);
         } else if is("PDOMapping") {
-            entry.pdo_mapping = Some(match parse_integer(&e.value) {
-                Some(0) => false,
-                Some(1) => true,
+            entry.pdo_mapping = match int_of::<u8>(e) {
+                Some(0) => Some(false),
+                Some(1) => Some(true),
                 _ => {
-                    return Err(ParseError::invalid(
-                        e.line, &sec.name, k, &e.value, "0 or 1",
-                    ));
+                    f.push(
+                        Severity::Error,
+                        ParseError::invalid(e.line, &sec.name, k, &e.value, "0 or 1; taken as 0"),
+                    );
+                    extra.push((e.key.clone(), e.value.clone()));
+                    None
                 }
-            });
+            };
         } else if is("ObjFlags") {
-            entry.obj_flags = Some(int_of(sec, e, "an UNSIGNED32")?);
+            entry.obj_flags = int_key(f, sec, e, "an UNSIGNED32", &mut extra);
         } else if is("Denotation") {
             entry.denotation = Some(e.value.clone());
         } else if is("UploadFile") {
@@ -228,15 +293,19 @@ fn parse_entry(sec: &RawSection) -> Result<(Entry, Option<u8>, Option<u8>), Pars
         } else if is("DownloadFile") {
             entry.download_file = Some(e.value.clone());
         } else if is("SubNumber") {
-            sub_number = Some(int_of(sec, e, "a number of sub-objects 0..=255")?);
+            sub_number = int_key(f, sec, e, "a number of sub-objects 0..=255", &mut extra);
         } else if is("CompactSubObj") {
-            compact = Some(int_of(sec, e, "a number of sub-objects 0..=255")?);
+            compact = int_key(f, sec, e, "a number of sub-objects 0..=255", &mut extra);
         } else {
-            entry.extra.push((e.key.clone(), e.value.clone()));
+            extra.push((e.key.clone(), e.value.clone()));
         }
     }
-    entry.parameter_name = name.ok_or_else(|| missing(sec, "ParameterName"))?;
-    Ok((entry, sub_number, compact))
+    entry.extra = extra;
+    entry.parameter_name = name.unwrap_or_else(|| {
+        f.push(Severity::Warning, missing(sec, "ParameterName"));
+        String::new()
+    });
+    (entry, sub_number, compact)
 }
 
 /// The sub-objects `CompactSubObj=n` stands for (CiA 306 compact storage): sub-index 0 "NrOfObjects"
@@ -291,20 +360,27 @@ pub(crate) fn expand_compact(
 
 /// Entries of a `[xxxxName]`, `[xxxxValue]` or `[xxxxDenotation]` section keyed by
 /// sub-index (decimal keys, `NrOfEntries` of them).
-fn by_sub(sec: &RawSection) -> Result<BTreeMap<u8, &RawEntry>, ParseError> {
-    let m = numbered(sec, "NrOfEntries", "", false)?;
-    m.into_iter()
-        .map(|(k, e)| match u8::try_from(k) {
-            Ok(s) => Ok((s, e)),
-            Err(_) => Err(ParseError::invalid(
-                e.line,
-                &sec.name,
-                &e.key,
-                &e.key,
-                "a sub-index 0..=255",
-            )),
-        })
-        .collect()
+fn by_sub<'a>(f: &mut Found, sec: &'a RawSection) -> BTreeMap<u8, &'a RawEntry> {
+    let m = numbered(f, sec, "NrOfEntries", "");
+    let mut out = BTreeMap::new();
+    for (k, e) in m {
+        match u8::try_from(k) {
+            Ok(s) => {
+                out.insert(s, e);
+            }
+            Err(_) => f.push(
+                Severity::Warning,
+                ParseError::invalid(
+                    e.line,
+                    &sec.name,
+                    &e.key,
+                    &e.key,
+                    "a sub-index 0..=255; skipped",
+                ),
+            ),
+        }
+    }
+    out
 }
 
 /// Decodes bytes: UTF-8 if valid, else ISO 8859-1 (each byte one character), the encoding
@@ -316,27 +392,129 @@ pub fn decode(bytes: &[u8]) -> String {
     }
 }
 
-/// Parses an EDS or DCF file.
+/// An EDS or DCF file read as far as it can be, with what was found on the way.
+#[derive(Debug, Clone)]
+pub struct Loaded {
+    /// The file's content.
+    pub eds: Eds,
+    /// Every diagnostic: what the parser read past or guessed, then [`Eds::check`]'s
+    /// findings, each with its line where the file has one.
+    pub report: Report,
+}
+
+/// Reads an EDS or DCF file the way the files in the field are written: nothing is refused.
+/// What CiA 306 does not allow, or what had to be guessed, is a diagnostic in
+/// [`Loaded::report`] naming line, section and key; [`crate::to_od`] then builds the
+/// dictionary from what the file evidently means. The same report is what
+/// `cantwin eds check` prints.
+pub fn load(text: &str) -> Loaded {
+    let (eds, found, sections) = read(text);
+    let mut report = Report::default();
+    for (severity, e) in found {
+        report.push_parse(severity, &e);
+    }
+    let lines = SourceLines::new(&sections);
+    for mut issue in eds.check().issues {
+        issue.line = lines.find(&issue.section, issue.key.as_deref());
+        report.issues.push(issue);
+    }
+    Loaded { eds, report }
+}
+
+/// [`load`] of bytes: UTF-8 when valid, ISO 8859-1 otherwise (see [`decode`]).
+pub fn load_bytes(bytes: &[u8]) -> Loaded {
+    load(&decode(bytes))
+}
+
+/// Parses an EDS or DCF file, refusing it at the first error the parser reads past (a
+/// malformed line, a duplicate, a key whose value cannot be read); warnings and notes do not
+/// refuse it. [`load`] reads every file and reports instead.
 pub fn parse(text: &str) -> Result<Eds, ParseError> {
-    let sections = tokenize(text)?;
+    let (eds, found, _) = read(text);
+    match found.into_iter().find(|(s, _)| *s == Severity::Error) {
+        Some((_, e)) => Err(e),
+        None => Ok(eds),
+    }
+}
+
+/// Where each section and key is in the file, by the names [`Eds::check`] gives them
+/// (`1018sub1` for `[1018SUB01]`).
+struct SourceLines(HashMap<String, (usize, Vec<(String, usize)>)>);
+
+impl SourceLines {
+    fn canonical(name: &str) -> String {
+        match classify(name) {
+            Kind::Object(i) => format!("{i:04X}"),
+            Kind::Sub(i, s) => format!("{i:04X}sub{s:X}"),
+            _ => name.to_ascii_lowercase(),
+        }
+    }
+
+    fn new(sections: &[RawSection]) -> Self {
+        SourceLines(
+            sections
+                .iter()
+                .map(|s| {
+                    let keys = s.entries.iter().map(|e| (e.key.clone(), e.line)).collect();
+                    (Self::canonical(&s.name), (s.line, keys))
+                })
+                .collect(),
+        )
+    }
+
+    fn find(&self, section: &str, key: Option<&str>) -> Option<usize> {
+        let (line, keys) = self.0.get(&Self::canonical(section))?;
+        let at_key = key.and_then(|k| {
+            keys.iter()
+                .find(|(n, _)| n.eq_ignore_ascii_case(k))
+                .map(|(_, l)| *l)
+        });
+        Some(at_key.unwrap_or(*line))
+    }
+}
+
+fn read(text: &str) -> (Eds, crate::ini::Found, Vec<RawSection>) {
+    let (sections, found) = tokenize(text);
+    let mut f = Found(found);
+    let eds = build(&mut f, &sections);
+    (eds, f.0, sections)
+}
+
+/// A typed `[FileInfo]`/`[DeviceInfo]`/`[DeviceComissioning]` section: a key whose value
+/// cannot be read is a warning and kept as an extra key.
+fn keyed<T>(
+    f: &mut Found,
+    sec: &RawSection,
+    from_raw: impl Fn(&RawSection) -> (T, Vec<ParseError>),
+) -> T {
+    let (v, bad) = from_raw(sec);
+    for e in bad {
+        f.push(Severity::Warning, e);
+    }
+    v
+}
+
+fn build(f: &mut Found, sections: &[RawSection]) -> Eds {
     let mut eds = Eds::default();
     let mut subs: Vec<(u16, u8, &RawSection)> = Vec::new();
     let mut helpers: Vec<(u8, u16, &RawSection)> = Vec::new();
     let mut commissioning_line = None;
-    for sec in &sections {
+    for sec in sections {
         match classify(&sec.name) {
-            Kind::FileInfo => eds.file_info = FileInfo::from_raw(sec)?,
-            Kind::DeviceInfo => eds.device_info = DeviceInfo::from_raw(sec)?,
+            Kind::FileInfo => eds.file_info = keyed(f, sec, FileInfo::from_raw),
+            Kind::DeviceInfo => eds.device_info = keyed(f, sec, DeviceInfo::from_raw),
             Kind::Commissioning => {
                 // Both spellings in one file would be two commissioning sections.
                 if let Some(first) = commissioning_line {
-                    return Err(
+                    f.push(
+                        Severity::Error,
                         ParseError::at(sec.line, ParseErrorKind::DuplicateSection(first))
                             .in_section(&sec.name),
                     );
+                    continue;
                 }
                 commissioning_line = Some(sec.line);
-                eds.commissioning = Some(DeviceCommissioning::from_raw(sec)?);
+                eds.commissioning = Some(keyed(f, sec, DeviceCommissioning::from_raw));
             }
             Kind::DummyUsage => {
                 let mut map = BTreeMap::new();
@@ -346,39 +524,47 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
                         .get(..5)
                         .filter(|p| p.eq_ignore_ascii_case("Dummy"))
                         .and_then(|_| e.key.get(5..))
-                        .and_then(hex4)
-                        .ok_or_else(|| {
+                        .and_then(hex4);
+                    let Some(ty) = ty else {
+                        f.push(
+                            Severity::Warning,
                             ParseError::invalid(
                                 e.line,
                                 &sec.name,
                                 &e.key,
                                 &e.key,
-                                "a key `Dummyxxxx`",
-                            )
-                        })?;
-                    let on = match parse_integer(&e.value) {
-                        Some(0) => false,
-                        Some(1) => true,
-                        _ => {
-                            return Err(ParseError::invalid(
-                                e.line, &sec.name, &e.key, &e.value, "0 or 1",
-                            ));
-                        }
+                                "a key `Dummyxxxx`; skipped",
+                            ),
+                        );
+                        continue;
                     };
-                    map.insert(ty, on);
+                    match int_of::<u8>(e) {
+                        Some(0) => {
+                            map.insert(ty, false);
+                        }
+                        Some(1) => {
+                            map.insert(ty, true);
+                        }
+                        _ => f.push(
+                            Severity::Error,
+                            ParseError::invalid(
+                                e.line,
+                                &sec.name,
+                                &e.key,
+                                &e.value,
+                                "0 or 1; skipped",
+                            ),
+                        ),
+                    }
                 }
                 eds.dummy_usage = Some(map);
             }
             Kind::Comments => {
-                let lines = numbered(sec, "Lines", "Line", true)?;
+                let lines = numbered(f, sec, "Lines", "Line");
                 eds.comments = Some(lines.into_values().map(|e| e.value.clone()).collect());
             }
             Kind::List(which) => {
-                let entries = numbered(sec, "SupportedObjects", "", true)?;
-                let list = entries
-                    .into_values()
-                    .map(|e| index_value(sec, e))
-                    .collect::<Result<Vec<u16>, _>>()?;
+                let list = index_list(f, sec, "SupportedObjects");
                 match which {
                     0 => eds.mandatory_objects = list,
                     1 => eds.optional_objects = list,
@@ -386,7 +572,7 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
                 }
             }
             Kind::Object(index) => {
-                let (entry, sub_number, compact_sub_obj) = parse_entry(sec)?;
+                let (entry, sub_number, compact_sub_obj) = parse_entry(f, sec);
                 eds.objects.insert(
                     index,
                     Object {
@@ -402,11 +588,7 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
             Kind::Values(i) => helpers.push((1, i, sec)),
             Kind::Denotations(i) => helpers.push((2, i, sec)),
             Kind::Links(index) => {
-                let entries = numbered(sec, "ObjectLinks", "", true)?;
-                let list = entries
-                    .into_values()
-                    .map(|e| index_value(sec, e))
-                    .collect::<Result<Vec<u16>, _>>()?;
+                let list = index_list(f, sec, "ObjectLinks");
                 eds.object_links.insert(index, list);
             }
             Kind::Other => eds.other_sections.push(Section {
@@ -424,23 +606,36 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
     for (index, sub, sec) in subs {
         // `[1000sub1]` and `[1000sub01]` name the same sub-object.
         if let Some(first) = sub_lines.insert((index, sub), sec.line) {
-            return Err(
+            f.push(
+                Severity::Error,
                 ParseError::at(sec.line, ParseErrorKind::DuplicateSection(first))
                     .in_section(&sec.name),
             );
+            continue;
         }
-        let Some(obj) = eds.objects.get_mut(&index) else {
-            return Err(
-                ParseError::at(sec.line, ParseErrorKind::NoObject(index)).in_section(&sec.name)
+        let obj = eds.objects.entry(index).or_insert_with(|| {
+            // The sub-objects say the object is there: a RECORD, the object code that
+            // allows sub-objects of any type.
+            f.push(
+                Severity::Warning,
+                ParseError::at(sec.line, ParseErrorKind::NoObject(index)).in_section(&sec.name),
             );
-        };
+            Object {
+                entry: Entry {
+                    object_type: Some(crate::RECORD),
+                    ..Entry::default()
+                },
+                ..Object::default()
+            }
+        });
         if obj.compact_sub_obj.is_some() {
-            return Err(
+            f.push(
+                Severity::Warning,
                 ParseError::at(sec.line, ParseErrorKind::CompactWithSubs(index))
                     .in_section(&sec.name),
             );
         }
-        let (entry, sub_number, compact) = parse_entry(sec)?;
+        let (entry, sub_number, compact) = parse_entry(f, sec);
         // SubNumber and CompactSubObj have no meaning on a sub-object; keep them as written.
         let mut entry = entry;
         if let Some(n) = sub_number {
@@ -453,11 +648,11 @@ pub fn parse(text: &str) -> Result<Eds, ParseError> {
         }
         obj.subs.insert(sub, entry);
     }
-    expand_all(&mut eds, &helpers)?;
-    Ok(eds)
+    expand_all(f, &mut eds, &helpers);
+    eds
 }
 
-fn expand_all(eds: &mut Eds, helpers: &[(u8, u16, &RawSection)]) -> Result<(), ParseError> {
+fn expand_all(f: &mut Found, eds: &mut Eds, helpers: &[(u8, u16, &RawSection)]) {
     let mut names: BTreeMap<u16, BTreeMap<u8, String>> = BTreeMap::new();
     let mut values: BTreeMap<u16, BTreeMap<u8, EdsValue>> = BTreeMap::new();
     let mut denots: BTreeMap<u16, BTreeMap<u8, String>> = BTreeMap::new();
@@ -478,7 +673,8 @@ fn expand_all(eds: &mut Eds, helpers: &[(u8, u16, &RawSection)]) -> Result<(), P
             });
             continue;
         };
-        let entries = by_sub(sec)?;
+        let dt = obj.entry.data_type;
+        let entries = by_sub(f, sec);
         match what {
             0 => {
                 names.insert(
@@ -490,14 +686,10 @@ fn expand_all(eds: &mut Eds, helpers: &[(u8, u16, &RawSection)]) -> Result<(), P
                 );
             }
             1 => {
-                let dt = obj.entry.data_type;
-                let mut m = BTreeMap::new();
-                for (s, e) in entries {
-                    let v = EdsValue::parse(dt, &e.value).map_err(|exp| {
-                        ParseError::invalid(e.line, &sec.name, &e.key, &e.value, exp)
-                    })?;
-                    m.insert(s, v);
-                }
+                let m = entries
+                    .into_iter()
+                    .map(|(s, e)| (s, EdsValue::read(dt, &e.value).0))
+                    .collect();
                 values.insert(index, m);
             }
             _ => {
@@ -515,14 +707,17 @@ fn expand_all(eds: &mut Eds, helpers: &[(u8, u16, &RawSection)]) -> Result<(), P
     let empty_v = BTreeMap::new();
     for (index, obj) in eds.objects.iter_mut() {
         if let Some(n) = obj.compact_sub_obj {
-            obj.subs = expand_compact(
+            let mut subs = expand_compact(
                 &obj.entry,
                 n,
                 names.get(index).unwrap_or(&empty_s),
                 values.get(index).unwrap_or(&empty_v),
                 denots.get(index).unwrap_or(&empty_s),
             );
+            // Sub-object sections beside `CompactSubObj` say more about those sub-objects
+            // than the compact description: they are taken as written.
+            subs.extend(std::mem::take(&mut obj.subs));
+            obj.subs = subs;
         }
     }
-    Ok(())
 }

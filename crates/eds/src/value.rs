@@ -188,6 +188,36 @@ impl EdsValue {
         }
     }
 
+    /// Reads a value as a file states it, never refusing: what does not have the form of the
+    /// type is kept as [`EdsValue::Raw`] text (judged, and reported, by [`crate::Eds::check`]
+    /// and left out by [`crate::to_od`]). The note says what was read with a guess: lely's
+    /// quoted strings (`"text"`) lose their quotes, and an OCTET_STRING or DOMAIN written as
+    /// `@` and text (`@ABCD`) is read as the bytes of the text.
+    pub fn read(data_type: Option<u16>, text: &str) -> (EdsValue, Option<&'static str>) {
+        let t = text.trim();
+        match data_type.and_then(DataType::from_index) {
+            Some(DataType::VisibleString | DataType::UnicodeString)
+                if t.len() >= 2 && t.starts_with('"') && t.ends_with('"') =>
+            {
+                return (
+                    EdsValue::Text(t[1..t.len() - 1].to_owned()),
+                    Some("quoted text: read without the quotes"),
+                );
+            }
+            Some(DataType::OctetString | DataType::Domain) if t.starts_with('@') => {
+                return (
+                    EdsValue::Bytes(t.as_bytes()[1..].to_vec()),
+                    Some("`@` and text: read as the bytes of the text"),
+                );
+            }
+            _ => {}
+        }
+        match EdsValue::parse(data_type, t) {
+            Ok(v) => (v, None),
+            Err(_) => (EdsValue::Raw(t.to_owned()), None),
+        }
+    }
+
     /// The integer the value stands for on a device with this node-ID (`$NODEID` replaced);
     /// `None` for non-integers (and for a sum past the `i128` range).
     pub fn evaluate(&self, node_id: u8) -> Option<i128> {

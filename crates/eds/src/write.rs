@@ -76,38 +76,14 @@ fn entry_keys(e: &Entry, sub_number: Option<u8>, compact: Option<u8>) -> Vec<(St
     if let Some(f) = &e.download_file {
         v.push(kv("DownloadFile", f.as_str()));
     }
-    const TYPED: [&str; 15] = [
-        "ParameterName",
-        "ObjectType",
-        "DataType",
-        "AccessType",
-        "DefaultValue",
-        "PDOMapping",
-        "LowLimit",
-        "HighLimit",
-        "ObjFlags",
-        "ParameterValue",
-        "Denotation",
-        "UploadFile",
-        "DownloadFile",
-        "SubNumber",
-        "CompactSubObj",
-    ];
-    // An extra key that a typed field also writes is skipped so that no key appears twice;
-    // `SubNumber`/`CompactSubObj` kept among a sub-object's extra keys are written as found.
+    // An extra key is written unless a typed field already wrote one of that name (an
+    // unreadable value of a defined key is kept there and written back as found).
     for (k, x) in &e.extra {
-        if !TYPED.iter().any(|t| t.eq_ignore_ascii_case(k))
-            || (sub_number.is_none() && compact.is_none() && is_sub_only(k))
-        {
+        if !v.iter().any(|(w, _)| w.eq_ignore_ascii_case(k)) {
             v.push((k.clone(), x.clone()));
         }
     }
     v
-}
-
-/// `SubNumber`/`CompactSubObj` kept in a sub-object's extra keys (they have no meaning there).
-fn is_sub_only(k: &str) -> bool {
-    k.eq_ignore_ascii_case("SubNumber") || k.eq_ignore_ascii_case("CompactSubObj")
 }
 
 /// The names, values and denotations a compact object's sub-objects would be written with,

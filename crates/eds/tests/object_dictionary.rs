@@ -4,7 +4,7 @@
 
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::{
-    Access, DataType, ObjectDictionary, OdBuilder, OdDescription, SubObject, Value,
+    Access, DataType, ObjectCode, ObjectDictionary, OdBuilder, OdDescription, SubObject, Value,
 };
 use cantwin_eds::{
     ConvertError, DeviceInfo, EdsValue, FileInfo, apply_parameter_values, from_od, parse,
@@ -207,36 +207,45 @@ fn corpus_compact_arrays_stay_compact_in_the_dictionary() {
     assert_eq!(desc.get(0x6000, 2).unwrap().name, "Inputs 9-16");
     assert!(desc.get(0x6000, 2).unwrap().pdo_mappable);
     assert_eq!(desc.object(0x2000).unwrap().flags(), 1);
-    // The DEFTYPE object of the quirks file is a type definition, not a value.
+    // The DEFTYPE object of the quirks file is held with its code and the type's length in
+    // bits (CiA 301 §7.4.7.1).
     let q = to_od(&corpus("quirks.eds")).unwrap();
-    assert!(q.object(0x0002).is_none());
+    assert_eq!(q.object(0x0002).unwrap().code(), ObjectCode::DefType);
+    assert_eq!(
+        q.get(0x0002, 0).unwrap().default,
+        Some(Value::Unsigned32(8))
+    );
     assert!(q.object(0x1000).is_some());
 }
 
 #[test]
-fn conversion_errors_name_the_entry() {
+fn conversion_takes_the_evident_intent_and_fails_only_without_a_data_type() {
     let mut eds = corpus("drive.eds");
-    eds.objects
+    let e = eds
+        .objects
         .get_mut(&0x6048)
         .unwrap()
         .subs
         .get_mut(&2)
-        .unwrap()
-        .access_type = None;
-    assert_eq!(
-        to_od(&eds).err(),
-        Some(ConvertError::Access {
-            index: 0x6048,
-            sub: 2
-        })
-    );
+        .unwrap();
+    e.access_type = None;
+    let desc = to_od(&eds).unwrap();
+    assert_eq!(desc.get(0x6048, 2).unwrap().access, Access::Ro);
     let mut eds = corpus("drive.eds");
     eds.objects.get_mut(&0x2002).unwrap().entry.default_value = Some(EdsValue::Integer(2));
+    let desc = to_od(&eds).unwrap();
+    assert_eq!(desc.get(0x2002, 0).unwrap().default, None);
+    eds.objects.get_mut(&0x2002).unwrap().entry.data_type = None;
     let e = to_od(&eds).unwrap_err();
     assert_eq!(
-        e.to_string(),
-        "0x2002:0: DefaultValue \"2\" does not fit the data type"
+        e,
+        ConvertError::DataType {
+            index: 0x2002,
+            sub: 0,
+            data_type: None
+        }
     );
+    assert_eq!(e.to_string(), "0x2002:0: data type None is not supported");
 }
 
 /// The stack's own CiA 301 communication objects and PDO objects: the EDS of every CANopen
