@@ -364,7 +364,8 @@ fn manual_1003_newest_first_and_cleared_by_writing_0() {
     assert_eq!(read_u32(&mut c, ms(3), 0x1003, 2), Ok(0x0011_8110));
     assert_eq!(write(&mut c, ms(4), 0x1003, 0, &[0]), Ok(()));
     assert_eq!(read(&mut c, ms(5), 0x1003, 0), Ok(vec![0]));
-    assert_eq!(read_u32(&mut c, ms(5), 0x1003, 1), Ok(0));
+    // Cleared: sub 1 holds no error any more (CiA 301 §7.5.2.4).
+    assert_eq!(read_u32(&mut c, ms(5), 0x1003, 1), Err(0x0800_0024));
     // More than ten errors keep the ten newest.
     for k in 0..12u64 {
         event(&mut c, ms(10 + 2 * k), ControllerEvent::ErrorPassive);

@@ -46,8 +46,9 @@ fn manual_1001_1002_1003_start_empty() {
     assert_eq!(read_u32(&mut c, t, 0x1002, 0), Ok(0));
     assert_eq!(write(&mut c, t, 0x1002, 0, &[0; 4]), Err(READ_ONLY));
     assert_eq!(read(&mut c, t, 0x1003, 0), Ok(vec![0]));
+    // No error recorded: each entry is "no data available" (CiA 301 §7.5.2.4).
     for sub in 1..=10 {
-        assert_eq!(read_u32(&mut c, t, 0x1003, sub), Ok(0));
+        assert_eq!(read_u32(&mut c, t, 0x1003, sub), Err(0x0800_0024));
     }
     assert_eq!(read_u32(&mut c, t, 0x1003, 11), Err(NO_SUB));
     assert_eq!(write(&mut c, t, 0x1003, 1, &[0; 4]), Err(READ_ONLY));
