@@ -35,6 +35,15 @@ pub(crate) struct Delivery {
     pub at: AtomicU64,
 }
 
+/// A Python thread that acted on the simulation (sent a frame, changed a device) and has not
+/// waited since: the turn rule of virtual time (`crate::turns`).
+pub(crate) struct Acting {
+    /// Its `threading.get_ident()`.
+    pub thread: u64,
+    /// When it acted last (wall clock).
+    pub since: std::time::Instant,
+}
+
 /// The state of one simulation.
 pub(crate) struct Core {
     pub mode: Mode,
@@ -43,6 +52,8 @@ pub(crate) struct Core {
     /// How long (wall clock) a receiver in virtual time lets other Python threads answer a
     /// frame before it lets the simulation run past it.
     pub reaction_time: std::time::Duration,
+    /// The threads that acted and have not waited since (at most one entry per thread).
+    pub acting: Vec<Acting>,
 }
 
 /// What the simulation's objects share: the core and a condition variable signalled when
@@ -72,7 +83,40 @@ pub(crate) fn secs(seconds: f64) -> PyResult<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
+impl Shared {
+    /// Lock the core on behalf of the calling Python thread, which is about to act on the
+    /// simulation: bus time waits for it (`crate::turns`).
+    pub fn lock_acting(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Core>> {
+        let thread = crate::turns::thread_ident(py)?;
+        let mut core = self.lock();
+        core.acted(thread);
+        Ok(core)
+    }
+}
+
 impl Core {
+    /// Note that `thread` acted just now.
+    pub fn acted(&mut self, thread: u64) {
+        self.acting.retain(|a| a.thread != thread);
+        self.acting.push(Acting {
+            thread,
+            since: std::time::Instant::now(),
+        });
+    }
+
+    /// Note that `thread` waits now (in a receive, or letting bus time pass).
+    pub fn waits(&mut self, thread: u64) {
+        self.acting.retain(|a| a.thread != thread);
+    }
+
+    /// The threads bus time still waits for: those that acted less than the reaction time
+    /// ago and have not waited since (older entries are forgotten here).
+    pub fn acting_threads(&mut self) -> Vec<u64> {
+        let limit = self.reaction_time;
+        self.acting.retain(|a| a.since.elapsed() < limit);
+        self.acting.iter().map(|a| a.thread).collect()
+    }
+
     /// Run `f` on the simulation (in paced mode, brought up to the wall clock first).
     pub fn with_sim<R>(&mut self, f: impl FnOnce(&mut BusSim) -> R) -> PyResult<R> {
         match &mut self.mode {

@@ -11,6 +11,7 @@ mod core;
 mod devices;
 mod port;
 mod sim;
+mod turns;
 
 use pyo3::prelude::*;
 

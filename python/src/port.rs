@@ -128,7 +128,8 @@ fn closed() -> PyErr {
 
 impl Port {
     /// Queue `frame`, waiting up to `timeout` for room in the queue.
-    fn transmit(&self, frame: Frame, timeout: Duration) -> PyResult<()> {
+    /// `thread` is the sending Python thread: bus time waits for it to wait (`crate::turns`).
+    fn transmit(&self, frame: Frame, timeout: Duration, thread: u64) -> PyResult<()> {
         let port = self.port;
         let wall_deadline = std::time::Instant::now() + std::time::Duration::from(timeout);
         let mut bus_deadline = None;
@@ -146,9 +147,13 @@ impl Port {
                 let r = core
                     .with_sim(|sim| sim.transmit(port, frame))?
                     .map_err(|e| err(e.to_string()));
+                if r.is_ok() {
+                    core.acted(thread);
+                }
                 self.shared.delivery.pending.store(false, Ordering::Release);
-                drop(core);
-                self.shared.changed.notify_all();
+                // Receivers are woken by `send` once this thread holds the GIL again: the
+                // first look they take at it (`crate::turns`) then finds it on its way to
+                // its wait, not still inside this call.
                 return r;
             }
             match &mut core.mode {
@@ -179,15 +184,36 @@ impl Port {
     }
 
     /// Receive in either mode; `timeout` in seconds, `None` waits until a frame arrives.
+    /// `thread` is the receiving Python thread, which waits from now on.
     fn receive(
         &self,
         timeout: Option<Duration>,
         wait_for_answers: bool,
+        thread: u64,
     ) -> PyResult<Option<Received>> {
         let wall_deadline = timeout.map(|t| std::time::Instant::now() + t.into());
         let mut core = self.shared.lock();
+        core.waits(thread);
         let mut bus_deadline: Option<Option<Instant>> = None;
+        // A frame the pacing thread delivered while a thread that acted had not waited yet.
+        let mut held: Option<Received> = None;
         loop {
+            // The turn rule (`crate::turns`): neither run the simulation nor hand over a frame
+            // while a thread that acted has not reached its wait. Checked under the same lock
+            // that the simulation then runs under, so no act slips in between; a thread that
+            // keeps acting delays each step by at most the reaction time.
+            if !core.acting_threads().is_empty() {
+                let limit = std::time::Instant::now() + core.reaction_time;
+                drop(core);
+                let all_wait = crate::turns::settle(&self.shared, limit);
+                core = self.shared.lock();
+                if all_wait {
+                    continue;
+                }
+            }
+            if let Some(r) = held.take() {
+                return Ok(Some(r));
+            }
             if let Some(r) = self.take()? {
                 return Ok(Some(r));
             }
@@ -208,10 +234,8 @@ impl Port {
                         .rx
                         .recv_timeout(left.min(std::time::Duration::from_millis(100)))
                         .map_err(|RxClosed| closed())?;
-                    if let Some(r) = waited {
-                        return Ok(Some(r));
-                    }
                     core = self.shared.lock();
+                    held = waited;
                     continue;
                 }
             };
@@ -313,7 +337,10 @@ impl Port {
         }
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
         let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
-        py.detach(|| self.transmit(frame, timeout))
+        let thread = crate::turns::thread_ident(py)?;
+        let r = py.detach(|| self.transmit(frame, timeout, thread));
+        self.shared.changed.notify_all();
+        r
     }
 
     /// The next frame as ``(arbitration_id, extended, remote, dlc, data, time)`` (time: bus time
@@ -330,7 +357,8 @@ impl Port {
         wait_for_answers: bool,
     ) -> PyResult<Option<PyFrame>> {
         let timeout = timeout.map(secs).transpose()?;
-        py.detach(|| self.receive(timeout, wait_for_answers))
+        let thread = crate::turns::thread_ident(py)?;
+        py.detach(|| self.receive(timeout, wait_for_answers, thread))
             .map(|r| r.map(to_py))
     }
 

@@ -42,6 +42,7 @@ fn build(
         buses: built.buses,
         devices: built.devices,
         reaction_time,
+        acting: Vec::new(),
     };
     Ok(Simulation {
         shared: Arc::new(Shared {
@@ -137,9 +138,12 @@ impl Simulation {
     /// span at once; paced, it waits that long on the wall clock while the simulation runs.
     fn advance(&self, py: Python<'_>, seconds: f64) -> PyResult<()> {
         let d = secs(seconds)?;
+        let thread = crate::turns::thread_ident(py)?;
         let shared = Arc::clone(&self.shared);
         py.detach(move || {
             let mut core = shared.lock();
+            // The caller lets time pass itself: it waits (`crate::turns`).
+            core.waits(thread);
             match &mut core.mode {
                 Mode::Virtual(sim) => {
                     sim.run_for(d);
@@ -223,8 +227,15 @@ impl Simulation {
     /// Store `data` (little-endian, the object's size) in object `index`/`sub` of `device`
     /// as the device's own application does: no access check, event-driven TPDOs mapping the
     /// object become due.
-    fn write_object(&self, device: &str, index: u16, sub: u8, data: &[u8]) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn write_object(
+        &self,
+        py: Python<'_>,
+        device: &str,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::write_object(&mut core, device, index, sub, data)
     }
 
@@ -233,12 +244,13 @@ impl Simulation {
     #[pyo3(signature = (device, channel, on, *, module=None))]
     fn set_digital_input(
         &self,
+        py: Python<'_>,
         device: &str,
         channel: u8,
         on: bool,
         module: Option<usize>,
     ) -> PyResult<()> {
-        let mut core = self.shared.lock();
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::set_digital_input(&mut core, device, channel, on, module)
     }
 
@@ -247,12 +259,13 @@ impl Simulation {
     #[pyo3(signature = (device, channel, value, *, module=None))]
     fn set_analog_input(
         &self,
+        py: Python<'_>,
         device: &str,
         channel: u8,
         value: f64,
         module: Option<usize>,
     ) -> PyResult<()> {
-        let mut core = self.shared.lock();
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::set_analog_input(&mut core, device, channel, value, module)
     }
 
@@ -287,23 +300,35 @@ impl Simulation {
     /// Set a drive parameter from its keypad (no fieldbus involved): ADV200 `PAR` number
     /// (effective as the drive's manual says: fieldbus settings at the next drive reset),
     /// OpenDrive parameter name.
-    fn set_param(&self, device: &str, number: crate::devices::ParKey, value: i64) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn set_param(
+        &self,
+        py: Python<'_>,
+        device: &str,
+        number: crate::devices::ParKey,
+        value: i64,
+    ) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::set_param(&mut core, device, &number, value)
     }
 
     /// Raise a drive alarm by its manual's name (ADV200: "External fault", "Overvoltage",
     /// …): the fault reaction and EMCY follow as on the real drive.
-    fn raise_alarm(&self, device: &str, alarm: &str) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn raise_alarm(&self, py: Python<'_>, device: &str, alarm: &str) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::raise_alarm(&mut core, device, alarm)
     }
 
     /// Set the physical quantity `name` of `device` (an input, a load, a module pulled out)
     /// to `value` now, as ``[[at]] action = "set"`` in scenario scripts does: the kind's
     /// signal names (``"digital_input.4"``, ``"analog_input.2"``, …; the error lists them).
-    fn set_signal(&self, device: &str, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn set_signal(
+        &self,
+        py: Python<'_>,
+        device: &str,
+        name: &str,
+        value: &Bound<'_, PyAny>,
+    ) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::set_signal(&mut core, device, name, value)
     }
 
@@ -329,55 +354,60 @@ impl Simulation {
     /// Give `device` the internal defect `fault` in its kind's words, or repair it with
     /// `None` (``action = "inject"``/``"repair"`` in scenario scripts).
     #[pyo3(signature = (device, fault))]
-    fn inject(&self, device: &str, fault: Option<&str>) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn inject(&self, py: Python<'_>, device: &str, fault: Option<&str>) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         crate::devices::inject(&mut core, device, fault)
     }
 
     /// Power `device` on or off (`power_on`/`power_off` in scenario scripts).
-    fn power(&self, device: &str, on: bool) -> PyResult<()> {
+    fn power(&self, py: Python<'_>, device: &str, on: bool) -> PyResult<()> {
         self.shared
-            .lock()
+            .lock_acting(py)?
             .on_port(device, |bus, port| bus.set_powered(port, on))
     }
 
     /// Cut or restore `device`'s connection to the wires (`disconnect`/`connect`).
-    fn connect(&self, device: &str, connected: bool) -> PyResult<()> {
+    fn connect(&self, py: Python<'_>, device: &str, connected: bool) -> PyResult<()> {
         self.shared
-            .lock()
+            .lock_acting(py)?
             .on_port(device, |bus, port| bus.set_connected(port, connected))
     }
 
     /// Force `device`'s controller bus-off (`bus_off`).
-    fn bus_off(&self, device: &str) -> PyResult<()> {
+    fn bus_off(&self, py: Python<'_>, device: &str) -> PyResult<()> {
         self.shared
-            .lock()
+            .lock_acting(py)?
             .on_port(device, |bus, port| bus.force_bus_off(port))
     }
 
     /// Make `device`'s controller babble `frame` (``"ID#DATA"``), or stop with `None`
     /// (`babble`/`babble_stop`).
     #[pyo3(signature = (device, frame))]
-    fn babble(&self, device: &str, frame: Option<&str>) -> PyResult<()> {
+    fn babble(&self, py: Python<'_>, device: &str, frame: Option<&str>) -> PyResult<()> {
         let frame = frame
             .map(cantwin_scenario::script::parse_frame)
             .transpose()
             .map_err(PyValueError::new_err)?;
         self.shared
-            .lock()
+            .lock_acting(py)?
             .on_port(device, |bus, port| bus.set_babble(port, frame))
     }
 
     /// Misconfigure `device`'s bit rate (``"250k"``…), or fix it with `None`
     /// (`bit_rate_mismatch`/`bit_rate_fix`).
     #[pyo3(signature = (device, bit_rate))]
-    fn bit_rate_mismatch(&self, device: &str, bit_rate: Option<&str>) -> PyResult<()> {
+    fn bit_rate_mismatch(
+        &self,
+        py: Python<'_>,
+        device: &str,
+        bit_rate: Option<&str>,
+    ) -> PyResult<()> {
         let rate = bit_rate
             .map(str::parse::<BitRate>)
             .transpose()
             .map_err(|e| PyValueError::new_err(e.to_string()))?;
         self.shared
-            .lock()
+            .lock_acting(py)?
             .on_port(device, |bus, port| bus.set_bit_rate_mismatch(port, rate))
     }
 
@@ -386,12 +416,13 @@ impl Simulation {
     #[pyo3(signature = (bus, fraction, *, sender=None, count=None))]
     fn drop_frames(
         &self,
+        py: Python<'_>,
         bus: &str,
         fraction: f64,
         sender: Option<&str>,
         count: Option<u64>,
     ) -> PyResult<()> {
-        self.fault(bus, false, fraction, sender, count)
+        self.fault(py, bus, false, fraction, sender, count)
     }
 
     /// Corrupt a `fraction` of the transmission attempts on `bus` (an error frame follows):
@@ -399,17 +430,18 @@ impl Simulation {
     #[pyo3(signature = (bus, fraction, *, sender=None, count=None))]
     fn corrupt_frames(
         &self,
+        py: Python<'_>,
         bus: &str,
         fraction: f64,
         sender: Option<&str>,
         count: Option<u64>,
     ) -> PyResult<()> {
-        self.fault(bus, true, fraction, sender, count)
+        self.fault(py, bus, true, fraction, sender, count)
     }
 
     /// Remove every fault rule of `bus` (`clear_faults`).
-    fn clear_faults(&self, bus: &str) -> PyResult<()> {
-        let mut core = self.shared.lock();
+    fn clear_faults(&self, py: Python<'_>, bus: &str) -> PyResult<()> {
+        let mut core = self.shared.lock_acting(py)?;
         let id = core.bus_id(bus)?;
         core.with_sim(|sim| sim.bus_mut(id).map(cantwin_bus::Bus::clear_faults))?;
         Ok(())
@@ -508,6 +540,7 @@ impl Simulation {
 impl Simulation {
     fn fault(
         &self,
+        py: Python<'_>,
         bus: &str,
         corrupt: bool,
         fraction: f64,
@@ -519,7 +552,7 @@ impl Simulation {
                 "fraction must be in 0..=1, not {fraction}"
             )));
         }
-        let mut core = self.shared.lock();
+        let mut core = self.shared.lock_acting(py)?;
         let id = core.bus_id(bus)?;
         let sel = FrameSelector::Fraction(fraction);
         let mut rule = if corrupt {

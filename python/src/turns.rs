@@ -1,0 +1,129 @@
+//! Whose turn it is: bus time waits for Python threads that act.
+//!
+//! # The model
+//!
+//! In virtual time the bus stands still while Python works and runs while Python waits.
+//! A Python thread *acts* when it sends a frame or changes the simulation (writes an object,
+//! sets a signal, injects a fault, powers a device, …); it *waits* when it blocks in a
+//! receive of a port, in one of `threading`'s waits (`Condition.wait`, and through it
+//! `Event.wait`, `queue.Queue.get`, `Semaphore.acquire`; `Thread.join`), or in a call into C
+//! that does not come back (`time.sleep`, I/O: the thread stays at the same instruction).
+//!
+//! A receiver that would run the simulation (virtual time) or hand over a frame (paced) first
+//! lets every thread that acted reach its wait, at most the simulation's reaction time (wall
+//! clock) after it acted. So the answer to a frame is not simulated, nor delivered, before
+//! the thread that sent the frame listens for it: python-canopen's `sync.transmit()` followed
+//! by `tpdo[1].wait_for_reception()`, `nmt.state = …` followed by `wait_for_heartbeat()` and
+//! a trigger followed by `emcy.wait()` find the answer they wait for, as on a real bus where
+//! the device takes longer to answer than the host takes to start waiting.
+//!
+//! Bus time is unaffected: a frame sent at bus time *t* is queued at *t* and the answer comes
+//! when the device gives it; only the moment (wall clock) at which the simulation computes it
+//! moves.
+
+use std::time::{Duration, Instant};
+
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::core::Shared;
+
+/// How long a thread may stay at the same instruction before it counts as blocked in a call
+/// into C (`time.sleep`, a socket read). A thread that runs Python code moves on between two
+/// looks, which are at least [`POLL`] apart and each take the GIL from it.
+const STILL: Duration = Duration::from_millis(2);
+
+/// Pause between two looks at threads that have not reached their wait yet.
+const POLL: Duration = Duration::from_micros(50);
+
+/// The `threading` functions a thread blocks in. Every python-canopen wait
+/// (`wait_for_reception`, `wait_for_heartbeat`, `emcy.wait`, the SDO client's response
+/// queue) is a `Condition.wait`.
+const THREADING_WAITS: [&str; 3] = ["wait", "join", "_wait_for_tstate_lock"];
+
+/// `threading.get_ident()` of the calling thread.
+pub(crate) fn thread_ident(py: Python<'_>) -> PyResult<u64> {
+    py.import("_thread")?
+        .getattr("get_ident")?
+        .call0()?
+        .extract()
+}
+
+/// Where a thread was seen last: its top frame and instruction, and since when.
+struct Spot {
+    thread: u64,
+    frame: Py<PyAny>,
+    lasti: i64,
+    since: Instant,
+}
+
+/// Wait until every thread that acted waits or acted longer than the reaction time ago
+/// (`true`), or until `deadline` (`false`). Call it without holding the core's lock and
+/// without the GIL.
+pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
+    let mut spots: Vec<Spot> = Vec::new();
+    loop {
+        let threads = shared.lock().acting_threads();
+        if threads.is_empty() {
+            return true;
+        }
+        if Instant::now() >= deadline {
+            return false;
+        }
+        // If Python cannot be asked (an interpreter shutting down), nobody is waited for:
+        // a receiver must never hang on it.
+        let waiting = Python::attach(|py| waiting_threads(py, &threads, &mut spots))
+            .unwrap_or_else(|_| threads.clone());
+        let all = waiting.len() == threads.len();
+        shared
+            .lock()
+            .acting
+            .retain(|a| !waiting.contains(&a.thread));
+        if !all {
+            std::thread::sleep(POLL);
+        }
+    }
+}
+
+/// Which of `threads` wait now (module documentation); a thread that ended waits.
+fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> PyResult<Vec<u64>> {
+    let frames = py.import("sys")?.getattr("_current_frames")?.call0()?;
+    let frames = frames.cast::<PyDict>()?;
+    let mut waiting = Vec::new();
+    for &thread in threads {
+        let Some(frame) = frames.get_item(thread)? else {
+            waiting.push(thread);
+            continue;
+        };
+        let code = frame.getattr("f_code")?;
+        let name: String = code.getattr("co_name")?.extract()?;
+        let file: String = code.getattr("co_filename")?.extract()?;
+        let in_threading = std::path::Path::new(&file)
+            .file_name()
+            .is_some_and(|f| f == "threading.py");
+        if in_threading && THREADING_WAITS.contains(&name.as_str()) {
+            waiting.push(thread);
+            continue;
+        }
+        let lasti: i64 = frame.getattr("f_lasti")?.extract()?;
+        match spots.iter_mut().find(|s| s.thread == thread) {
+            Some(s) if s.frame.bind(py).is(&frame) && s.lasti == lasti => {
+                if s.since.elapsed() >= STILL {
+                    waiting.push(thread);
+                }
+            }
+            Some(s) => {
+                s.frame = frame.unbind();
+                s.lasti = lasti;
+                s.since = Instant::now();
+            }
+            None => spots.push(Spot {
+                thread,
+                frame: frame.unbind(),
+                lasti,
+                since: Instant::now(),
+            }),
+        }
+    }
+    Ok(waiting)
+}
