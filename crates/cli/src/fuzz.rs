@@ -4,6 +4,12 @@
 //! checked is the project's rule that bad input gets the protocol's own answer or a clear
 //! error, never a panic (decoders) or a stuck simulation (twins). The targets live in the
 //! crates they exercise (their `fuzz` modules); this module runs the campaign and prints.
+//!
+//! The boundary targets ([`boundary`], `net-*` and `files`) run a real `cantwin sim` with
+//! its gateways and attack it over loopback, and run the file commands as children on
+//! mutated files; `--boundary` runs them all, `--attack-seconds` sets how long each lasts.
+
+pub mod boundary;
 
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Instant as WallInstant;
@@ -31,6 +37,19 @@ pub struct Args {
     /// List the targets and exit.
     #[arg(long)]
     list: bool,
+    /// Run every boundary target (servers over loopback, file commands as children) instead
+    /// of the in-process ones.
+    #[arg(long)]
+    boundary: bool,
+    /// Wall time of each network attack of the boundary targets, in seconds.
+    #[arg(long, default_value_t = 5.0, value_name = "SECONDS")]
+    attack_seconds: f64,
+    /// Attack connections a boundary target keeps open at most.
+    #[arg(long, default_value_t = 200)]
+    connections: usize,
+    /// Mutated files the `files` target runs the file commands on.
+    #[arg(long, default_value_t = 300)]
+    files: usize,
 }
 
 fn parse_seed(s: &str) -> Result<u64, String> {
@@ -190,7 +209,26 @@ pub fn run(args: &Args) -> Result<()> {
                 || serde_json::json!({"target": t.name, "about": t.about}),
             )?;
         }
+        for (name, about) in boundary::TARGETS {
+            crate::output::result(
+                format_args!("{name:24} {about}"),
+                || serde_json::json!({"target": name, "about": about, "boundary": true}),
+            )?;
+        }
         return Ok(());
+    }
+    let (outside, inside): (Vec<&String>, Vec<&String>) = args
+        .targets
+        .iter()
+        .partition(|n| boundary::TARGETS.iter().any(|(b, _)| b == n));
+    if args.boundary || !outside.is_empty() {
+        if !inside.is_empty() {
+            bail!(
+                "boundary targets run on their own: name only boundary targets, or none with --boundary"
+            );
+        }
+        let names: Vec<&str> = outside.iter().map(|s| s.as_str()).collect();
+        return run_boundary(args, &names, json);
     }
     if !json {
         println!(
@@ -257,6 +295,70 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if failures > 0 {
         bail!("{failures} fuzz cases failed");
+    }
+    Ok(())
+}
+
+/// The boundary campaign: runs, prints each target's figures and findings, fails on a
+/// finding.
+fn run_boundary(args: &Args, names: &[&str], json: bool) -> Result<()> {
+    if !(args.attack_seconds.is_finite() && args.attack_seconds > 0.0) {
+        bail!("--attack-seconds must be a positive number of seconds");
+    }
+    let scratch = boundary::scratch_dir();
+    let opts = boundary::Options {
+        exe: std::env::current_exe()?,
+        attack_time: std::time::Duration::from_secs_f64(args.attack_seconds),
+        connections: args.connections,
+        files: args.files,
+        seed: args.seed,
+        scratch: scratch.clone(),
+    };
+    let reports = boundary::run(names, &opts);
+    boundary::remove_scratch(&scratch);
+    let reports = reports?;
+    let findings: usize = reports.iter().map(|r| r.findings.len()).sum();
+    if json {
+        crate::output::emit(
+            &serde_json::json!({ "seed": args.seed, "findings": findings, "targets": reports }),
+        )?;
+    } else {
+        println!(
+            "{:16} {:>9} {:>6} {:>21} {:>14} {:>8} {:>9} {:>9}",
+            "target",
+            "attacks",
+            "held",
+            "RSS KiB before/peak/after",
+            "fds b/p/a",
+            "probes",
+            "p50 ms",
+            "p99 ms"
+        );
+        for r in &reports {
+            println!(
+                "{:16} {:>9} {:>6} {:>7}/{:>7}/{:>7} {:>4}/{:>4}/{:>4} {:>4}/{:<3} {:>9.2} {:>9.2}",
+                r.target,
+                r.attacks,
+                r.connections_held,
+                r.rss_kib[0],
+                r.rss_kib[1],
+                r.rss_kib[2],
+                r.fds[0],
+                r.fds[1],
+                r.fds[2],
+                r.probes,
+                r.probe_failures,
+                r.latency_ms[0],
+                r.latency_ms[1]
+            );
+            for f in &r.findings {
+                println!("  finding: {f}");
+            }
+        }
+        println!("total: {findings} findings");
+    }
+    if findings > 0 {
+        bail!("{findings} boundary findings");
     }
     Ok(())
 }
