@@ -401,3 +401,24 @@ pub fn commission(
     dcf.commissioning = Some(commissioning);
     (dcf, notes)
 }
+
+/// The file with each DCF `ParameterValue` as the entry's `DefaultValue`, where the
+/// judgement keeps the value (one that does not fit leaves the default as it is): the
+/// values a commissioned device comes up with after power-on and after every reset
+/// (CiA 306 DCF).
+pub fn configured(eds: &Eds) -> Eds {
+    let mut out = eds.clone();
+    for o in out.objects.values_mut() {
+        let entries = std::iter::once(&mut o.entry).chain(o.subs.values_mut());
+        for e in entries {
+            let Some(v) = e.parameter_value.clone() else {
+                continue;
+            };
+            // Judged for the lowest and the highest node-ID, as a default is.
+            if judged_value(e, &v, 1).is_some() && judged_value(e, &v, 127).is_some() {
+                e.default_value = Some(v);
+            }
+        }
+    }
+    out
+}

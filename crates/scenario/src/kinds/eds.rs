@@ -11,9 +11,13 @@
 //! | `sdo_timeout_ms` | 1000 | SDO server timeout |
 //! | `lss` | false | answer LSS (CiA 305, see [`super::lss`]); `node_id` may then be 0xFF or `"unconfigured"` |
 //!
-//! The file is the device's truth: every VAR, ARRAY and RECORD object of the file becomes an
-//! object of the dictionary with the file's data type, access, limits and default value
-//! (`$NODEID` resolved with the node-ID). A DCF's `ParameterValue`s replace the defaults, so
+//! The file is the device's truth: every VAR, DOMAIN, ARRAY and RECORD object of the file
+//! (and the DEFTYPE entries of basic types, such as the dummy entries 0x0002–0x0007) becomes
+//! an object of the dictionary with the file's data type, access, limits and default value
+//! (`$NODEID` resolved with the node-ID). Files are read as they are written in the field
+//! (`cantwin_eds::load`): what CiA 306 does not allow is read past, the way `cantwin eds
+//! check` reports it, and only a file no dictionary can hold (an entry without a data type)
+//! is refused. A DCF's `ParameterValue`s replace the defaults, so
 //! the device comes up configured after power-up and after every reset, as a commissioned
 //! device would (CiA 306 DCF: the values the device is configured with).
 //!
@@ -32,7 +36,7 @@
 use std::path::{Path, PathBuf};
 
 use cantwin_bus::{BoxedNode, PortConfig};
-use cantwin_eds::{EdsValue, parse_bytes, to_od};
+use cantwin_eds::{EdsValue, configured, load_bytes, to_od};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::error::ScenarioError;
@@ -77,8 +81,11 @@ impl DeviceKind for EdsKind {
         let path = resolve(s.file(), &file);
         let bytes = std::fs::read(&path)
             .map_err(|e| s.error("file", format!("cannot read {}: {e}", path.display())))?;
-        let mut eds =
-            parse_bytes(&bytes).map_err(|e| s.error("file", format!("{}: {e}", path.display())))?;
+        // Files in the field bend CiA 306 in many ways; the device is what the file evidently
+        // means (`cantwin eds check` prints what was read past). Only a file no dictionary can
+        // hold is refused, by `to_od` below.
+        let loaded = load_bytes(&bytes);
+        let mut eds = configured(&loaded.eds);
 
         let from_dcf = eds.commissioning.as_ref().and_then(|c| c.node_id);
         let lss: bool = s.get_or("lss", false)?;
@@ -98,16 +105,6 @@ impl DeviceKind for EdsKind {
             check_node_id(s, node_id)?;
         }
 
-        // A DCF's ParameterValues are the values the device is configured with: they become
-        // the power-on values, so that resets come back to them too.
-        for o in eds.objects.values_mut() {
-            let entries = std::iter::once(&mut o.entry).chain(o.subs.values_mut());
-            for e in entries {
-                if let Some(v) = e.parameter_value.clone() {
-                    e.default_value = Some(v);
-                }
-            }
-        }
         if let Some(ms) = s.get::<u16>("heartbeat_ms")? {
             let Some(hb) = eds.objects.get_mut(&0x1017) else {
                 return Err(s.error(
