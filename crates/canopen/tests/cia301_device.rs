@@ -233,6 +233,123 @@ fn cia301_7_2_8_3_2_2_heartbeat_consumer_not_armed_before_the_first_heartbeat() 
     assert!(h.take().is_empty());
 }
 
+/// A device whose dictionary has no 0x1029 (error behaviour): identity, error register,
+/// one heartbeat consumer entry.
+fn device_without_1029() -> Harness {
+    use cantwin_canopen::device::Device;
+    use cantwin_canopen::od::{Access, DataType, OdBuilder, SubObject};
+    use std::sync::Arc;
+    let desc = OdBuilder::new()
+        .var(0x1000, SubObject::unsigned32("Device type", Access::Ro, 0))
+        .var(
+            0x1001,
+            SubObject::new("Error register", DataType::Unsigned8, Access::Ro),
+        )
+        .array_of(
+            0x1016,
+            "Consumer heartbeat time",
+            1,
+            SubObject::unsigned32("Consumer heartbeat time", Access::Rw, 0x0003_0064),
+        )
+        .var(
+            0x1017,
+            SubObject::new("Producer heartbeat time", DataType::Unsigned16, Access::Rw),
+        )
+        .record(
+            0x1018,
+            "Identity object",
+            [(1, SubObject::unsigned32("Vendor-ID", Access::Ro, 0))],
+        )
+        .build()
+        .unwrap();
+    let mut h = Harness::with_device(Device::new(Arc::new(desc), DeviceConfig::new(5)).unwrap());
+    h.power_up(ms(0));
+    assert_eq!(h.take(), at_ms(&[(0, "705#00")]));
+    h
+}
+
+#[test]
+fn cia301_7_5_2_32_without_0x1029_a_heartbeat_timeout_leaves_operational_for_pre_operational() {
+    let mut h = device_without_1029();
+    h.rx(ms(1), "000#0105");
+    assert_eq!(h.dev.state(), State::Operational);
+    h.rx(ms(10), "703#05");
+    h.run_until(ms(109));
+    assert!(h.take().is_empty());
+    h.run_until(ms(110));
+    assert_eq!(h.take(), at_ms(&[(110, "085#3081110300000000")]));
+    assert_eq!(h.dev.state(), State::PreOperational);
+}
+
+#[test]
+fn cia301_7_5_2_32_without_0x1029_a_heartbeat_timeout_leaves_stopped_and_pre_operational_alone() {
+    // Pre-operational: the EMCY goes out, the state stays.
+    let mut h = device_without_1029();
+    h.rx(ms(10), "703#7F");
+    h.run_until(ms(110));
+    assert_eq!(h.take(), at_ms(&[(110, "085#3081110300000000")]));
+    assert_eq!(h.dev.state(), State::PreOperational);
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x11);
+    // Stopped: no EMCY (§7.3.2.2: only NMT and error control), the error is recorded, the
+    // state stays.
+    let mut h = device_without_1029();
+    h.rx(ms(1), "000#0205");
+    assert_eq!(h.dev.state(), State::Stopped);
+    h.rx(ms(10), "703#05");
+    h.run_until(ms(200));
+    assert!(h.take().is_empty());
+    assert!(h.events().contains(&Event::HeartbeatLost { node: 3 }));
+    assert_eq!(h.dev.state(), State::Stopped);
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x11);
+}
+
+#[test]
+fn cia301_7_5_2_2_error_register_follows_the_active_errors_with_each_emcy() {
+    let mut h = Harness::booted();
+    h.rx(ms(1), "000#0105");
+    // RPDO 1 (one byte) arrives empty: EMCY 0x8210, generic + communication bits.
+    h.rx(ms(2), "205#");
+    assert_eq!(h.take(), at_ms(&[(2, "085#1082110000000000")]));
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x11);
+    // The next correct RPDO resets it: EMCY 0x0000 with the register cleared.
+    h.rx(ms(3), "205#01");
+    assert_eq!(h.take(), at_ms(&[(3, "085#0000000000000000")]));
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0);
+    // With another communication error active, the communication bit stays set.
+    h.event(ms(4), ControllerEvent::ErrorPassive);
+    h.rx(ms(5), "205#");
+    h.rx(ms(6), "205#02");
+    assert_eq!(
+        h.take(),
+        at_ms(&[
+            (4, "085#2081110000000000"),
+            (5, "085#1082110000000000"),
+            (6, "085#0000110000000000"),
+        ])
+    );
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x11);
+    h.event(ms(7), ControllerEvent::ErrorActive);
+    assert_eq!(h.take(), at_ms(&[(7, "085#0000000000000000")]));
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0);
+    // With an error of another class active, only the communication bit goes.
+    h.dev.emcy().raise(0x3210, [0; 5]);
+    h.rx(ms(8), "205#");
+    h.rx(ms(9), "205#03");
+    assert_eq!(
+        h.take(),
+        at_ms(&[
+            (7, "085#1032050000000000"),
+            (8, "085#1082150000000000"),
+            (9, "085#0000050000000000"),
+        ])
+    );
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0x05);
+    h.dev.emcy().clear(0x3210);
+    h.run_until(ms(10));
+    assert_eq!(h.take(), at_ms(&[(9, "085#0000000000000000")]));
+    assert_eq!(h.read_u32(0x1001, 0).unwrap(), 0);
+}
+
 #[test]
 fn cia301_7_2_8_3_2_2_heartbeat_consumer_timeout_raises_emcy_8130() {
     let mut h = Harness::booted();
