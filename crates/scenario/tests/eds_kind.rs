@@ -214,14 +214,16 @@ fn cia306_dcf_parameter_values_and_node_id_are_applied() {
 #[test]
 fn malformed_eds_is_reported_with_its_line() {
     let dir = temp_dir("malformed");
+    // An unreadable access type is read past (held read-only); an entry without a data type
+    // makes the dictionary impossible and is named with its line.
     std::fs::write(
         dir.join("bad.eds"),
-        "[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=rx\n",
+        "[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=rx\n\n[2000]\nParameterName=x\nAccessType=rw\n",
     )
     .unwrap();
     let e = build_error(&scenario_in(&dir, "file = \"bad.eds\"\nnode_id = 3"));
     assert!(e.contains("file"), "{e}");
-    assert!(e.contains("line 4 [1000] AccessType"), "{e}");
+    assert!(e.contains("line 6 [2000] DataType"), "{e}");
     let _ = std::fs::remove_dir_all(dir);
 }
 

@@ -36,7 +36,7 @@
 use std::path::{Path, PathBuf};
 
 use cantwin_bus::{BoxedNode, PortConfig};
-use cantwin_eds::{EdsValue, configured, load_bytes, to_od};
+use cantwin_eds::{ConvertError, EdsValue, configured, load_bytes, to_od};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::error::ScenarioError;
@@ -120,9 +120,27 @@ impl DeviceKind for EdsKind {
         let sdo_timeout = sdo_timeout(s)?;
 
         let desc = to_od(&eds).map_err(|e| {
+            // Name the line of the entry that makes the dictionary impossible.
+            let at = match &e {
+                ConvertError::DataType { index, sub, .. } => {
+                    let sections = [format!("{index:04X}"), format!("{index:04X}sub{sub:X}")];
+                    loaded
+                        .report
+                        .errors()
+                        .find(|i| {
+                            sections.contains(&i.section) && i.key.as_deref() == Some("DataType")
+                        })
+                        .map(|i| format!(" ({i})"))
+                }
+                _ => None,
+            };
             s.error(
                 "file",
-                format!("{}: not a usable object dictionary: {e}", path.display()),
+                format!(
+                    "{}: not a usable object dictionary: {e}{}",
+                    path.display(),
+                    at.unwrap_or_default()
+                ),
             )
         })?;
         let port = PortConfig {
