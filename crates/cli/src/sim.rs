@@ -1,5 +1,5 @@
 //! `cantwin sim SCENARIO.toml`: run a scenario paced to the wall clock, with gateways for
-//! external tools, until Ctrl-C or `--duration`.
+//! external tools, until SIGINT (Ctrl-C), SIGTERM or SIGHUP, or `--duration`.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
@@ -43,7 +43,8 @@ pub struct Args {
     allow_remote: bool,
     #[command(flatten)]
     web_options: crate::web::Options,
-    /// Stop after this many seconds of wall time (default: run until Ctrl-C).
+    /// Stop after this many seconds of wall time (default: run until Ctrl-C, SIGTERM or
+    /// SIGHUP).
     #[arg(long, value_name = "SECONDS")]
     duration: Option<f64>,
     /// Record every frame of every bus, with bus timestamps mapped to wall time, into a pcap
@@ -73,6 +74,9 @@ fn parse_listen(spec: &str, flag: &str) -> Result<SocketAddr> {
     })
 }
 
+/// How often a running simulation's captures are flushed to their files.
+const CAPTURE_FLUSH: WallDuration = WallDuration::from_millis(500);
+
 pub fn run(args: &Args) -> Result<()> {
     if args.check {
         return crate::check::run(
@@ -94,6 +98,15 @@ pub fn run(args: &Args) -> Result<()> {
     for w in &built.warnings {
         eprintln!("cantwin sim: warning: {w}");
     }
+    // SIGINT, SIGTERM and SIGHUP (ctrlc's termination feature) all end the run below, with
+    // captures flushed and closed; installed before any capture exists, so that no signal
+    // finds a capture it would leave cut short.
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .context("installing the Ctrl-C handler")?;
+    }
     let mut captures = Captures::new();
     let pcap = args.pcap.as_ref().map(|p| {
         let ng = p
@@ -107,6 +120,8 @@ pub fn run(args: &Args) -> Result<()> {
             eprintln!("recording {}", file.display());
         }
     }
+    // The file headers reach the files at once: a capture is readable from the start.
+    captures.finish()?;
     let bus_names: Vec<String> = built.buses.iter().map(|(n, _)| n.clone()).collect();
     let slcan_bus = match (&args.slcan, &args.slcan_bus) {
         (None, Some(_)) => bail!("--slcan-bus needs --slcan"),
@@ -192,19 +207,24 @@ pub fn run(args: &Args) -> Result<()> {
     use std::io::Write as _;
     std::io::stdout().flush().ok();
 
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
-            .context("installing the Ctrl-C handler")?;
-    }
     let started = WallInstant::now();
     let deadline = args
         .duration
         .map(|d| started + WallDuration::from_secs_f64(d));
+    let mut flushed = WallInstant::now();
+    let mut capture_error = None;
     while !stop.load(Ordering::SeqCst) && deadline.is_none_or(|d| WallInstant::now() < d) {
         if let Some(d) = dashboard.as_mut() {
             d.poll(&handle);
+        }
+        // Captures reach their files this often, whole records only (each writer writes a
+        // record in one piece), so that a SIGKILL loses at most the last second.
+        if flushed.elapsed() >= CAPTURE_FLUSH {
+            flushed = WallInstant::now();
+            if let Err(e) = captures.finish() {
+                capture_error = Some(e);
+                break;
+            }
         }
         std::thread::sleep(WallDuration::from_millis(20));
     }
@@ -222,6 +242,9 @@ pub fn run(args: &Args) -> Result<()> {
     let sim = paced
         .stop()
         .context("the simulation thread stopped unexpectedly")?;
+    if let Some(e) = capture_error {
+        return Err(e);
+    }
     captures.finish()?;
     eprintln!(
         "cantwin sim: stopped after {:.1} s ({} of bus time{})",
