@@ -34,12 +34,23 @@ impl Drop for Killed {
 /// One HTTP/1.1 exchange: (status, body as JSON). The body is read by its Content-Length
 /// (or chunks): chromedriver keeps connections open.
 fn http(port: u16, method: &str, path: &str, body: Option<&Value>) -> (u16, Value) {
+    http_with(port, method, path, "", body)
+}
+
+/// As [`http`], with `headers` (complete header lines) added to the request.
+fn http_with(
+    port: u16,
+    method: &str,
+    path: &str,
+    headers: &str,
+    body: Option<&Value>,
+) -> (u16, Value) {
     let s = TcpStream::connect(("127.0.0.1", port)).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     let body = body.map(|b| b.to_string()).unwrap_or_default();
     write!(
         &s,
-        "{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        "{method} {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nContent-Type: application/json\r\n{headers}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
         body.len()
     )
     .unwrap();
@@ -359,11 +370,20 @@ fn sim_with_web(extra: &[&str]) -> (Killed, u16) {
 #[test]
 fn web_controls_answer_bad_requests_with_4xx_and_a_message() {
     let (_sim, port) = sim_with_web(&["--json"]);
+    // Controls carry the run's token, which the page holds.
+    let (_, page) = http(port, "GET", "/", None);
+    let page = page.as_str().unwrap();
+    let token = page
+        .split("name=\"cantwin-token\" content=\"")
+        .nth(1)
+        .and_then(|r| r.split('"').next())
+        .unwrap();
+    let token = format!("X-Cantwin-Token: {token}\r\n");
     let post = |path: &str, body: &str| {
         let v: Value = serde_json::from_str(body).unwrap_or(Value::String(body.into()));
-        http(port, "POST", path, Some(&v))
+        http_with(port, "POST", path, &token, Some(&v))
     };
-    let (status, v) = http(port, "POST", "/api/nmt", None);
+    let (status, v) = http_with(port, "POST", "/api/nmt", &token, None);
     assert_eq!(status, 400, "{v}");
     assert!(v["message"].as_str().unwrap().contains("not JSON"), "{v}");
     let (status, v) = post("/api/nmt", r#"{"device":"nobody","command":"stop"}"#);
