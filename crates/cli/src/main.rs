@@ -60,10 +60,13 @@ enum Command {
         after_help = "Examples:\n  cantwin sim scenarios/cia301-device.toml --socketcand 29536\n  \
                             cantwin sim scenarios/cia301-device.toml --socketcand 0 --duration 60\n  \
                             cantwin sim scenario.toml --slcan 127.0.0.1:29537 --slcan-bus can0\n  \
-                            cantwin sim scenarios/plant.toml --web 8080\n\n\
+                            cantwin sim scenarios/plant.toml --web 8080\n  \
+                            cantwin sim scenarios/plant.toml --web 0.0.0.0:8080 --allow-remote --allow-host plant.lan\n  \
+                            cantwin sim scenarios/plant.toml --web 8080 --web-max-connections 16 --web-max-streams 4\n\n\
                             Once a gateway accepts connections it prints one line per bus it serves,\n\
-                            and the web dashboard its address:\n  \
-                            socketcand 127.0.0.1:29536 can0\n  slcan 127.0.0.1:29537 can0\n  web http://127.0.0.1:8080/"
+                            and the web dashboard its address (with the run's token under --allow-remote):\n  \
+                            socketcand 127.0.0.1:29536 can0\n  slcan 127.0.0.1:29537 can0\n  web http://127.0.0.1:8080/\n  \
+                            web http://plant.lan:8080/?token=5f0c…"
     )]
     Sim(sim::Args),
     /// Print a capture (pcap, pcapng or candump log), one frame a line.
