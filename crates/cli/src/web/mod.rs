@@ -45,31 +45,33 @@ use serde_json::{Value, json};
 
 pub use server::Server;
 
+/// Where `--help` lists the options below.
+const HEADING: &str = "Web dashboard";
+
 /// The dashboard's options beside `--web` and `--allow-remote`.
 #[derive(Debug, Clone, clap::Args)]
-#[command(next_help_heading = "Web dashboard")]
 pub struct Options {
     /// With --allow-remote, a further name the dashboard answers to in the Host header,
     /// besides 127.0.0.1, localhost, [::1] and the bound address; repeatable. NAME takes the
     /// served port, NAME:PORT its own (behind a proxy). Requests naming any other host are
     /// refused, which defeats DNS rebinding. E.g. `--web 0.0.0.0:8080 --allow-remote
     /// --allow-host plant.lan`.
-    #[arg(long = "allow-host", value_name = "NAME[:PORT]")]
+    #[arg(long = "allow-host", value_name = "NAME[:PORT]", help_heading = HEADING)]
     pub allow_host: Vec<String>,
     /// Web connections served at once; one more is answered 503 and closed, so the
     /// gateways of the process keep their descriptors.
-    #[arg(long, value_name = "N", default_value_t = 64)]
+    #[arg(long, value_name = "N", default_value_t = 64, help_heading = HEADING)]
     pub web_max_connections: usize,
     /// Event streams (open pages) served at once; one more is answered 503.
-    #[arg(long, value_name = "N", default_value_t = 16)]
+    #[arg(long, value_name = "N", default_value_t = 16, help_heading = HEADING)]
     pub web_max_streams: usize,
     /// Seconds a request's head may take to arrive (from the connection's opening or the end
     /// of the previous answer); then the connection is closed.
-    #[arg(long, value_name = "SECONDS", default_value_t = 10.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 10.0, help_heading = HEADING)]
     pub web_header_timeout: f64,
     /// Seconds a web connection may see no byte move either way (a stalled request body, an
     /// event stream nobody reads); then it is closed.
-    #[arg(long, value_name = "SECONDS", default_value_t = 60.0)]
+    #[arg(long, value_name = "SECONDS", default_value_t = 60.0, help_heading = HEADING)]
     pub web_idle_timeout: f64,
 }
 
