@@ -31,4 +31,12 @@ impl GwError {
     pub const NET: GwError = GwError::Code(106);
     /// 107: unsupported node.
     pub const NODE: GwError = GwError::Code(107);
+    /// 501: LSS implementation- or manufacturer-specific error.
+    pub const LSS_MANUFACTURER: GwError = GwError::Code(501);
+    /// 502: LSS node-ID not supported.
+    pub const LSS_NODE_ID: GwError = GwError::Code(502);
+    /// 503: LSS bit-rate not supported.
+    pub const LSS_BIT_RATE: GwError = GwError::Code(503);
+    /// 504: LSS parameter storing failed.
+    pub const LSS_STORE: GwError = GwError::Code(504);
 }

@@ -4,12 +4,15 @@
 //! transfer or an NMT command through a master) and hands the result back.
 //!
 //! A request is one line, `[<seq>] [[<net>] <node>] <command>`; the answer is one line
-//! `[<seq>] OK`, `[<seq>] <value>` or `[<seq>] ERROR: <code>`, where the code is the SDO
-//! abort code in hex (`0x06020000`, CiA 301 table 22) or one of the gateway's own error
-//! codes in decimal (CiA 309-3): 100 request not supported, 101 syntax error, 102 request not
-//! processed due to internal state, 103 time-out, 105 no default node set, 106 unsupported
-//! net, 107 unsupported node. `help` answers with its text and then `[<seq>] OK`. Without
-//! `[<seq>]` the answer has no prefix either.
+//! `[<seq>] OK`, `[<seq>] <value>` or `[<seq>] ERROR:<code>`, where the code is the SDO
+//! abort code in hex (`ERROR:0x06020000`, CiA 301 table 22) or one of the gateway's own
+//! error codes in decimal (CiA 309-3): 100 request not supported, 101 syntax error, 102
+//! request not processed due to internal state, 103 time-out, 105 no default node set, 106
+//! unsupported net, 107 unsupported node, 501 LSS manufacturer-specific error, 502 LSS
+//! node-ID not supported, 503 LSS bit rate not supported, 504 LSS storing failed. `help`
+//! answers with its text and then `[<seq>] OK`. `[<seq>]` is required (a line without it is
+//! answered `ERROR:101` under the previous sequence number); the sequence number is shown as
+//! a signed 32-bit number, as CANopenNode prints it; an empty line gets an empty answer.
 //!
 //! Commands:
 //!
@@ -18,12 +21,16 @@
 //! * `start`, `stop`, `preop` (`preoperational`), `reset node`, `reset comm`
 //!   (`reset communication`): NMT, node 0 addresses all nodes;
 //! * `set network <net>`, `set node <node>`, `set sdo_timeout <ms>`, `set sdo_block <0|1>`;
+//! * LSS (CiA 305, [`BusOp::Lss`]): `lss_switch_glob`, `lss_switch_sel`, `lss_set_node`,
+//!   `lss_conf_bitrate`, `lss_activate_bitrate`, `lss_store`, `lss_inquire_addr`,
+//!   `lss_get_node`, `_lss_fastscan`, `lss_allnodes`;
 //! * `info`, `help`.
 //!
 //! Types: `b`, `i8`…`i64`, `u8`…`u64` (decimal or `0x` hex), `x8`, `x16`, `x32`, `x64`
-//! (unsigned, shown in hex), `r32`, `r64`, `t`, `td`, `vs`, `us` (text; in double quotes
-//! when it has spaces, a quote inside doubled; shown quoted), `os`, `d` (hex bytes, spaces
-//! allowed).
+//! (unsigned, shown in hex), `r32`, `r64`, `vs` (text; in double quotes when it has
+//! spaces, a quote inside doubled; shown quoted), `os`, `us`, `d` (MIME base64, RFC 2045, as
+//! CANopenNode's gateway), `hex` (bytes as upper-case hex separated by spaces; on write a
+//! token may hold several bytes).
 //!
 //! One gateway serves one network, net [`NET`]; each client has its own [`Session`]: default
 //! node, SDO timeout and block setting.
@@ -47,7 +54,7 @@
 //! let Step::Bus(read) = request("[3] read 0x1017 0 u16", &mut client) else {
 //!     return Err("a read goes to the bus");
 //! };
-//! assert_eq!(read.finish(Err(GwError::TIMEOUT)), "[3] ERROR: 103");
+//! assert_eq!(read.finish(Err(GwError::TIMEOUT)), "[3] ERROR:103");
 //! # Ok(())
 //! # }
 //! ```
@@ -58,5 +65,8 @@ mod request;
 mod value;
 
 pub use error::GwError;
-pub use request::{BusOp, HELP, NET, Pending, Session, Step, request};
+pub use request::{
+    BusOp, FASTSCAN_TIMEOUT_MS, HELP, LSS_TIMEOUT_MS, LssOp, LssResult, NET, Pending, Session,
+    Step, request,
+};
 pub use value::{MNEMONICS, data_type};

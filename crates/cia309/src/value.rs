@@ -4,6 +4,8 @@
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::{DataType, Value};
 
+use base64::Engine as _;
+
 use crate::error::GwError;
 
 /// The CiA 309-3 data type mnemonics and the CiA 301 types they stand for.
@@ -50,6 +52,12 @@ pub(crate) enum Ty {
     Data(DataType),
     /// `x8`…`x64`: an unsigned integer of this many bytes, shown in hex.
     Hex(usize),
+    /// `os`, `us`, `d`: the bytes in MIME base64 (RFC 2045), on one line, as CANopenNode's
+    /// gateway writes and reads them.
+    Base64,
+    /// `hex` (CANopenNode's own): the bytes as upper-case hex, two digits each, separated by
+    /// spaces.
+    HexBytes,
 }
 
 /// The type of a mnemonic, including the gateway's own `x8`…`x64`.
@@ -59,6 +67,10 @@ pub(crate) fn ty(mnemonic: &str) -> Result<Ty, GwError> {
         "x16" => Ok(Ty::Hex(2)),
         "x32" => Ok(Ty::Hex(4)),
         "x64" => Ok(Ty::Hex(8)),
+        "hex" => Ok(Ty::HexBytes),
+        "os" | "us" | "d" => Ok(Ty::Base64),
+        // CANopenNode's gateway has no time types: its table of types ends without them.
+        "t" | "td" => Err(GwError::SYNTAX),
         m => data_type(m).map(Ty::Data).ok_or(GwError::SYNTAX),
     }
 }
@@ -91,6 +103,10 @@ fn text_value(rest: &str) -> Result<String, GwError> {
 /// The bytes to write for `value` of type `t`.
 pub(crate) fn encode(t: Ty, value: &str) -> Result<Vec<u8>, GwError> {
     match t {
+        Ty::Base64 => BASE64
+            .decode(value.trim().as_bytes())
+            .map_err(|_| GwError::SYNTAX),
+        Ty::HexBytes => hex_bytes(value),
         Ty::Hex(n) => {
             let v = number_u64(value.trim()).ok_or(GwError::SYNTAX)?;
             if n < 8 && v >> (8 * n) != 0 {
@@ -121,6 +137,30 @@ pub(crate) fn encode(t: Ty, value: &str) -> Result<Vec<u8>, GwError> {
     }
 }
 
+/// RFC 2045 base64 (the standard alphabet), padding optional on input.
+const BASE64: base64::engine::GeneralPurpose = base64::engine::GeneralPurpose::new(
+    &base64::alphabet::STANDARD,
+    base64::engine::GeneralPurposeConfig::new()
+        .with_decode_padding_mode(base64::engine::DecodePaddingMode::Indifferent),
+);
+
+/// Bytes written as hex: two digits make a byte, a space or the end after a single digit
+/// ends that byte (`01 2 30 456789 0A b0 0 ff`: 01 02 30 45 67 89 0A B0 00 FF).
+fn hex_bytes(value: &str) -> Result<Vec<u8>, GwError> {
+    let mut out = Vec::new();
+    for token in value.split_whitespace() {
+        let digits = token.as_bytes();
+        for pair in digits.chunks(2) {
+            let text = core::str::from_utf8(pair).map_err(|_| GwError::SYNTAX)?;
+            out.push(u8::from_str_radix(text, 16).map_err(|_| GwError::SYNTAX)?);
+        }
+    }
+    if out.is_empty() {
+        return Err(GwError::SYNTAX);
+    }
+    Ok(out)
+}
+
 fn number_u64(t: &str) -> Option<u64> {
     match t.strip_prefix("0x").or_else(|| t.strip_prefix("0X")) {
         Some(h) => u64::from_str_radix(h, 16).ok(),
@@ -137,7 +177,8 @@ pub(crate) fn show(t: Option<Ty>, data: &[u8]) -> Result<String, GwError> {
             .join(" ")
     };
     match t {
-        None => Ok(hex_bytes(data)),
+        None | Some(Ty::HexBytes) => Ok(hex_bytes(data)),
+        Some(Ty::Base64) => Ok(BASE64.encode(data)),
         Some(Ty::Hex(n)) => {
             if data.len() != n {
                 return Err(GwError::Abort(AbortCode::TYPE_MISMATCH));
@@ -164,6 +205,24 @@ pub(crate) fn show(t: Option<Ty>, data: &[u8]) -> Result<String, GwError> {
 mod tests {
     use super::*;
 
+    /// CANopenNode's gateway: `os`, `us`, `d` in base64, `hex` as its help text shows it.
+    #[test]
+    fn cia309_3_written_bytes_in_base64_and_hex() {
+        let e = |m: &str, v: &str| encode(ty(m).unwrap(), v);
+        assert_eq!(e("os", "Aas=").unwrap(), [1, 0xAB]);
+        assert_eq!(e("os", "Aas").unwrap(), [1, 0xAB]);
+        assert_eq!(e("d", "Y2FudHdpbg==").unwrap(), b"cantwin");
+        assert_eq!(e("us", "QQBCAA==").unwrap(), [0x41, 0, 0x42, 0]);
+        assert_eq!(e("os", "not base64!").err(), Some(GwError::SYNTAX));
+        assert_eq!(
+            e("hex", "01 2 30 456789 0A b0 0 ff").unwrap(),
+            [0x01, 0x02, 0x30, 0x45, 0x67, 0x89, 0x0A, 0xB0, 0x00, 0xFF]
+        );
+        assert_eq!(e("hex", "0g").err(), Some(GwError::SYNTAX));
+        assert_eq!(ty("t").err(), Some(GwError::SYNTAX));
+        assert_eq!(ty("td").err(), Some(GwError::SYNTAX));
+    }
+
     #[test]
     fn cia309_3_read_values_shown_like_the_reference_gateway() {
         let d = |m: &str| Some(ty(m).unwrap());
@@ -172,7 +231,13 @@ mod tests {
         assert_eq!(show(d("i8"), &[0xFE]).unwrap(), "-2");
         assert_eq!(show(d("b"), &[1]).unwrap(), "1");
         assert_eq!(show(d("vs"), b"a \"b\"").unwrap(), "\"a \"\"b\"\"\"");
-        assert_eq!(show(d("os"), &[1, 0xAB]).unwrap(), "01 AB");
+        assert_eq!(show(d("os"), &[1, 0xAB]).unwrap(), "Aas=");
+        assert_eq!(show(d("d"), b"cantwin").unwrap(), "Y2FudHdpbg==");
+        assert_eq!(show(d("us"), &[0x41, 0, 0x42, 0]).unwrap(), "QQBCAA==");
+        assert_eq!(
+            show(d("hex"), &[0xC8, 0x3D, 0xBB, 0]).unwrap(),
+            "C8 3D BB 00"
+        );
         assert_eq!(show(None, &[1, 0xAB]).unwrap(), "01 AB");
         assert_eq!(
             show(d("u32"), &[1, 2]).err(),

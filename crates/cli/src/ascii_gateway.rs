@@ -2,8 +2,9 @@
 //! CANopenNode's gateway and its `cocomm` client (parsed and answered by `cantwin-cia309`),
 //! on stdin/stdout or TCP.
 //!
-//! One gateway serves one network, net 1. The bus is driven by one master on the gateway's
-//! thread; each client has its own default node, SDO timeout and block setting.
+//! One gateway serves one network, net 1. The bus is driven by one master and one LSS master
+//! (CiA 305) on the gateway's thread; each client has its own default node, SDO timeout and
+//! block setting.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -14,8 +15,9 @@ use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
 use cantwin_can::{Duration, Outbox};
+use cantwin_canopen::lss;
 use cantwin_canopen::master::{Master, MasterEvent, Mode, SdoEvent, TransferId};
-use cantwin_cia309::{BusOp, GwError, Session, Step};
+use cantwin_cia309::{BusOp, GwError, LSS_TIMEOUT_MS, LssOp, LssResult, Session, Step};
 
 use crate::connect::{Link, Target};
 
@@ -47,22 +49,29 @@ struct Job {
     op: BusOp,
     timeout: Duration,
     mode: Mode,
-    reply: Sender<Result<Vec<u8>, GwError>>,
+    reply: Sender<JobResult>,
+}
+
+/// The result of a job: an SDO transfer's or NMT command's, or an LSS operation's.
+enum JobResult {
+    Sdo(Result<Vec<u8>, GwError>),
+    Lss(Result<LssResult, GwError>),
 }
 
 /// Answers one request line; bus operations go to `jobs`.
 fn answer(line: &str, s: &mut Session, jobs: &Sender<Job>) -> String {
     match cantwin_cia309::request(line, s) {
         Step::Answer(text) => text,
-        Step::Bus(pending) => {
-            let result = run_job(pending.op().clone(), s, jobs);
-            pending.finish(result)
-        }
+        Step::Bus(pending) => match run_job(pending.op().clone(), s, jobs) {
+            Ok(JobResult::Sdo(r)) => pending.finish(r),
+            Ok(JobResult::Lss(r)) => pending.finish_lss(r),
+            Err(e) => pending.finish(Err(e)),
+        },
     }
 }
 
 /// Hands `op` to the gateway's thread with the client's settings and waits for the result.
-fn run_job(op: BusOp, s: &Session, jobs: &Sender<Job>) -> Result<Vec<u8>, GwError> {
+fn run_job(op: BusOp, s: &Session, jobs: &Sender<Job>) -> Result<JobResult, GwError> {
     let (tx, rx) = mpsc::channel();
     let job = Job {
         op,
@@ -75,11 +84,117 @@ fn run_job(op: BusOp, s: &Session, jobs: &Sender<Job>) -> Result<Vec<u8>, GwErro
         reply: tx,
     };
     jobs.send(job).map_err(|_| GwError::STATE)?;
-    rx.recv().map_err(|_| GwError::STATE)?
+    rx.recv().map_err(|_| GwError::STATE)
+}
+
+/// Runs one LSS service to its end on the bus.
+fn lss_service(
+    link: &mut Link,
+    master: &mut lss::Master,
+    service: lss::Service,
+    timeout_ms: u16,
+) -> Result<Result<lss::Outcome, GwError>> {
+    let timeout = Duration::from_millis(u64::from(timeout_ms));
+    master.set_timeout(timeout);
+    let mut out = Outbox::new();
+    if master.start(service, link.now(), &mut out).is_err() {
+        return Ok(Err(GwError::STATE));
+    }
+    for f in out.drain() {
+        link.send(f)?;
+    }
+    let mut outcome = master.poll();
+    if outcome.is_none() {
+        // A fastscan is at most 2 + 4 × 33 steps of one timeout each.
+        let limit =
+            WallDuration::from_millis(u64::from(timeout_ms)) * 140 + WallDuration::from_secs(1);
+        link.run(
+            master,
+            |m| {
+                outcome = m.poll();
+                outcome.is_some()
+            },
+            limit,
+        )?;
+    }
+    Ok(outcome.ok_or(GwError::TIMEOUT))
+}
+
+/// Runs an LSS operation: one service, or `lss_allnodes`' cycle of fastscan, configure
+/// node-ID, store and switch state global waiting per node found.
+fn execute_lss(
+    link: &mut Link,
+    master: &mut lss::Master,
+    op: LssOp,
+) -> Result<Result<LssResult, GwError>> {
+    let (timeout_ms, start, store) = match op {
+        LssOp::Service {
+            service,
+            timeout_ms,
+        } => {
+            return Ok(lss_service(link, master, service, timeout_ms)?.map(LssResult::Outcome));
+        }
+        LssOp::AllNodes {
+            timeout_ms,
+            start,
+            store,
+        } => (timeout_ms, start, store),
+    };
+    let mut assigned = Vec::new();
+    let mut id = start;
+    let refused = |o: lss::Outcome, code: GwError| match o {
+        lss::Outcome::Done => Ok(()),
+        lss::Outcome::Timeout => Err(GwError::TIMEOUT),
+        lss::Outcome::Refused { error: 0xFF, .. } => Err(GwError::LSS_MANUFACTURER),
+        _ => Err(code),
+    };
+    let end = loop {
+        let address = match lss_service(link, master, lss::Service::Fastscan, timeout_ms)? {
+            Ok(lss::Outcome::Address(a)) => a,
+            Ok(lss::Outcome::Timeout) => break Ok(true),
+            Ok(_) => break Err(GwError::STATE),
+            Err(e) => break Err(e),
+        };
+        let set = lss_service(
+            link,
+            master,
+            lss::Service::ConfigureNodeId(id),
+            LSS_TIMEOUT_MS,
+        )?;
+        if let Err(e) = set.and_then(|o| refused(o, GwError::LSS_NODE_ID)) {
+            break Err(e);
+        }
+        if store {
+            let stored = lss_service(
+                link,
+                master,
+                lss::Service::StoreConfiguration,
+                LSS_TIMEOUT_MS,
+            )?;
+            if let Err(e) = stored.and_then(|o| refused(o, GwError::LSS_STORE)) {
+                break Err(e);
+            }
+        }
+        let waiting = lss::Service::SwitchGlobal(lss::Mode::Waiting);
+        if let Err(e) = lss_service(link, master, waiting, LSS_TIMEOUT_MS)? {
+            break Err(e);
+        }
+        assigned.push((id, address));
+        if id >= 127 {
+            break Ok(false);
+        }
+        id += 1;
+    };
+    Ok(Ok(LssResult::AllNodes { assigned, end }))
 }
 
 /// Runs `op` on the bus; the master's own SDO timeout ends a transfer that gets no answer.
-fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec<u8>, GwError>> {
+fn execute(
+    link: &mut Link,
+    master: &mut Master,
+    lss_master: &mut lss::Master,
+    job: &Job,
+) -> Result<JobResult> {
     let mut out = Outbox::new();
     master.config_mut().sdo.timeout = job.timeout;
     let started = match &job.op {
@@ -88,8 +203,11 @@ fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec
             for f in out.drain() {
                 link.send(f)?;
             }
-            return Ok(r.map(|()| Vec::new()).map_err(|_| GwError::NODE));
+            return Ok(JobResult::Sdo(
+                r.map(|()| Vec::new()).map_err(|_| GwError::NODE),
+            ));
         }
+        BusOp::Lss(op) => return Ok(JobResult::Lss(execute_lss(link, lss_master, *op)?)),
         BusOp::Upload { node, mux } => master.upload(*node, *mux, job.mode, link.now(), &mut out),
         BusOp::Download { node, mux, data } => {
             master.download(*node, *mux, data.clone(), job.mode, link.now(), &mut out)
@@ -97,7 +215,7 @@ fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec
     };
     let id: TransferId = match started {
         Ok(id) => id,
-        Err(_) => return Ok(Err(GwError::STATE)),
+        Err(_) => return Ok(JobResult::Sdo(Err(GwError::STATE))),
     };
     for f in out.drain() {
         link.send(f)?;
@@ -122,7 +240,7 @@ fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec
         },
         limit,
     )?;
-    Ok(result.unwrap_or(Err(GwError::TIMEOUT)))
+    Ok(JobResult::Sdo(result.unwrap_or(Err(GwError::TIMEOUT))))
 }
 
 /// Drives the bus: runs jobs one at a time and keeps the master fed between them (so the
@@ -130,10 +248,11 @@ fn execute(link: &mut Link, master: &mut Master, job: &Job) -> Result<Result<Vec
 /// gone.
 fn serve_bus(link: &mut Link, jobs: &Receiver<Job>) -> Result<()> {
     let mut master = Master::new();
+    let mut lss_master = lss::Master::new(Duration::from_millis(u64::from(LSS_TIMEOUT_MS)));
     loop {
         match jobs.try_recv() {
             Ok(job) => {
-                let r = execute(link, &mut master, &job)?;
+                let r = execute(link, &mut master, &mut lss_master, &job)?;
                 // A client that left does not take an answer.
                 let _ = job.reply.send(r);
             }
@@ -190,9 +309,8 @@ fn serve_client(
 ) -> std::io::Result<()> {
     while let Some(line) = read_line(input)? {
         let text = match line {
-            Ok(l) if l.trim().is_empty() => continue,
             Ok(l) => answer(&l, &mut session, jobs),
-            Err(()) => format!("ERROR: {}", GwError::SYNTAX),
+            Err(()) => format!("[{}] ERROR:{}", session.sequence as i32, GwError::SYNTAX),
         };
         output.write_all(text.replace('\n', eol).as_bytes())?;
         output.write_all(eol.as_bytes())?;
@@ -255,7 +373,7 @@ fn accept(listener: &TcpListener, jobs: &Sender<Job>, session: Session) {
             clients.fetch_sub(1, Ordering::SeqCst);
             let _ = writeln!(
                 stream,
-                "ERROR: {} (the gateway serves at most {MAX_CLIENTS} clients)\r",
+                "[0] ERROR:{} # the gateway serves at most {MAX_CLIENTS} clients\r",
                 GwError::STATE
             );
             continue;

@@ -18,7 +18,7 @@ fn conversation() -> Vec<(String, String)> {
         ("[1] 5 read 0x1008 0 vs", format!("[1] \"{DEVICE_NAME}\"")),
         ("[2] 5 write 0x1017 0 u16 250", "[2] OK".into()),
         ("[3] 5 read 0x1017 0 u16", "[3] 250".into()),
-        ("[4] 5 read 0x1234 0 u8", "[4] ERROR: 0x06020000".into()),
+        ("[4] 5 read 0x1234 0 u8", "[4] ERROR:0x06020000".into()),
         ("[5] 5 read 0x1018 1 x32", "[5] 0x00000CA7".into()),
         // Reset node: 0x1017 back to the power-on value (the scenario's heartbeat_ms).
         ("[6] 5 reset node", "[6] OK".into()),
@@ -27,18 +27,15 @@ fn conversation() -> Vec<(String, String)> {
         ("[9] set sdo_timeout 200", "[9] OK".into()),
         // Stopped: the SDO server is silent (CiA 301 §7.3.2.2.1), the client times out.
         ("[10] stop", "[10] OK".into()),
-        ("[11] read 0x1000 0 u32", "[11] ERROR: 0x05040000".into()),
+        ("[11] read 0x1000 0 u32", "[11] ERROR:0x05040000".into()),
         ("[12] start", "[12] OK".into()),
         ("[13] read 0x2002 0 u8", "[13] 0".into()),
         ("[14] preop", "[14] OK".into()),
-        (
-            "[15] write 0x2002 0 u8 101",
-            "[15] ERROR: 0x06090031".into(),
-        ),
+        ("[15] write 0x2002 0 u8 101", "[15] ERROR:0x06090031".into()),
         ("[16] reset comm", "[16] OK".into()),
-        ("[17] 5 read", "[17] ERROR: 101".into()),
-        ("[18] 5 jump", "[18] ERROR: 100".into()),
-        ("[19] 2 5 start", "[19] ERROR: 106".into()),
+        ("[17] 5 read", "[17] ERROR:101".into()),
+        ("[18] 5 jump", "[18] ERROR:100".into()),
+        ("[19] 2 5 start", "[19] ERROR:106".into()),
     ];
     pairs.into_iter().map(|(q, a)| (q.to_string(), a)).collect()
 }
@@ -119,7 +116,7 @@ fn cia309_3_gateway_serves_tcp_clients() {
     // A line longer than the gateway takes is refused as a syntax error, and the client
     // stays connected.
     let long = format!("[30] 5 write 0x1008 0 vs {}", "x".repeat(2000));
-    assert_eq!(ask(&long), "ERROR: 101");
+    assert_eq!(ask(&long), "[19] ERROR:101");
     assert_eq!(ask("[31] 5 read 0x1017 0 u16"), "[31] 100");
 
     // A second client has its own default node.
@@ -132,7 +129,7 @@ fn cia309_3_gateway_serves_tcp_clients() {
     write!(other_writer, "[1] read 0x1017 0 u16\r\n").unwrap();
     let mut line = String::new();
     other_reader.read_line(&mut line).unwrap();
-    assert_eq!(line, "[1] ERROR: 105\r\n");
+    assert_eq!(line, "[1] ERROR:105\r\n");
 
     let _ = gw.kill();
     let _ = gw.wait();
@@ -176,7 +173,7 @@ fn cia309_3_gateway_reads_the_eds_device_of_a_scenario() {
     );
     assert_eq!(
         String::from_utf8(out.stdout).unwrap(),
-        "[1] \"cantwin example I/O module\"\n[2] 3000\n[3] ERROR: 0x06090031\n\
+        "[1] \"cantwin example I/O module\"\n[2] 3000\n[3] ERROR:0x06090031\n\
          [4] 0x00030191\n[5] 0xA5\n"
     );
 }
