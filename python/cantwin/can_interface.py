@@ -12,11 +12,21 @@ own. Message timestamps are bus time in seconds since the simulation started (th
 the frame).
 
 In virtual time, :meth:`recv` runs the simulation instead of sleeping: by up to `timeout`
-of bus time, stopping as soon as a frame for this node arrives. After a frame reached Python
-on a thread other than the one that opened the bus (python-can's Notifier), the simulation
-waits up to the simulation's ``reaction_time`` (wall clock) for another thread to answer
-before it runs on, so python-canopen's Notifier thread and the thread that answers (an SDO
-client, say) behave as on a fast host.
+of bus time, stopping as soon as a frame for this node arrives. Bus time waits for Python:
+
+* after a thread sent a frame (or changed a device through the simulation), the simulation
+  does not run, and no frame is handed to a receiver, until that thread waits (in
+  :meth:`recv`, on a ``threading`` condition, event, queue or join, or blocked in
+  ``time.sleep`` or I/O), at most the simulation's ``reaction_time`` (wall clock). So
+  ``network.sync.transmit()`` followed by ``node.tpdo[1].wait_for_reception()``, or
+  ``node.nmt.state = "OPERATIONAL"`` followed by ``node.nmt.wait_for_heartbeat()``, gets the
+  answer it waits for;
+* after a frame reached Python on a thread other than the one that opened the bus
+  (python-can's Notifier), the simulation waits up to ``reaction_time`` for another thread
+  to answer before it runs on, so python-canopen's Notifier thread and the thread that
+  answers (an SDO client, say) behave as on a fast host.
+
+Paced to the wall clock, only the first rule applies, to the handing over of frames.
 """
 
 from __future__ import annotations

@@ -7,11 +7,15 @@
 //! the timeout in bus time, stopping as soon as a frame for this port arrives.
 //!
 //! A protocol stack in Python (python-canopen) receives on one thread (python-can's
-//! Notifier) and answers on another. Without care the receiving thread would run the
-//! simulation on (through the device's SDO timeout, say) before the answering thread got to
-//! send its answer. So after a frame reached Python, the simulation does not run more than
-//! [`REACTION_GAP`] past it until Python sent something or the simulation's reaction time
-//! (wall clock) passed: the answer goes out at the bus time a fast host would have sent it.
+//! Notifier) and sends and waits on others. Two rules keep the threads in step, both bounded
+//! by the simulation's reaction time (wall clock):
+//!
+//! * **Answers** (the reaction rule): after a frame reached Python, the simulation does not
+//!   run more than [`REACTION_GAP`] past it until Python sent something: the answer goes out
+//!   at the bus time a fast host would have sent it, not after the device's SDO timeout.
+//! * **Turns** (`crate::turns`): after a thread acted (sent a frame, changed a device), the
+//!   simulation does not run, and no frame is handed over, until that thread waits: the
+//!   answer to a frame is never there before its sender listens for it.
 
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, PoisonError};

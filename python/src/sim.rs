@@ -18,7 +18,10 @@ use crate::port::Port;
 ///
 /// Build it with :py:meth:`Simulation.load` (a scenario file) or
 /// :py:meth:`Simulation.from_toml` (scenario text). It starts in virtual time at 0 s: only
-/// :py:meth:`advance` and python-can receivers waiting on a :py:class:`Port` move time on.
+/// :py:meth:`advance` and python-can receivers waiting on a :py:class:`Port` move time on,
+/// and bus time stands still while a Python thread that sent a frame or changed a device has
+/// not started waiting (on a receive, a ``threading`` wait, ``time.sleep``), at most
+/// ``reaction_time`` of wall time: a script that triggers and then waits finds the answer.
 /// :py:meth:`start_paced` hands it to a thread that keeps bus time in step with the wall
 /// clock until :py:meth:`stop_paced`.
 #[pyclass(module = "cantwin._native", frozen)]
@@ -67,8 +70,10 @@ impl Simulation {
     /// Load the scenario file `path` and build it.
     ///
     /// `state_dir` keeps what devices store (CANopen 0x1010) between runs; `reaction_time`
-    /// (seconds, wall clock) is how long a receiver in virtual time lets other Python threads
-    /// answer a frame before the simulation runs on past it (see the package README).
+    /// (seconds, wall clock) bounds how long a receiver lets other Python threads answer a
+    /// frame before the simulation runs on past it, and how long it waits for a thread that
+    /// acted to start waiting before the simulation runs or a frame is handed over (see the
+    /// package README).
     #[staticmethod]
     #[pyo3(signature = (path, *, state_dir=None, reaction_time=0.02))]
     fn load(path: PathBuf, state_dir: Option<PathBuf>, reaction_time: f64) -> PyResult<Self> {
