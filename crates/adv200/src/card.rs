@@ -47,6 +47,7 @@ use crate::alarms::{Alarm, CardFault, opt_bus};
 use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
 use crate::ds402::State as PowerState;
+use crate::memory::Memory;
 use crate::od::{Descriptions, Personality};
 use crate::params::{ParamDb, ParamError, def, par};
 use crate::pdc::{self, Pdc};
@@ -194,6 +195,11 @@ pub struct Adv200 {
     /// [`Node::next_deadline`] as of the end of the last call that could change it: the bus
     /// asks for it after every event; every other change of the drive sets `dirty`.
     deadline: Option<Instant>,
+    /// Where "Save all parameters" keeps the parameters across power cycles, if anywhere
+    /// ([`crate::memory`]).
+    memory: Option<Memory>,
+    /// What was wrong with the memory at the last power-up or save.
+    memory_error: Option<String>,
 }
 
 impl core::fmt::Debug for Adv200 {
@@ -237,6 +243,45 @@ impl Adv200 {
             bus_off_recovered: None,
             descriptions,
             deadline: None,
+            memory: None,
+            memory_error: None,
+        }
+    }
+
+    /// Keeps what "Save all parameters" (0x1010 sub 1) stores in `memory` from now on, and
+    /// loads the drive parameters from it at every power-up ([`crate::memory`]).
+    pub fn set_memory(&mut self, memory: Memory) {
+        self.memory = Some(memory);
+    }
+
+    /// What was wrong with the parameter memory at the last power-up or save (the drive
+    /// then raised Param error), if anything.
+    pub fn memory_error(&self) -> Option<&str> {
+        self.memory_error.as_deref()
+    }
+
+    /// Loads the saved parameters at power-up; whether the memory could not be read.
+    fn load_memory(&mut self) -> bool {
+        let Some(m) = self.memory.clone() else {
+            return false;
+        };
+        match m.load_params(&mut self.st_mut().params) {
+            Ok(_) => false,
+            Err(e) => {
+                self.memory_error = Some(crate::memory::describe(&e));
+                true
+            }
+        }
+    }
+
+    /// Completes a store the card's device was asked for; Param error if it fails.
+    fn flush_memory(&mut self) {
+        let Some(m) = self.memory.clone() else {
+            return;
+        };
+        if let Err(e) = m.flush(&self.st().params) {
+            self.memory_error = Some(e.to_string());
+            self.st_mut().drive.raise(Alarm::ParamError);
         }
     }
 
@@ -517,7 +562,14 @@ impl Adv200 {
                     SdoCapabilities::FULL
                 };
                 c.sdo = services.with_sub_index_ff_refused();
-                Device::with_hooks(d, c, Station::default()).ok()
+                // Memory that cannot be read is the drive's Param error (§1.5), not the
+                // generic 0x5000.
+                c.storage_fault = None;
+                let mut dev = Device::with_hooks(d, c, Station::default()).ok()?;
+                if let Some(m) = &self.memory {
+                    dev.set_storage(m.card_storage());
+                }
+                Some(dev)
             });
         let Some(mut dev) = built else {
             return self.config_fault(0xFF04, now);
@@ -864,6 +916,7 @@ impl Adv200 {
     fn card_events(&mut self, now: Instant) -> bool {
         let mut faults = Vec::new();
         let mut any = false;
+        let mut memory_fault = false;
         if let Some(c) = &mut self.card {
             while let Some(e) = c.dev.poll_event() {
                 any = true;
@@ -878,12 +931,18 @@ impl Adv200 {
                     } => c.last_sync = Some(now),
                     // The TPDO parameters are back at their power-on values.
                     Event::ResetCommunication => c.dev.hooks_mut().remapped = true,
+                    Event::StorageLoadFailed(_) => memory_fault = true,
                     _ => {}
                 }
             }
         }
         for f in faults {
             self.bus_fault(f);
+        }
+        if memory_fault {
+            self.memory_error
+                .get_or_insert_with(|| "the saved communication parameters cannot be read".into());
+            self.st_mut().drive.raise(Alarm::ParamError);
         }
         any
     }
@@ -923,6 +982,7 @@ impl Adv200 {
         if let Some(c) = &mut self.card {
             c.dev.on_frame(frame, now, out);
         }
+        self.flush_memory();
         let events = self.card_events(now);
         let st = self.st();
         if events || st.touched || st.remapped || st.drive.has_events() {
@@ -1029,7 +1089,17 @@ impl Adv200 {
 
 impl Node for Adv200 {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.memory_error = None;
+        let unreadable = self.load_memory();
         self.reset_drive(now, out);
+        let events = self.card_events(now);
+        if unreadable {
+            self.st_mut().drive.raise(Alarm::ParamError);
+        }
+        if unreadable || events {
+            self.settle(now);
+            self.deadline = self.compute_deadline();
+        }
     }
 
     fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

@@ -61,6 +61,7 @@ pub mod ds402;
 pub mod eds;
 pub mod example;
 pub mod fieldbus;
+pub mod memory;
 pub mod od;
 pub mod params;
 pub mod pdc;

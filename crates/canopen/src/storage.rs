@@ -442,11 +442,9 @@ fn stored(index: u16, access: Access) -> bool {
 
 /// The blob of `group`'s parameters in `od`.
 pub fn encode(od: &ObjectDictionary, group: Group) -> Vec<u8> {
-    let mut out = Vec::with_capacity(64);
-    out.extend_from_slice(MAGIC);
-    out.push(VERSION);
     let desc = od.description();
     let range = group.range();
+    let mut entries = Vec::new();
     for obj in desc.objects().filter(|o| range.contains(&o.index())) {
         for (sub, d) in obj.subs() {
             if !stored(obj.index(), d.access) {
@@ -455,23 +453,40 @@ pub fn encode(od: &ObjectDictionary, group: Group) -> Vec<u8> {
             let Ok(id) = od.locate(obj.index(), sub) else {
                 continue;
             };
-            let raw = od.raw(id);
-            let Ok(len) = u16::try_from(raw.len()) else {
-                continue;
-            };
-            out.extend_from_slice(&obj.index().to_le_bytes());
-            out.push(sub);
-            out.extend_from_slice(&len.to_le_bytes());
-            out.extend_from_slice(raw);
+            entries.push((obj.index(), sub, od.raw(id)));
         }
+    }
+    encode_entries(entries)
+}
+
+/// A blob of the values `entries` (index, sub-index, bytes), for a device that keeps the
+/// parameters outside its dictionary (values longer than 65535 bytes are left out).
+pub fn encode_entries<'a>(entries: impl IntoIterator<Item = Entry<'a>>) -> Vec<u8> {
+    let mut out = Vec::with_capacity(64);
+    out.extend_from_slice(MAGIC);
+    out.push(VERSION);
+    for (index, sub, raw) in entries {
+        let Ok(len) = u16::try_from(raw.len()) else {
+            continue;
+        };
+        out.extend_from_slice(&index.to_le_bytes());
+        out.push(sub);
+        out.extend_from_slice(&len.to_le_bytes());
+        out.extend_from_slice(raw);
     }
     let sum = fnv1a(&out);
     out.extend_from_slice(&sum.to_le_bytes());
     out
 }
 
+/// The values of a blob made by [`encode`] or [`encode_entries`], or what is wrong with
+/// it (checksum, magic, version, layout).
+pub fn decode_entries(blob: &[u8]) -> Result<Vec<Entry<'_>>, StorageError> {
+    entries(blob)
+}
+
 /// One stored value: index, sub-index, bytes.
-type Entry<'a> = (u16, u8, &'a [u8]);
+pub type Entry<'a> = (u16, u8, &'a [u8]);
 
 /// The entries of a blob, or what is wrong with it.
 fn entries(blob: &[u8]) -> Result<Vec<Entry<'_>>, StorageError> {
