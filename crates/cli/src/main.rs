@@ -18,6 +18,7 @@ mod dnet;
 mod dump;
 mod eds;
 mod fuzz;
+mod lss;
 mod monitor;
 mod monitor_ui;
 mod output;
@@ -106,6 +107,18 @@ enum Command {
         after_help = "Examples:\n  cantwin nmt --socketcand 127.0.0.1:29536 start 5\n  cantwin nmt --socketcand 127.0.0.1:29536 reset-comm all"
     )]
     Nmt(canopen::NmtArgs),
+    /// LSS master (CiA 305): switch nodes to LSS configuration, set node-IDs and bit rates,
+    /// store, inquire addresses, identify, fastscan, commission a node without node-ID.
+    #[command(
+        after_help = "Examples:\n  cantwin lss --socketcand 127.0.0.1:29536 commission 5 --fastscan\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 switch global configuration\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 set-node 5\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 conf-bitrate 500k\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 store\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 inquire\n  \
+                            cantwin lss --socketcand 127.0.0.1:29536 switch global waiting"
+    )]
+    Lss(lss::LssArgs),
     /// Find the CANopen nodes on a bus (SDO upload of 0x1000 to ids 1–127).
     #[command(
         after_help = "Examples:\n  cantwin scan --socketcand 127.0.0.1:29536\n  cantwin scan --scenario scenarios/cia301-device.toml"
@@ -181,6 +194,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Trace(args) => canopen::run_trace(&args),
         Command::Monitor(args) => monitor::run(&args),
         Command::Gateway(args) => ascii_gateway::run(&args),
+        Command::Lss(args) => lss::run_lss(&args),
         Command::Report(args) => report::run(&args),
         Command::Scenario(args) => scenario_cmd::run(&args),
         Command::Replay(args) => replay::run(&args),
