@@ -27,14 +27,21 @@
 //! With the factory parameters (`Fieldbus baudrate` None, `Fieldbus address` 0) the card
 //! stays off the bus in Opt Bus Fault FF02, as the real one does until it is configured. A card
 //! whose baud rate differs from the bus's stays silent.
+//!
+//! With `--state-dir`, "Save all parameters" (0x1010 sub 1) keeps the drive parameters and
+//! the card's communication objects in `STATE_DIR/<device name>/`; at power-up the saved
+//! parameters take the place of those set here. A memory that cannot be read is a build
+//! warning naming the file, and the drive raises Param error (EMCY 0xFF2D, §1.5).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use cantwin_adv200::memory::Memory;
 use cantwin_adv200::od::Descriptions;
 use cantwin_adv200::params::def;
 use cantwin_adv200::{Adv200, Adv200Config, example};
 use cantwin_bus::{BoxedNode, PortConfig};
+use cantwin_canopen::storage::FileStorage;
 use serde::Deserialize;
 
 use crate::error::ScenarioError;
@@ -68,7 +75,7 @@ impl DeviceKind for Adv200Kind {
         &self,
         s: &Settings<'_>,
         bus: &BusSpec,
-        _env: &BuildEnv,
+        env: &BuildEnv,
     ) -> Result<(BoxedNode, PortConfig), ScenarioError> {
         let config = Adv200Config {
             expedited_only: s.get_or("expedited_only", true)?,
@@ -126,6 +133,21 @@ impl DeviceKind for Adv200Kind {
         for (k, v) in analog.iter().enumerate() {
             node.set_analog_input(k as u8 + 1, *v);
         }
+        if let Some(dir) = &env.state_dir {
+            let dir = dir.join(&s.device().name);
+            let storage = FileStorage::new(&dir).map_err(|e| {
+                s.error(
+                    "name",
+                    format!("cannot keep the drive parameters in {}: {e}", dir.display()),
+                )
+            })?;
+            for problem in storage.check() {
+                s.warn(format!(
+                    "{problem}; the drive keeps the parameters it has and raises Param error (EMCY 0xFF2D)"
+                ));
+            }
+            node.set_memory(Memory::new(Box::new(storage)));
+        }
         Ok((BoxedNode::twin(node), PortConfig::default()))
     }
 }
@@ -143,6 +165,35 @@ mod tests {
 
     fn error_of(extra: &str) -> String {
         build_error(&(DEVICE.to_string() + extra))
+    }
+
+    #[test]
+    fn state_dir_memory_that_cannot_be_read_is_a_warning_and_param_error() {
+        use crate::{BuildEnv, Registry, Scenario};
+        use cantwin_adv200::alarms::Alarm;
+        let dir = std::env::temp_dir().join(format!("cantwin-adv200-kind-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let file = dir.join("drive").join(cantwin_canopen::storage::STORE_FILE);
+        std::fs::create_dir_all(&file).unwrap();
+        let env = BuildEnv {
+            state_dir: Some(dir.clone()),
+        };
+        let text = DEVICE.to_string() + "example = true\n";
+        let scenario = Scenario::parse(&text, "t.toml").unwrap();
+        let mut built = scenario.build(&Registry::builtin(), &env).unwrap();
+        assert_eq!(built.warnings.len(), 1, "{:?}", built.warnings);
+        let w = &built.warnings[0];
+        assert!(
+            w.contains(&file.display().to_string()) && w.contains("Param error"),
+            "{w}"
+        );
+        built.sim.run_until(Instant::from_nanos(10_000_000));
+        let port = built.device("drive").unwrap().port;
+        let node = built.sim.node::<Adv200>(port).unwrap();
+        assert!(node.drive().alarms().contains(&Alarm::ParamError));
+        // The worked example's parameters are still in effect: node 12.
+        assert_eq!(node.param(par::FIELDBUS_ADDRESS), Ok(12));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
