@@ -26,11 +26,11 @@
 //!   any of them). The default SDO server's own pre-defined identifiers (0x600 +
 //!   node-ID, 0x580 + node-ID) are the one use of restricted CAN-IDs the standard makes,
 //!   and stay writable to 0x1200;
-//! * the CAN-ID or frame format of an entry in use changes: CiA 301 requires bit 31 (bit 30
-//!   for a SYNC producer, bits 30/31 for TIME) to be set first, then the new identifier
-//!   written, then the entry made valid again. CANopenNode (`ODR_INVALID_VALUE`) and lely
-//!   (`CO_SDO_AC_PARAM_VAL`) both answer 0x0609 0030 here, so the stack does too, rather
-//!   than the general error 0x0800 0000.
+//! * the CAN-ID or frame format of an entry in use changes in one write from in use to in
+//!   use: the entry is to be taken out of use first (bit 31 set; for SYNC, bit 30 cleared;
+//!   for TIME, bits 30 and 31 cleared), then given its new identifier, then put back in use.
+//!   CANopenNode (`ODR_INVALID_VALUE`) and lely (`CO_SDO_AC_PARAM_VAL`) both answer
+//!   0x0609 0030 here, so the stack does too, rather than the general error 0x0800 0000.
 //!
 //! 29-bit CAN-IDs (bit 29 = 1) are accepted everywhere: the stack sends and receives
 //! extended frames, and the restricted table lists 11-bit CAN-IDs only. 0x1016 holds
