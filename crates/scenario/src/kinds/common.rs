@@ -66,6 +66,26 @@ pub(crate) fn canopen_device(
     Ok(device)
 }
 
+/// Replaces `path` with `bytes` atomically: a temporary file beside it, fsync, rename,
+/// fsync of the directory, so that a crash leaves the old contents or the new, never a
+/// torn file (the project's rule for stored state).
+pub(crate) fn replace_file(path: &std::path::Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let dir = path.parent().unwrap_or(std::path::Path::new("."));
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".tmp");
+    let tmp = dir.join(name);
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)?;
+    #[cfg(unix)]
+    std::fs::File::open(dir)?.sync_all()?;
+    Ok(())
+}
+
 /// Helpers for the kinds' unit tests.
 #[cfg(test)]
 pub(crate) mod testing {

@@ -65,7 +65,8 @@ struct FileFlash(PathBuf);
 
 impl FlashStorage for FileFlash {
     fn store(&mut self, image: &str) -> Result<(), String> {
-        std::fs::write(&self.0, image).map_err(|e| format!("{}: {e}", self.0.display()))
+        super::common::replace_file(&self.0, image.as_bytes())
+            .map_err(|e| format!("{}: {e}", self.0.display()))
     }
 }
 
@@ -146,13 +147,25 @@ impl DeviceKind for OpenDriveKind {
                 )
             };
             std::fs::create_dir_all(&dir).map_err(|e| cannot(e.to_string()))?;
-            match std::fs::read_to_string(&file) {
-                Ok(text) => {
-                    let flash = Flash::from_text(&text).map_err(|e| cannot(e.to_string()))?;
-                    node.drive_mut().set_flash(flash);
-                }
+            // A flash that cannot be read leaves the drive on its defaults; the manual gives
+            // no alarm for it, so the user hears of it as a warning naming the file.
+            let unusable = |why: String| {
+                s.warn(format!(
+                    "the drive's flash {} cannot be used: {why}; the drive starts on its defaults",
+                    file.display()
+                ))
+            };
+            match std::fs::read(&file) {
+                Ok(bytes) => match String::from_utf8(bytes).map_err(|e| e.to_string()) {
+                    Ok(text) if text.trim().is_empty() => unusable("the file is empty".into()),
+                    Ok(text) => match Flash::from_text(&text) {
+                        Ok(flash) => node.drive_mut().set_flash(flash),
+                        Err(e) => unusable(e.to_string()),
+                    },
+                    Err(e) => unusable(format!("not text ({e})")),
+                },
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(e) => return Err(cannot(e.to_string())),
+                Err(e) => unusable(e.to_string()),
             }
             node = node.with_storage(Box::new(FileFlash(file)));
         }
@@ -295,6 +308,33 @@ mod tests {
         let built = scenario.build(&Registry::builtin(), &env).unwrap();
         let node = built.sim.node::<OpenDrive>(port).unwrap();
         assert_eq!(node.drive().saved_param(P63), 1200);
+        assert!(built.warnings.is_empty(), "{:?}", built.warnings);
+        // Replaced atomically: no temporary file stays behind.
+        assert!(!dir.join("drive").join("flash.txt.tmp").exists());
+        // A flash that cannot be used is a warning naming the file; the drive starts on its
+        // defaults.
+        let file = dir.join("drive").join("flash.txt");
+        let default = cantwin_opendrive::params::def(P63).unwrap().default;
+        for (what, bytes) in [
+            ("empty", &b""[..]),
+            ("binary", &[0xFF, 0xFE, 0x00, 0x9C][..]),
+            ("damaged", &b"P63 = 12x0\n"[..]),
+        ] {
+            std::fs::write(&file, bytes).unwrap();
+            let built = scenario.build(&Registry::builtin(), &env).unwrap();
+            assert_eq!(built.warnings.len(), 1, "{what}: {:?}", built.warnings);
+            assert!(
+                built.warnings[0].contains(&file.display().to_string()),
+                "{what}: {}",
+                built.warnings[0]
+            );
+            let node = built.sim.node::<OpenDrive>(port).unwrap();
+            assert_eq!(node.drive().saved_param(P63), default, "{what}");
+        }
+        std::fs::remove_file(&file).unwrap();
+        std::fs::create_dir(&file).unwrap();
+        let built = scenario.build(&Registry::builtin(), &env).unwrap();
+        assert_eq!(built.warnings.len(), 1, "{:?}", built.warnings);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
