@@ -42,6 +42,9 @@ pub(crate) struct Acting {
     pub thread: u64,
     /// When it acted last (wall clock).
     pub since: std::time::Instant,
+    /// Whether it is back in Python: a thread still inside a call that released the GIL
+    /// (a send) cannot be waiting yet, whatever its Python frames show.
+    pub returned: bool,
 }
 
 /// The state of one simulation.
@@ -89,19 +92,27 @@ impl Shared {
     pub fn lock_acting(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Core>> {
         let thread = crate::turns::thread_ident(py)?;
         let mut core = self.lock();
-        core.acted(thread);
+        core.acted(thread, true);
         Ok(core)
     }
 }
 
 impl Core {
-    /// Note that `thread` acted just now.
-    pub fn acted(&mut self, thread: u64) {
+    /// Note that `thread` acted just now; `returned`: it holds the GIL (module `turns`).
+    pub fn acted(&mut self, thread: u64, returned: bool) {
         self.acting.retain(|a| a.thread != thread);
         self.acting.push(Acting {
             thread,
             since: std::time::Instant::now(),
+            returned,
         });
+    }
+
+    /// Note that `thread`, which acted inside a call that released the GIL, holds it again.
+    pub fn returned(&mut self, thread: u64) {
+        if let Some(a) = self.acting.iter_mut().find(|a| a.thread == thread) {
+            a.returned = true;
+        }
     }
 
     /// Note that `thread` waits now (in a receive, or letting bus time pass).
@@ -109,12 +120,13 @@ impl Core {
         self.acting.retain(|a| a.thread != thread);
     }
 
-    /// The threads bus time still waits for: those that acted less than the reaction time
-    /// ago and have not waited since (older entries are forgotten here).
-    pub fn acting_threads(&mut self) -> Vec<u64> {
+    /// The threads bus time still waits for, with whether each is back in Python: those
+    /// that acted less than the reaction time ago and have not waited since (older entries
+    /// are forgotten here).
+    pub fn acting_threads(&mut self) -> Vec<(u64, bool)> {
         let limit = self.reaction_time;
         self.acting.retain(|a| a.since.elapsed() < limit);
-        self.acting.iter().map(|a| a.thread).collect()
+        self.acting.iter().map(|a| (a.thread, a.returned)).collect()
     }
 
     /// Run `f` on the simulation (in paced mode, brought up to the wall clock first).

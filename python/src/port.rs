@@ -152,7 +152,7 @@ impl Port {
                     .with_sim(|sim| sim.transmit(port, frame))?
                     .map_err(|e| err(e.to_string()));
                 if r.is_ok() {
-                    core.acted(thread);
+                    core.acted(thread, false);
                 }
                 self.shared.delivery.pending.store(false, Ordering::Release);
                 // Receivers are woken by `send` once this thread holds the GIL again: the
@@ -343,6 +343,7 @@ impl Port {
         let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
         let thread = crate::turns::thread_ident(py)?;
         let r = py.detach(|| self.transmit(frame, timeout, thread));
+        self.shared.lock().returned(thread);
         self.shared.changed.notify_all();
         r
     }

@@ -63,18 +63,24 @@ struct Spot {
 pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
     let mut spots: Vec<Spot> = Vec::new();
     loop {
-        let threads = shared.lock().acting_threads();
-        if threads.is_empty() {
+        let acting = shared.lock().acting_threads();
+        if acting.is_empty() {
             return true;
         }
         if Instant::now() >= deadline {
             return false;
         }
+        // Only a thread back in Python can have reached a wait.
+        let threads: Vec<u64> = acting.iter().filter(|a| a.1).map(|a| a.0).collect();
         // If Python cannot be asked (an interpreter shutting down), nobody is waited for:
         // a receiver must never hang on it.
-        let waiting = Python::attach(|py| waiting_threads(py, &threads, &mut spots))
-            .unwrap_or_else(|_| threads.clone());
-        let all = waiting.len() == threads.len();
+        let waiting = if threads.is_empty() {
+            Vec::new()
+        } else {
+            Python::attach(|py| waiting_threads(py, &threads, &mut spots))
+                .unwrap_or_else(|_| threads.clone())
+        };
+        let all = waiting.len() == acting.len();
         shared
             .lock()
             .acting
