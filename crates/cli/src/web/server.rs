@@ -144,6 +144,11 @@ impl Server {
                 "cantwin sim: warning: --allow-remote: the web dashboard on {addr} obeys anyone who can reach it and has its address with the token ({url}); its controls power-cycle devices, write objects, inject faults and send NMT. It speaks plain HTTP: anyone on the network path can read the token. Host names accepted: {}",
                 policy.hosts().join(", ")
             );
+            if options.allow_host.is_empty() && addr.ip().is_unspecified() {
+                eprintln!(
+                    "cantwin sim: note: bound to all addresses without --allow-host, the dashboard answers only to the names above; give the name or address remote browsers use with --allow-host NAME"
+                );
+            }
         }
         let runtime = tokio::runtime::Builder::new_current_thread()
             .enable_io()
