@@ -150,6 +150,9 @@ pub fn run(args: &Args) -> Result<()> {
             ReplayError::Unsettled => {
                 anyhow::anyhow!("{e}; give them with --master-ids")
             }
+            ReplayError::TooManyFrames { .. } => {
+                anyhow::anyhow!("{capture} {e}; lower --max-gap, or replay a part of the capture")
+            }
             e => anyhow::Error::new(e),
         })?;
     let entries = &report.entries;

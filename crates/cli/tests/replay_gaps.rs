@@ -129,6 +129,26 @@ fn a_flipped_timestamp_byte_is_refused_naming_the_records_of_the_gap() {
     assert!((590..=610).contains(&unexpected), "{v}");
     assert!(v["matching"].as_u64().unwrap() > 10, "{v}");
 
+    // With the bound raised to a year, the replay stops when the twins have sent far more
+    // frames than the capture holds, long before the 1,165 hours, naming why.
+    let (ok, out, err) = bounded_cantwin(&[
+        "replay",
+        pcap.to_str().unwrap(),
+        "--scenario",
+        &scenario,
+        "--max-gap",
+        "31536000",
+    ]);
+    assert!(!ok, "{out}");
+    assert!(
+        err.contains(&format!(
+            "flipped.pcap spans more time than its frames account for: the twins sent more \
+             than {} frames by ",
+            100_000 + 100 * records
+        )) && err.contains("lower --max-gap, or replay a part of the capture"),
+        "{err}"
+    );
+
     // A bound that is not a number of seconds is refused before anything is read.
     let (ok, _, err) = cantwin(&[
         "replay",

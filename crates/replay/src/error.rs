@@ -53,6 +53,18 @@ pub enum ReplayError {
         /// The bound, in seconds.
         bound: String,
     },
+    /// The twins sent more frames than a capture of this size can be compared with: its
+    /// time span is out of proportion to its frames.
+    #[error(
+        "spans more time than its frames account for: the twins sent more than {budget} \
+         frames by {at} s of its time"
+    )]
+    TooManyFrames {
+        /// The most twin frames a run keeps.
+        budget: usize,
+        /// The capture time the budget ran out at, in seconds.
+        at: String,
+    },
     /// The capture holds no frames.
     #[error("holds no frames to replay")]
     NoFrames,

@@ -15,6 +15,13 @@
 //! produces them, and DeviceNet group-2 master messages thus come out as the master's.
 //! A fixed list of master identifiers replaces the rule.
 //!
+//! A replay's cost follows its input, never a timestamp in it: [`CapturedFrames::read`] keeps
+//! only the frames of the records it reads and refuses (or shortens) gaps beyond a
+//! [`GapBound`], naming the records around them; a run jumps over idle virtual time without
+//! work, and keeps at most a hundred twin frames per captured frame (and 100,000 more), so
+//! a capture whose span is out of proportion to its size ends in
+//! [`ReplayError::TooManyFrames`] instead of growing without bound.
+//!
 //! ```
 //! use cantwin_can::Frame;
 //! use cantwin_replay::{Captured, Kind, replay};

@@ -3,7 +3,9 @@
 
 use std::collections::BTreeSet;
 
-use cantwin_bus::{BusId, PortConfig, PortId, Recorder, TapId};
+use std::sync::{Arc, Mutex};
+
+use cantwin_bus::{BusEvent, BusInfo, FnTap, PortConfig, PortId};
 use cantwin_can::{Frame, Instant, ListenOnly};
 use cantwin_scenario::{BuildEnv, Built, Registry, Scenario};
 
@@ -72,29 +74,29 @@ impl Replayer<'_> {
         };
         report(0);
         let mut built = self.build()?;
-        let mut ports: Vec<(BusId, PortId, TapId)> = Vec::new();
-        for (_, id) in built.buses.clone() {
+        let sink = Arc::new(Mutex::new(Sink {
+            frames: Vec::new(),
+            budget: frame_budget(self.captured.len()),
+            over: None,
+        }));
+        let mut ports: Vec<PortId> = Vec::new();
+        for (i, (_, id)) in built.buses.clone().into_iter().enumerate() {
             let bus = built.sim.bus_mut(id).ok_or(ReplayError::BusGone)?;
             // The replayed master's port; it also acknowledges frames, as the capture's
             // master did.
             let port = bus.attach(ListenOnly, PortConfig::default().with_queue_depth(4096));
-            let tap = bus.add_tap(Recorder::new());
-            ports.push((id, port, tap));
+            let sink = Arc::clone(&sink);
+            bus.add_tap(FnTap(move |_: &BusInfo<'_>, event: &BusEvent| {
+                if let BusEvent::Frame(f) = event
+                    && !f.dropped
+                    && f.sender != port
+                {
+                    lock(&sink).keep(i, f.end, f.frame);
+                }
+            }));
+            ports.push(port);
         }
         let is_master = |c: &Captured| master[c.bus].contains(&id_key(c.frame.id()));
-        let twin_frames = |built: &Built| -> Vec<(usize, Instant, Frame)> {
-            let mut v = Vec::new();
-            for (i, (id, port, tap)) in ports.iter().enumerate() {
-                if let Some(r) = built.sim.bus(*id).and_then(|b| b.tap::<Recorder>(*tap)) {
-                    v.extend(
-                        r.frames()
-                            .filter(|f| !f.dropped && f.sender != *port)
-                            .map(|f| (i, f.end, f.frame)),
-                    );
-                }
-            }
-            v
-        };
         // The capture's time 0 is its first frame's end of frame. When that frame is the
         // master's it is sent at once; otherwise time 0 is when the twins' first frame ends.
         let anchor: i64 = match self.captured.first() {
@@ -102,7 +104,7 @@ impl Replayer<'_> {
             Some(_) => {
                 let limit = instant(self.end);
                 loop {
-                    if let Some(t) = twin_frames(&built).iter().map(|f| f.1).min() {
+                    if let Some(t) = lock(&sink).frames.iter().map(|f| f.1).min() {
                         break i64::try_from(t.as_nanos()).unwrap_or(i64::MAX);
                     }
                     match built.sim.step_next() {
@@ -119,9 +121,8 @@ impl Replayer<'_> {
             let start = anchor
                 .saturating_add(c.t)
                 .saturating_sub(to_eof(&c.frame, self.bit_ns[c.bus]));
-            let start = instant(start).max(built.sim.now());
-            built.sim.run_until(start);
-            let port = ports[c.bus].1;
+            advance(&mut built, instant(start), &sink, anchor)?;
+            let port = ports[c.bus];
             built
                 .sim
                 .transmit(port, c.frame)
@@ -133,12 +134,17 @@ impl Replayer<'_> {
             injected += 1;
             report(c.t);
         }
-        built
-            .sim
-            .run_until(instant(anchor.saturating_add(self.end)));
+        advance(
+            &mut built,
+            instant(anchor.saturating_add(self.end)),
+            &sink,
+            anchor,
+        )?;
         report(last);
+        drop(built);
+        let kept = std::mem::take(&mut lock(&sink).frames);
         let mut ids = vec![BTreeSet::new(); ports.len()];
-        let frames = twin_frames(&built)
+        let frames = kept
             .into_iter()
             .map(|(bus, end, frame)| {
                 ids[bus].insert(id_key(frame.id()));
@@ -154,6 +160,73 @@ impl Replayer<'_> {
             ids,
             injected,
         })
+    }
+}
+
+/// The twins' frames a run keeps, up to a budget.
+struct Sink {
+    /// Bus, end of frame, frame.
+    frames: Vec<(usize, Instant, Frame)>,
+    budget: usize,
+    /// When the first frame beyond the budget ended.
+    over: Option<Instant>,
+}
+
+impl Sink {
+    fn keep(&mut self, bus: usize, end: Instant, frame: Frame) {
+        if self.frames.len() < self.budget {
+            self.frames.push((bus, end, frame));
+        } else if self.over.is_none() {
+            self.over = Some(end);
+        }
+    }
+}
+
+fn lock(sink: &Mutex<Sink>) -> std::sync::MutexGuard<'_, Sink> {
+    // The taps only push: a poisoned sink still holds whole entries.
+    sink.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// How many twin frames a run of a capture of `captured` frames may keep: what bounds a
+/// replay's memory by its input rather than by the time span the capture claims. A replay
+/// that matches has about as many twin frames as the capture; a hundred times more, beyond a
+/// floor for short captures, is a capture out of proportion to its size.
+pub(crate) fn frame_budget(captured: usize) -> usize {
+    captured.saturating_mul(100).saturating_add(100_000)
+}
+
+/// How much virtual time a run advances at most between looks at its frame budget, while
+/// the twins are busy.
+const CHUNK_NS: u64 = 1_000_000_000;
+
+/// Run the simulation up to `to` (never back), in chunks while the twins are busy and in one
+/// jump over idle time, stopping when the twins exceed the frame budget.
+fn advance(
+    built: &mut Built,
+    to: Instant,
+    sink: &Mutex<Sink>,
+    anchor: i64,
+) -> Result<(), ReplayError> {
+    loop {
+        let now = built.sim.now();
+        if now >= to {
+            return Ok(());
+        }
+        let step = match built.sim.next_event_time() {
+            Some(next) if next < to => next
+                .max(Instant::from_nanos(now.as_nanos().saturating_add(CHUNK_NS)))
+                .min(to),
+            _ => to,
+        };
+        built.sim.run_until(step);
+        let s = lock(sink);
+        if let Some(at) = s.over {
+            let at = i64::try_from(at.as_nanos()).unwrap_or(i64::MAX) - anchor;
+            return Err(ReplayError::TooManyFrames {
+                budget: s.budget,
+                at: seconds(at),
+            });
+        }
     }
 }
 
