@@ -496,11 +496,11 @@ fn eds_check_reports_line_numbered_errors_and_exits_non_zero() {
         "[1000]\nParameterName=x\nDataType=0x0007\nAccessType=rx\n",
     )
     .unwrap();
-    let (ok, _, err) = cantwin(&["eds", "check", bad.to_str().unwrap()]);
+    let (ok, out, err) = cantwin(&["eds", "check", bad.to_str().unwrap()]);
     assert!(!ok);
     assert!(
-        err.contains("line 4 [1000] AccessType: invalid value \"rx\""),
-        "{err}"
+        out.contains("error: line 4 [1000] AccessType: invalid value \"rx\""),
+        "{out}"
     );
     assert!(!err.contains("Stack backtrace"), "{err}");
     std::fs::remove_dir_all(&dir).unwrap();

@@ -63,12 +63,14 @@ pub(crate) fn tokenize(text: &str) -> (Vec<RawSection>, Found) {
             continue;
         }
         if l.starts_with('#') {
+            // Reported once, at the first such line: a tool that writes them writes many.
             if !hash_comment {
                 hash_comment = true;
-                found.push((
-                    Severity::Note,
-                    ParseError::at(line, ParseErrorKind::HashComment),
-                ));
+                let mut e = ParseError::at(line, ParseErrorKind::HashComment);
+                if let Some(s) = sections.last().filter(|_| open) {
+                    e = e.in_section(&s.name);
+                }
+                found.push((Severity::Note, e));
             }
             continue;
         }
