@@ -1,0 +1,116 @@
+"""The turn rule of virtual time: bus time waits for a Python thread that sent a frame until
+that thread waits (package README, "Time"), with python-can alone and a Notifier thread."""
+
+import threading
+import time
+
+import can
+
+import cantwin
+from conftest import CIA301, NODE_ID
+
+TPDO1 = 0x180 + NODE_ID
+SYNC = can.Message(arbitration_id=0x080, data=b"", is_extended_id=False)
+NMT_START = can.Message(arbitration_id=0x000, data=[0x01, NODE_ID], is_extended_id=False)
+
+
+class Tpdo1(can.Listener):
+    """Sets `arrived` at each TPDO1 (the Notifier's thread) and notes its bus time."""
+
+    def __init__(self):
+        self.arrived = threading.Event()
+        self.times = []
+
+    def on_message_received(self, msg):
+        if msg.arbitration_id == TPDO1:
+            self.times.append(msg.timestamp)
+            self.arrived.set()
+
+
+def started(reaction_time):
+    """The CiA 301 twin operational, a python-can bus with a Notifier and a TPDO1 listener."""
+    sim = cantwin.Simulation.load(str(CIA301), reaction_time=reaction_time)
+    bus = can.Bus(interface="cantwin", channel="can0", sim=sim)
+    bus.send(NMT_START)
+    # The node-guarding-free twin answers SYNC with TPDO1 once operational (CiA 301
+    # §7.2.2.2, transmission type 1): let the command reach it first.
+    sim.advance(0.01)
+    tpdo = Tpdo1()
+    notifier = can.Notifier(bus, [tpdo], timeout=0.5)
+    return sim, bus, notifier, tpdo
+
+
+def spin(seconds):
+    """Run Python code (never wait) for `seconds` of wall time."""
+    end = time.perf_counter() + seconds
+    n = 0
+    while time.perf_counter() < end:
+        n += 1
+    return n
+
+
+def test_bus_time_stands_still_until_the_sender_waits():
+    sim, bus, notifier, tpdo = started(reaction_time=0.5)
+    try:
+        at = sim.now
+        bus.send(SYNC)
+        # Computing, not waiting: the Notifier must not run the simulation meanwhile.
+        spin(0.003)
+        assert sim.now == at and tpdo.times == []
+        assert tpdo.arrived.wait(timeout=2)
+        # The answer comes at the bus time the device gives it, right after the SYNC.
+        assert at < tpdo.times[0] < at + 0.001
+    finally:
+        notifier.stop()
+        bus.shutdown()
+
+
+def test_a_sleeping_sender_waits():
+    # A reaction time above the sleep: only seeing the thread blocked in time.sleep lets the
+    # simulation run before the sleep ends.
+    sim, bus, notifier, tpdo = started(reaction_time=0.5)
+    try:
+        bus.send(SYNC)
+        time.sleep(0.2)
+        assert tpdo.times, "the simulation did not run while the sender slept"
+    finally:
+        notifier.stop()
+        bus.shutdown()
+
+
+def test_a_sender_that_never_waits_holds_time_for_the_reaction_time_at_most():
+    sim, bus, notifier, tpdo = started(reaction_time=0.02)
+    try:
+        bus.send(SYNC)
+        # Never wait: the Notifier runs the simulation once the reaction time is over and
+        # hands the TPDO over at the next switch of the GIL.
+        end = time.monotonic() + 2.0
+        while not tpdo.times and time.monotonic() < end:
+            spin(0.001)
+        assert tpdo.times
+    finally:
+        notifier.stop()
+        bus.shutdown()
+
+
+def test_a_device_change_waits_for_its_thread_too():
+    sim, bus, notifier, tpdo = started(reaction_time=0.5)
+    emcy = threading.Event()
+
+    class Emcy(can.Listener):
+        def on_message_received(self, msg):
+            if msg.arbitration_id == 0x080 + NODE_ID:
+                emcy.set()
+
+    notifier.add_listener(Emcy())
+    try:
+        at = sim.now
+        # The twin's EMCY trigger object (scenarios/cia301-device.toml): the EMCY goes out
+        # when the simulation runs, which is once this thread waits.
+        sim.write_object("node5", 0x2001, 0, (0x5000).to_bytes(2, "little"))
+        spin(0.003)
+        assert sim.now == at and not emcy.is_set()
+        assert emcy.wait(timeout=2)
+    finally:
+        notifier.stop()
+        bus.shutdown()
