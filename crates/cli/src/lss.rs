@@ -417,5 +417,8 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
             println!("OK: {} has node-ID {node_id}", address(&found));
         }
     }
+    // Let the last frame (switch state global and activate bit timing get no answer) leave
+    // before the link closes.
+    link.run(&mut master, |_| false, WallDuration::from_millis(100))?;
     Ok(())
 }

@@ -1,0 +1,57 @@
+//! `cantwin lss` against `cantwin sim` running `scenarios/lss-commissioning.toml`: a node
+//! without node-ID selected by its LSS address, given node-ID 7 and stored; it then answers
+//! SDO as node 7. (Fastscan, a few hundred answer times long, is tested in virtual time.)
+#![allow(clippy::unwrap_used)]
+
+mod common;
+use common::*;
+
+#[test]
+fn cia305_cantwin_lss_commissions_a_node_selected_by_its_address() {
+    let (_sim, addr) = sim_with_socketcand(&scenario_file("lss-commissioning.toml"), "300");
+    let lss = |args: &[&str]| {
+        let mut all = vec!["lss", "--socketcand", &addr];
+        all.extend_from_slice(args);
+        let (ok, out, err) = cantwin(&all);
+        assert!(ok, "cantwin lss {args:?}: {err}");
+        out.trim().to_string()
+    };
+    assert_eq!(
+        lss(&["--timeout", "300", "identify", "non-configured"]),
+        "1 node(s) answered"
+    );
+    assert_eq!(
+        lss(&["switch", "selective", "0xCA7", "305", "0x10000", "0x30"]),
+        "OK: vendor 0x00000CA7 product 0x00000131 revision 0x00010000 serial 0x00000030 is in LSS configuration"
+    );
+    assert_eq!(lss(&["inquire", "node-id"]), "0xFF (no node-ID)");
+    assert_eq!(lss(&["inquire", "serial"]), "0x00000030");
+    let (ok, _, err) = cantwin(&["lss", "--socketcand", &addr, "conf-bitrate", "100k"]);
+    assert!(
+        !ok && err.contains("no entry in the CiA 301 bit timing table"),
+        "{err}"
+    );
+    assert!(lss(&["set-node", "7"]).starts_with("OK: node-ID 7 pending"));
+    assert_eq!(
+        lss(&["conf-bitrate", "500k"]),
+        "OK: 500k pending (table index 2)"
+    );
+    assert_eq!(lss(&["store"]), "OK: stored");
+    assert_eq!(lss(&["switch", "global", "waiting"]), "OK");
+    let (ok, out, err) = cantwin(&[
+        "sdo",
+        "--socketcand",
+        &addr,
+        "read",
+        "7",
+        "0x1018",
+        "4",
+        "u32",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "48 (0x00000030)");
+    assert_eq!(
+        lss(&["--timeout", "300", "identify", "non-configured"]),
+        "0 node(s) answered"
+    );
+}
