@@ -351,6 +351,9 @@ fn run_boundary(args: &Args, names: &[&str], json: bool) -> Result<()> {
                 r.latency_ms[0],
                 r.latency_ms[1]
             );
+            for n in &r.notes {
+                println!("  note: {n}");
+            }
             for f in &r.findings {
                 println!("  finding: {f}");
             }

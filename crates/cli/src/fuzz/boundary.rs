@@ -103,6 +103,8 @@ pub struct AttackReport {
     pub latency_ms: [f64; 2],
     /// Facts that break the rule for servers (or file commands), as sentences.
     pub findings: Vec<String>,
+    /// What the server answered, as sentences (e.g. how often it refused a BCM job).
+    pub notes: Vec<String>,
     /// Wall time of the attack (s).
     pub seconds: f64,
 }
@@ -595,10 +597,44 @@ fn flood(
     tried
 }
 
+/// Counts `< error` elements in what `s` has sent so far (without blocking); whether the
+/// server closed it.
+fn count_errors(s: &mut TcpStream, errors: &mut u64, tail: &mut Vec<u8>) -> bool {
+    if s.set_nonblocking(true).is_err() {
+        return true;
+    }
+    let mut buf = [0u8; 65536];
+    let closed = loop {
+        match s.read(&mut buf) {
+            Ok(0) => break true,
+            Ok(n) => {
+                tail.extend_from_slice(&buf[..n]);
+                *errors += tail.windows(7).filter(|w| w == b"< error").count() as u64;
+                // Keep the end, in case an element is cut between two reads.
+                let keep = tail.len().min(6);
+                tail.drain(..tail.len() - keep);
+            }
+            Err(e) if e.kind() == ErrorKind::WouldBlock => break false,
+            Err(_) => break true,
+        }
+    };
+    let _ = s.set_nonblocking(false);
+    closed
+}
+
 /// Cyclic BCM jobs for distinct identifiers on a few connections until the deadline or
-/// the server refuses them (its error answer), and subscriptions.
-fn bcm(addr: SocketAddr, pool: &mut Pool, rng: &mut SplitMix64, deadline: Instant) -> u64 {
+/// the server refuses them (its error answer), and subscriptions. Returns the jobs sent,
+/// the error answers and the connections the server closed.
+fn bcm(
+    addr: SocketAddr,
+    pool: &mut Pool,
+    rng: &mut SplitMix64,
+    deadline: Instant,
+) -> (u64, u64, usize) {
     let mut tried = 0u64;
+    let mut errors = 0u64;
+    let mut closed_by_server = 0;
+    let mut tails: Vec<Vec<u8>> = vec![Vec::new(); pool.conns.len()];
     let lanes = pool.conns.len().min(4);
     for c in pool.conns.iter_mut().take(lanes) {
         if let Some(mut s) = open(addr) {
@@ -608,7 +644,10 @@ fn bcm(addr: SocketAddr, pool: &mut Pool, rng: &mut SplitMix64, deadline: Instan
     }
     let mut id = 0u32;
     'outer: while Instant::now() < deadline {
-        for c in pool.conns.iter_mut().take(lanes) {
+        if pool.conns.iter().take(lanes).all(Option::is_none) {
+            break;
+        }
+        for (c, tail) in pool.conns.iter_mut().zip(&mut tails).take(lanes) {
             let Some(s) = c else { continue };
             let mut batch = Vec::new();
             for _ in 0..200 {
@@ -622,16 +661,23 @@ fn bcm(addr: SocketAddr, pool: &mut Pool, rng: &mut SplitMix64, deadline: Instan
                 }
                 tried += 1;
             }
-            if s.write_all(&batch).is_err() {
+            if s.write_all(&batch).is_err() || count_errors(s, &mut errors, tail) {
+                let _ = count_errors(s, &mut errors, tail);
                 *c = None;
+                closed_by_server += 1;
             }
             if Instant::now() >= deadline {
                 break 'outer;
             }
         }
     }
+    for (c, tail) in pool.conns.iter_mut().zip(&mut tails).take(lanes) {
+        if let Some(s) = c {
+            let _ = count_errors(s, &mut errors, tail);
+        }
+    }
     pool.count();
-    tried
+    (tried, errors, closed_by_server)
 }
 
 /// One network attack on the running server, with its measurements and findings.
@@ -648,6 +694,7 @@ fn attack(
     let prober = Prober::start(server.socketcand, pid);
     let deadline = Instant::now() + opts.attack_time;
     let mut pool = Pool::new(opts.connections.max(1));
+    let mut notes = Vec::new();
     let attacks = match name {
         "net-socketcand" => flood(
             server.socketcand,
@@ -656,7 +703,13 @@ fn attack(
             deadline,
             socketcand_payload,
         ),
-        "net-bcm" => bcm(server.socketcand, &mut pool, rng, deadline),
+        "net-bcm" => {
+            let (jobs, errors, closed) = bcm(server.socketcand, &mut pool, rng, deadline);
+            notes.push(format!(
+                "{jobs} add jobs sent on 4 connections; {errors} error answers; {closed} connections closed by the server"
+            ));
+            jobs
+        }
         "net-slcan" => flood(server.slcan, &mut pool, rng, deadline, slcan_payload),
         "net-http" => {
             let web = server.web;
@@ -707,6 +760,7 @@ fn attack(
         probe_failures: failures,
         latency_ms: [percentile(&times, 0.5), percentile(&times, 0.99)],
         findings: Vec::new(),
+        notes,
         seconds: started.elapsed().as_secs_f64(),
     };
     if !alive {
