@@ -240,6 +240,34 @@ fn web_refuses_a_host_other_than_loopback_with_the_port_or_an_allow_host_name() 
         !ok && err.contains("--allow-host needs --allow-remote"),
         "{err}"
     );
+    // Bad values are refused at start, with the option's name.
+    for (flag, value, says) in [
+        ("--allow-host", "a b", "--allow-host \"a b\""),
+        (
+            "--web-max-connections",
+            "18446744073709551615",
+            "--web-max-connections must be 1 to",
+        ),
+        ("--web-max-streams", "0", "--web-max-streams must be 1 to"),
+        (
+            "--web-header-timeout",
+            "inf",
+            "--web-header-timeout must be",
+        ),
+    ] {
+        let (ok, _, err) = common::cantwin(&[
+            "sim",
+            &common::scenario_file("plant.toml"),
+            "--web",
+            "0",
+            "--allow-remote",
+            flag,
+            value,
+            "--duration",
+            "1",
+        ]);
+        assert!(!ok && err.contains(says), "{flag} {value}: {err}");
+    }
 }
 
 #[test]

@@ -99,8 +99,15 @@ impl Server {
                 "--allow-host needs --allow-remote: without it the dashboard answers to loopback names only"
             );
         }
-        if options.web_max_connections == 0 || options.web_max_streams == 0 {
-            bail!("--web-max-connections and --web-max-streams must be at least 1");
+        // More than the process could hold open anyway (descriptors) is a mistake.
+        const MOST: usize = 65_536;
+        for (flag, n) in [
+            ("--web-max-connections", options.web_max_connections),
+            ("--web-max-streams", options.web_max_streams),
+        ] {
+            if !(1..=MOST).contains(&n) {
+                bail!("{flag} must be 1 to {MOST}, not {n}");
+            }
         }
         if options.web_max_streams >= options.web_max_connections {
             bail!(
