@@ -8,7 +8,6 @@ Run with ``pytest python/examples`` once the package is installed.
 
 import os
 import struct
-import time
 from pathlib import Path
 
 import canopen
@@ -48,7 +47,7 @@ def test_run_to_1500_rpm_with_pdos_and_sync(cantwin_sim, canopen_network, drive)
     drive.nmt.state = "OPERATIONAL"
     # TPDO1 as the drive reports it over SDO: synchronous, 0x18C.
     drive.tpdo.read()
-    tpdo1 = Receptions(drive.tpdo[1])
+    tpdo1 = drive.tpdo[1]
     assert drive.tpdo[1].cob_id == 0x180 + NODE and drive.tpdo[1].trans_type == 1
 
     # RPDO1 (0x20C): word 1 control word, word 2 Ramp ref 1 in rpm; both PDOs act at SYNC.
@@ -56,7 +55,7 @@ def test_run_to_1500_rpm_with_pdos_and_sync(cantwin_sim, canopen_network, drive)
     speed = None
     for _ in range(400):
         canopen_network.send_message(0x200 + NODE, struct.pack("<Hh", ENABLE | START, target))
-        data = tpdo1.after(canopen_network.sync.transmit)
+        data = after_sync(canopen_network, tpdo1)
         status, speed, analog2 = struct.unpack_from("<Hhh", data)
         if speed == target:
             break
@@ -72,7 +71,7 @@ def test_run_to_1500_rpm_with_pdos_and_sync(cantwin_sim, canopen_network, drive)
     # the speed falls below the zero-speed threshold, so it may lead the last ramp steps.
     for _ in range(400):
         canopen_network.send_message(0x200 + NODE, struct.pack("<Hh", ENABLE, 0))
-        status, speed, _ = struct.unpack_from("<Hhh", tpdo1.after(canopen_network.sync.transmit))
+        status, speed, _ = struct.unpack_from("<Hhh", after_sync(canopen_network, tpdo1))
         if speed == 0:
             break
         cantwin_sim.advance(0.05)
@@ -82,31 +81,20 @@ def test_run_to_1500_rpm_with_pdos_and_sync(cantwin_sim, canopen_network, drive)
 def test_external_fault_shows_in_the_status_word(cantwin_sim, canopen_network, drive):
     drive.nmt.state = "OPERATIONAL"
     drive.tpdo.read()
-    tpdo1 = Receptions(drive.tpdo[1])
+    tpdo1 = drive.tpdo[1]
     canopen_network.send_message(0x200 + NODE, struct.pack("<Hh", ENABLE, 0))
-    status, _, _ = struct.unpack_from("<Hhh", tpdo1.after(canopen_network.sync.transmit))
+    status, _, _ = struct.unpack_from("<Hhh", after_sync(canopen_network, tpdo1))
     assert status & 0x0002  # Drive ok
     cantwin_sim.raise_alarm("drive", "External fault")
     cantwin_sim.advance(0.01)
-    status, _, _ = struct.unpack_from("<Hhh", tpdo1.after(canopen_network.sync.transmit))
+    status, _, _ = struct.unpack_from("<Hhh", after_sync(canopen_network, tpdo1))
     assert not status & 0x0002
     assert cantwin_sim.drive("drive")["alarms"]
 
 
-class Receptions:
-    """Every reception of a PDO, recorded from the moment it is made: in virtual time the
-    twin answers a SYNC before ``wait_for_reception`` could start waiting."""
-
-    def __init__(self, pdo):
-        self.data = []
-        pdo.add_callback(lambda m: self.data.append(bytes(m.data)))
-
-    def after(self, action, timeout=2.0):
-        """Run `action` and return the data of the first reception after it."""
-        seen = len(self.data)
-        action()
-        deadline = time.monotonic() + timeout
-        while len(self.data) <= seen and time.monotonic() < deadline:
-            time.sleep(0.001)
-        assert len(self.data) > seen, "no TPDO after SYNC"
-        return self.data[seen]
+def after_sync(network, pdo):
+    """SYNC, then the data of the TPDO it triggers, with python-canopen's own wait in the
+    order a script for the real drive has it."""
+    network.sync.transmit()
+    assert pdo.wait_for_reception(timeout=2) is not None, "no TPDO after SYNC"
+    return bytes(pdo.data)
