@@ -636,4 +636,67 @@ mod tests {
         let e = build_error(&scenario("node_id = 200"));
         assert!(e.contains("0xFF"), "{e}");
     }
+
+    fn attach_probe(mut b: Built) -> (Built, PortId) {
+        let bus = b.bus("can0").unwrap();
+        let probe = Probe {
+            master: Master::new(Duration::from_millis(20)),
+            seen: Vec::new(),
+        };
+        let port = b.sim.attach(bus, probe, PortConfig::default()).unwrap();
+        (b, port)
+    }
+
+    /// None of the three seed devices' manuals mentions LSS: they do not answer it.
+    #[test]
+    fn seed_devices_do_not_answer_lss() {
+        for file in ["adv200-example.toml", "tm3-island.toml", "opendrive.toml"] {
+            let (mut b, port) = attach_probe(crate::kinds::common::testing::shipped(file));
+            b.sim.run_for(Duration::from_millis(50));
+            run(&mut b, port, Service::SwitchGlobal(Mode::Configuration));
+            assert_eq!(
+                run(&mut b, port, Service::InquireNodeId),
+                Outcome::Timeout,
+                "{file}"
+            );
+            assert_eq!(
+                run(&mut b, port, Service::IdentifyNonConfigured),
+                Outcome::Identified(0),
+                "{file}"
+            );
+            let seen = &b.sim.node::<Probe>(port).unwrap().seen;
+            assert!(
+                seen.iter()
+                    .all(|f| f.id().as_raw() != u32::from(wire::SLAVE_ID)),
+                "{file}"
+            );
+        }
+    }
+
+    #[test]
+    fn cia305_eds_device_with_lss_waits_for_its_node_id() {
+        let eds = format!(
+            "{}/../../scenarios/eds/example-io.eds",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let text = format!(
+            "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+             [[device]]\nname = \"io\"\nkind = \"eds\"\nbus = \"can0\"\nfile = {eds:?}\n\
+             lss = true\nnode_id = 0xFF\n"
+        );
+        let (mut b, port) = attach_probe(built(&text));
+        b.sim.run_for(Duration::from_millis(100));
+        assert_eq!(ids_since(&b, port, 0), Vec::<u32>::new());
+        run(&mut b, port, Service::SwitchGlobal(Mode::Configuration));
+        assert_eq!(
+            run(&mut b, port, Service::ConfigureNodeId(9)),
+            Outcome::Done
+        );
+        let before = seen(&b, port);
+        run(&mut b, port, Service::SwitchGlobal(Mode::Waiting));
+        b.sim.run_for(Duration::from_millis(5));
+        assert_eq!(ids_since(&b, port, before).first(), Some(&0x709));
+        let dev = b.device("io").unwrap().port;
+        assert_eq!(b.sim.twin(dev).unwrap().canopen_node_id(), Some(9));
+    }
 }
