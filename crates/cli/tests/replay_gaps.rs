@@ -162,4 +162,17 @@ fn a_flipped_timestamp_byte_is_refused_naming_the_records_of_the_gap() {
         !ok && err.contains("--max-gap must be a positive number"),
         "{err}"
     );
+    // The twins run on for the tolerance after the last frame: it may not exceed the bound.
+    let (ok, _, err) = cantwin(&[
+        "replay",
+        pcap.to_str().unwrap(),
+        "--scenario",
+        &scenario,
+        "--tolerance-ms",
+        "120000",
+    ]);
+    assert!(
+        !ok && err.contains("--tolerance-ms 120000 is longer than --max-gap 60 s"),
+        "{err}"
+    );
 }
