@@ -19,8 +19,14 @@
 //!   the guarding toggle bit and aborts SDO transfers silently. **Reset node** restores
 //!   0x2000–0x9FFF first (stored manufacturer and application parameters on top of the
 //!   defaults), reports [`Event::ResetApplication`], then resets communication.
+//! * **COB-ID entries** (0x1005, 0x1012, 0x1014, 0x1028, 0x1200–0x12FF, the PDOs) follow
+//!   one rule, [`crate::cob_id`]: restricted CAN-IDs (CiA 301 §7.3.5), the frame bits and
+//!   each entry's reserved bits, answered with 0x0609 0030.
+//! * **0x1003**: an entry above the number of errors recorded reads as 0x0800 0024 "no data
+//!   available" (§7.5.2.4).
 //! * **Communication errors** (heartbeat consumer timeout, life guarding event, bus-off)
-//!   apply 0x1029 sub 1. The heartbeat and guarding losses raise EMCY 0x8130, with the
+//!   apply 0x1029 sub 1 (without 0x1029: its default 0, OPERATIONAL → PRE-OPERATIONAL
+//!   only, §7.5.2.32). The heartbeat and guarding losses raise EMCY 0x8130, with the
 //!   lost producer's node-ID in the first manufacturer-specific byte (0 for life
 //!   guarding); it is cleared (EMCY 0x0000) once no partner is lost any more.
 //! * **Controller events**: receive overrun raises 0x8110, cleared by the next frame
