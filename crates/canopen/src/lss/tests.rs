@@ -156,3 +156,67 @@ fn cia305_master_selective_switch_inquiry_and_identify_remote() {
         Err(Busy)
     );
 }
+
+mod properties {
+    use super::*;
+    use cantwin_can::Frame;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// Any 0–8 bytes on 0x7E5: a request decodes only from 8 bytes and encodes back to
+        /// the same frame where its unused bytes are 0; a slave given it never panics and
+        /// answers at most one frame, always on 0x7E4.
+        #[test]
+        fn cia305_4_2_any_master_frame_is_decoded_or_dropped(
+            data in proptest::collection::vec(any::<u8>(), 0..=8),
+            node_id in prop_oneof![Just(UNCONFIGURED), 1u8..=127],
+            configuration in any::<bool>(),
+        ) {
+            let f = Frame::std(wire::MASTER_ID, &data).unwrap();
+            if let Ok(req) = Request::decode(&f) {
+                prop_assert_eq!(data.len(), 8);
+                prop_assert_eq!(Request::decode(&req.encode()), Ok(req));
+            }
+            let mut s = Slave::new(Address::default(), node_id, BitRate::R500K, Box::new(MemoryStore::new()));
+            let mut out = Outbox::new();
+            if configuration {
+                s.on_frame(&Request::SwitchGlobal(Mode::Configuration).encode(), Instant::ZERO, &mut out);
+            }
+            s.on_frame(&f, Instant::ZERO, &mut out);
+            prop_assert!(out.len() <= 1);
+            for a in out.drain() {
+                prop_assert_eq!(a.id().as_raw(), u32::from(wire::SLAVE_ID));
+                prop_assert!(Response::decode(&a).is_ok());
+            }
+        }
+
+        /// Any 0–8 bytes on 0x7E4 while a master waits: it never panics and a service
+        /// ends with an outcome by its deadline.
+        #[test]
+        fn cia305_master_takes_any_slave_frame(
+            data in proptest::collection::vec(any::<u8>(), 0..=8),
+            pick in 0usize..4,
+        ) {
+            let services = [
+                Service::InquireNodeId,
+                Service::InquireAddress,
+                Service::StoreConfiguration,
+                Service::Fastscan,
+            ];
+            let mut m = Master::new(Duration::from_millis(10));
+            let mut out = Outbox::new();
+            m.start(services[pick], Instant::ZERO, &mut out).unwrap();
+            let f = Frame::std(wire::SLAVE_ID, &data).unwrap();
+            m.on_frame(&f, Instant::ZERO, &mut out);
+            for _ in 0..200 {
+                let Some(now) = m.next_deadline() else {
+                    break;
+                };
+                m.on_tick(now, &mut out);
+            }
+            prop_assert!(m.is_idle());
+        }
+    }
+}
