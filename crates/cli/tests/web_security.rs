@@ -504,9 +504,11 @@ fn web_answers_carry_csp_frame_nosniff_and_referrer_headers() {
     assert_eq!(answers[0].1.header("cache-control"), Some("no-store"));
 }
 
-/// Opens a connection and sends a request head that never ends.
+/// Opens a connection and sends a request head that never ends. The connect waits out one
+/// SYN retransmission (1 s, then 3 s): on a loaded machine the listen backlog can be full
+/// for a moment even while the server accepts.
 fn half_sent(port: u16) -> std::io::Result<TcpStream> {
-    let mut s = TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(1))?;
+    let mut s = TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(5))?;
     let _ = write!(s, "GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n");
     Ok(s)
 }

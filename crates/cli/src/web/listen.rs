@@ -65,7 +65,9 @@ pub async fn serve(
             }
             Err(_) => {
                 // A fresh socket's send buffer is empty: the answer goes out without
-                // waiting, and dropping the stream closes it.
+                // waiting, and dropping the stream closes it. A client whose request had
+                // already arrived may see a reset instead (RFC 1122 §4.2.2.13: a close with
+                // data unread), which ends its connection as promptly.
                 let _ = stream.try_write(&refusal);
             }
         }
