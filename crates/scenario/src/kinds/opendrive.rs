@@ -43,7 +43,9 @@
 //! With `--state-dir`, the drive's flash (saved parameters, latched alarms, the DIP S1
 //! position of the last power-up) is kept in `STATE_DIR/<device name>/flash.txt`: read when
 //! the scenario is built (the `params` keys are applied on top), written whenever it
-//! changes.
+//! changes, atomically, behind a first line with the image's FNV-1a checksum. A flash that
+//! cannot be used (unreadable, truncated, damaged) is a build warning naming the file, and
+//! the drive starts on its defaults (the manual gives no alarm for it).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -60,12 +62,41 @@ use crate::spec::BusSpec;
 /// The OPEN DRIVE kind.
 pub struct OpenDriveKind;
 
-/// The drive's flash in a file.
+/// The drive's flash in a file: a first line with the FNV-1a checksum of the image, then
+/// the image ([`Flash::to_text`]), replaced atomically.
 struct FileFlash(PathBuf);
+
+/// The first line of a flash file, before the checksum in hexadecimal.
+const FLASH_SUM: &str = "# cantwin flash fnv1a ";
+
+fn fnv1a(data: &[u8]) -> u32 {
+    data.iter().fold(0x811C_9DC5u32, |h, b| {
+        (h ^ u32::from(*b)).wrapping_mul(0x0100_0193)
+    })
+}
+
+/// The image of a flash file, or why it cannot be used. A file without the checksum line
+/// (written before it existed) is taken as it is.
+fn flash_image(text: &str) -> Result<&str, String> {
+    let Some(rest) = text.strip_prefix(FLASH_SUM) else {
+        // A cut inside the checksum line itself.
+        if FLASH_SUM.starts_with(text) || text.starts_with("# cantwin") {
+            return Err("the file is truncated".into());
+        }
+        return Ok(text);
+    };
+    let (sum, image) = rest.split_once('\n').ok_or("the file is truncated")?;
+    let sum = u32::from_str_radix(sum.trim(), 16).map_err(|_| "a damaged checksum line")?;
+    if sum != fnv1a(image.as_bytes()) {
+        return Err("checksum mismatch (the file is truncated or damaged)".into());
+    }
+    Ok(image)
+}
 
 impl FlashStorage for FileFlash {
     fn store(&mut self, image: &str) -> Result<(), String> {
-        super::common::replace_file(&self.0, image.as_bytes())
+        let text = format!("{FLASH_SUM}{:08x}\n{image}", fnv1a(image.as_bytes()));
+        super::common::replace_file(&self.0, text.as_bytes())
             .map_err(|e| format!("{}: {e}", self.0.display()))
     }
 }
@@ -158,9 +189,11 @@ impl DeviceKind for OpenDriveKind {
             match std::fs::read(&file) {
                 Ok(bytes) => match String::from_utf8(bytes).map_err(|e| e.to_string()) {
                     Ok(text) if text.trim().is_empty() => unusable("the file is empty".into()),
-                    Ok(text) => match Flash::from_text(&text) {
+                    Ok(text) => match flash_image(&text)
+                        .and_then(|image| Flash::from_text(image).map_err(|e| e.to_string()))
+                    {
                         Ok(flash) => node.drive_mut().set_flash(flash),
-                        Err(e) => unusable(e.to_string()),
+                        Err(e) => unusable(e),
                     },
                     Err(e) => unusable(format!("not text ({e})")),
                 },
@@ -312,8 +345,14 @@ mod tests {
         // Replaced atomically: no temporary file stays behind.
         assert!(!dir.join("drive").join("flash.txt.tmp").exists());
         // A flash that cannot be used is a warning naming the file; the drive starts on its
-        // defaults.
+        // defaults. Every cut of the saved file is one (its checksum line).
         let file = dir.join("drive").join("flash.txt");
+        let whole = std::fs::read(&file).unwrap();
+        for cut in 0..whole.len() {
+            std::fs::write(&file, &whole[..cut]).unwrap();
+            let built = scenario.build(&Registry::builtin(), &env).unwrap();
+            assert_eq!(built.warnings.len(), 1, "cut {cut}: {:?}", built.warnings);
+        }
         let default = cantwin_opendrive::params::def(P63).unwrap().default;
         for (what, bytes) in [
             ("empty", &b""[..]),
