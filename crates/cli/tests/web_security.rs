@@ -202,6 +202,13 @@ fn web_refuses_a_host_other_than_loopback_with_the_port_or_an_allow_host_name() 
             a.body
         );
     }
+    // The absolute form (as to a proxy) names another host on the request line.
+    let a = exchange(
+        port,
+        &format!("GET http://attacker.example/api/snapshot HTTP/1.1\r\nHost: 127.0.0.1:{port}"),
+        "",
+    );
+    assert_eq!(a.status, 403, "absolute form: {}", a.body);
     let a = exchange(port, "GET / HTTP/1.0", "");
     assert_eq!(a.status, 403, "no Host: {}", a.body);
     assert!(a.body.contains("no Host header"), "{}", a.body);

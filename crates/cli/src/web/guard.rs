@@ -18,7 +18,7 @@
 //!   `--allow-remote` reading needs the token too (header, or `?token=` for the page itself
 //!   and the event stream, which a browser's EventSource cannot give headers).
 
-use axum::http::{HeaderMap, Method, StatusCode, header};
+use axum::http::{HeaderMap, Method, StatusCode, Uri, header};
 
 /// The header that carries the run's token.
 pub const TOKEN_HEADER: &str = "x-cantwin-token";
@@ -76,14 +76,16 @@ impl Policy {
     }
 
     /// Whether the request with this head may go on to its handler.
-    pub fn check(
-        &self,
-        method: &Method,
-        path: &str,
-        query: Option<&str>,
-        headers: &HeaderMap,
-    ) -> Result<(), Refusal> {
+    pub fn check(&self, method: &Method, target: &Uri, headers: &HeaderMap) -> Result<(), Refusal> {
         let forbidden = |m: String| Err((StatusCode::FORBIDDEN, m));
+        // A request line in absolute form names its own host, which would stand in for Host
+        // (RFC 9112 §3.2.2); only proxies are sent those, and the dashboard is none.
+        if target.authority().is_some() {
+            return forbidden(format!(
+                "the request names its target in absolute form ({target}), as to a proxy: the dashboard takes a path only"
+            ));
+        }
+        let (path, query) = (target.path(), target.query());
         let Some(host) = text(headers, header::HOST) else {
             return forbidden("the request has no Host header".into());
         };
@@ -248,7 +250,8 @@ mod tests {
     #[test]
     fn host_and_origin_must_name_the_served_port_and_the_pages_own_origin() {
         let p = policy(false, &[]);
-        let get = |h: &[(&'static str, &str)]| p.check(&Method::GET, "/", None, &head(h));
+        let get =
+            |h: &[(&'static str, &str)]| p.check(&Method::GET, &Uri::from_static("/"), &head(h));
         assert!(get(&[("host", "127.0.0.1:8080")]).is_ok());
         assert!(get(&[("host", "LOCALHOST:8080")]).is_ok());
         assert!(get(&[("host", "[::1]:8080")]).is_ok());
@@ -256,6 +259,12 @@ mod tests {
         assert!(get(&[("host", "localhost")]).is_err());
         assert!(get(&[("host", "attacker.example:8080")]).is_err());
         assert!(get(&[]).is_err());
+        let absolute = Uri::from_static("http://attacker.example/api/snapshot");
+        let h = head(&[("host", "127.0.0.1:8080")]);
+        assert_eq!(
+            p.check(&Method::GET, &absolute, &h).map_err(|e| e.0),
+            Err(StatusCode::FORBIDDEN)
+        );
         let own = [
             ("host", "localhost:8080"),
             ("origin", "http://localhost:8080"),
@@ -282,7 +291,7 @@ mod tests {
                 "host",
                 HeaderValue::from_str(host).unwrap_or(HeaderValue::from_static("?")),
             );
-            p.check(&Method::GET, "/", None, &h)
+            p.check(&Method::GET, &Uri::from_static("/"), &h)
         };
         assert!(get("plant.lan:8080").is_ok());
         assert!(get("plant.lan").is_err());
@@ -298,7 +307,7 @@ mod tests {
         let local = policy(false, &[]);
         let host = ("host", "127.0.0.1:8080");
         let post = |p: &Policy, h: &[(&'static str, &str)]| {
-            p.check(&Method::POST, "/api/nmt", None, &head(h))
+            p.check(&Method::POST, &Uri::from_static("/api/nmt"), &head(h))
                 .map_err(|e| e.0)
         };
         assert_eq!(
@@ -324,7 +333,13 @@ mod tests {
         );
         // Reading: free on loopback, with the token under --allow-remote.
         let read = |p: &Policy, path: &str, q: Option<&str>| {
-            p.check(&Method::GET, path, q, &head(&[host]))
+            let target: Uri = match q {
+                Some(q) => format!("{path}?{q}"),
+                None => path.to_string(),
+            }
+            .parse()
+            .unwrap_or_default();
+            p.check(&Method::GET, &target, &head(&[host]))
                 .map_err(|e| e.0)
         };
         assert_eq!(read(&local, "/api/snapshot", None), Ok(()));

@@ -278,12 +278,7 @@ fn router(state: AppState, policy: Arc<Policy>) -> Router {
 
 /// Lets a request through to its handler only if the [`Policy`] admits its head.
 async fn admit(State(policy): State<Arc<Policy>>, req: HttpRequest, next: Next) -> Response {
-    match policy.check(
-        req.method(),
-        req.uri().path(),
-        req.uri().query(),
-        req.headers(),
-    ) {
+    match policy.check(req.method(), req.uri(), req.headers()) {
         Ok(()) => next.run(req).await,
         Err((status, reason)) => answer(status, false, reason),
     }
