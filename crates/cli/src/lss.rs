@@ -264,6 +264,10 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
     }
     let mut master = Master::new(Duration::from_millis(ms));
     let mut link = Link::open(&args.target)?;
+    // A socketcand server may forward the first bus frames to a new client some tens of
+    // milliseconds late; a short answer time would take that for silence (fastscan: for a 1
+    // bit). Listen for a moment before the first request.
+    link.run(&mut master, |_| false, WallDuration::from_millis(100))?;
     let l = &mut link;
     let m = &mut master;
     match &args.command {

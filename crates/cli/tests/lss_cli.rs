@@ -55,3 +55,37 @@ fn cia305_cantwin_lss_commissions_a_node_selected_by_its_address() {
         "0 node(s) answered"
     );
 }
+
+/// `commission --fastscan`: the node without node-ID is found bit by bit (50 ms per step,
+/// about 7 s), given node-ID 9, stored, and boots.
+#[test]
+fn cia305_cantwin_lss_commissions_the_node_found_by_fastscan() {
+    let (_sim, addr) = sim_with_socketcand(&scenario_file("lss-commissioning.toml"), "300");
+    let (ok, out, err) = cantwin(&[
+        "lss",
+        "--socketcand",
+        &addr,
+        "--timeout",
+        "50",
+        "commission",
+        "9",
+        "--fastscan",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        out.trim(),
+        "OK: vendor 0x00000CA7 product 0x00000131 revision 0x00010000 serial 0x00000030 has node-ID 9"
+    );
+    let (ok, out, err) = cantwin(&[
+        "sdo",
+        "--socketcand",
+        &addr,
+        "read",
+        "9",
+        "0x1018",
+        "4",
+        "u32",
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "48 (0x00000030)");
+}
