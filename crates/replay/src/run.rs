@@ -121,7 +121,7 @@ impl Replayer<'_> {
             let start = anchor
                 .saturating_add(c.t)
                 .saturating_sub(to_eof(&c.frame, self.bit_ns[c.bus]));
-            advance(&mut built, instant(start), &sink, anchor)?;
+            advance(&mut built, instant(start), &sink, anchor, &mut report)?;
             let port = ports[c.bus];
             built
                 .sim
@@ -139,6 +139,7 @@ impl Replayer<'_> {
             instant(anchor.saturating_add(self.end)),
             &sink,
             anchor,
+            &mut report,
         )?;
         report(last);
         drop(built);
@@ -200,12 +201,14 @@ pub(crate) fn frame_budget(captured: usize) -> usize {
 const CHUNK_NS: u64 = 1_000_000_000;
 
 /// Run the simulation up to `to` (never back), in chunks while the twins are busy and in one
-/// jump over idle time, stopping when the twins exceed the frame budget.
+/// jump over idle time, stopping when the twins exceed the frame budget; `report` is told the
+/// capture time reached after each chunk.
 fn advance(
     built: &mut Built,
     to: Instant,
     sink: &Mutex<Sink>,
     anchor: i64,
+    report: &mut dyn FnMut(i64),
 ) -> Result<(), ReplayError> {
     loop {
         let now = built.sim.now();
@@ -219,6 +222,7 @@ fn advance(
             _ => to,
         };
         built.sim.run_until(step);
+        report(i64::try_from(step.as_nanos()).unwrap_or(i64::MAX) - anchor);
         let s = lock(sink);
         if let Some(at) = s.over {
             let at = i64::try_from(at.as_nanos()).unwrap_or(i64::MAX) - anchor;
