@@ -236,6 +236,18 @@ pub fn rss_kib(pid: u32) -> u64 {
         .unwrap_or(0)
 }
 
+/// `VmHWM` (peak resident memory) of process `pid`, in KiB (0 where /proc is not there).
+fn hwm_kib(pid: u32) -> u64 {
+    std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0)
+}
+
 /// Open descriptors of process `pid` (0 where /proc is not there).
 pub fn fds(pid: u32) -> usize {
     std::fs::read_dir(format!("/proc/{pid}/fd")).map_or(0, |d| d.count())
@@ -796,6 +808,8 @@ fn attack(
 /// The outcome of one file command run as a child.
 struct Run {
     seconds: f64,
+    /// The child's peak resident memory as last seen (`VmHWM`, KiB).
+    peak_kib: u64,
     timed_out: bool,
     /// Killed by a signal other than the harness's own (the address space limit makes an
     /// allocation fail: abort).
@@ -834,7 +848,10 @@ fn run_limited(opts: &Options, args: &[&std::ffi::OsStr], prlimit: bool) -> Resu
         String::from_utf8_lossy(&text).into_owned()
     });
     let mut timed_out = false;
+    let mut peak_kib = 0;
     let status = loop {
+        // `prlimit` sets the limit and executes the command: the same process.
+        peak_kib = peak_kib.max(hwm_kib(child.id()));
         if let Some(s) = child.try_wait()? {
             break s;
         }
@@ -855,6 +872,7 @@ fn run_limited(opts: &Options, args: &[&std::ffi::OsStr], prlimit: bool) -> Resu
     let signal = None;
     Ok(Run {
         seconds: started.elapsed().as_secs_f64(),
+        peak_kib,
         timed_out,
         signal,
         panicked: text.contains("panicked"),
@@ -956,6 +974,7 @@ fn files(opts: &Options) -> Result<AttackReport> {
             let run = run_limited(opts, &args, prlimit)?;
             r.attacks += 1;
             slowest = slowest.max(run.seconds);
+            r.rss_kib[1] = r.rss_kib[1].max(run.peak_kib);
             let what = || {
                 format!(
                     "cantwin {} on {}",
@@ -983,8 +1002,20 @@ fn files(opts: &Options) -> Result<AttackReport> {
         }
         let _ = std::fs::remove_file(&file);
     }
-    // For the file commands the latency figure is the slowest run.
+    // For the file commands the latency figure is the slowest run, the memory peak the
+    // largest a child reached.
     r.latency_ms = [0.0, slowest * 1e3];
+    r.notes.push(format!(
+        "{} runs; slowest {:.0} ms; largest peak resident memory {} KiB; RLIMIT_AS {}",
+        r.attacks,
+        slowest * 1e3,
+        r.rss_kib[1],
+        if prlimit {
+            format!("{} MiB", FILE_AS_LIMIT >> 20)
+        } else {
+            "not set (no prlimit)".into()
+        }
+    ));
     r.seconds = started.elapsed().as_secs_f64();
     Ok(r)
 }
