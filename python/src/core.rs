@@ -40,7 +40,7 @@ pub(crate) struct Delivery {
 pub(crate) struct Acting {
     /// Its `threading.get_ident()`.
     pub thread: u64,
-    /// When it acted last (wall clock).
+    /// When it acted last, or came back to Python from that act (wall clock).
     pub since: std::time::Instant,
     /// Whether it is back in Python: a thread still inside a call that released the GIL
     /// (a send) cannot be waiting yet, whatever its Python frames show.
@@ -116,10 +116,12 @@ impl Core {
         });
     }
 
-    /// Note that `thread`, which acted inside a call that released the GIL, holds it again.
+    /// Note that `thread`, which acted inside a call that released the GIL, holds it again:
+    /// its time to reach a wait starts now.
     pub fn returned(&mut self, thread: u64) {
         if let Some(a) = self.acting.iter_mut().find(|a| a.thread == thread) {
             a.returned = true;
+            a.since = std::time::Instant::now();
         }
     }
 
@@ -129,11 +131,9 @@ impl Core {
     }
 
     /// The threads bus time still waits for, with whether each is back in Python: those
-    /// that acted less than the reaction time ago and have not waited since (older entries
-    /// are forgotten here).
-    pub fn acting_threads(&mut self) -> Vec<(u64, bool)> {
-        let limit = self.reaction_time;
-        self.acting.retain(|a| a.since.elapsed() < limit);
+    /// that acted and have not been seen waiting since (`crate::turns::settle` forgets the
+    /// ones that ran too long).
+    pub fn acting_threads(&self) -> Vec<(u64, bool)> {
         self.acting.iter().map(|a| (a.thread, a.returned)).collect()
     }
 

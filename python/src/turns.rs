@@ -11,7 +11,8 @@
 //!
 //! A receiver that would run the simulation (virtual time) or hand over a frame (paced) first
 //! lets every thread that acted reach its wait, at most the simulation's reaction time (wall
-//! clock) after it acted. So the answer to a frame is not simulated, nor delivered, before
+//! clock) after it came back from its act, as far as looks at it can tell (a thread preempted
+//! while it holds the GIL cannot be looked at, and loses no time). So the answer to a frame is not simulated, nor delivered, before
 //! the thread that sent the frame listens for it: python-canopen's `sync.transmit()` followed
 //! by `tpdo[1].wait_for_reception()`, `nmt.state = …` followed by `wait_for_heartbeat()` and
 //! a trigger followed by `emcy.wait()` find the answer they wait for, as on a real bus where
@@ -31,7 +32,15 @@ use crate::core::Shared;
 /// How long a thread may stay at the same instruction before it counts as blocked in a call
 /// into C (`time.sleep`, a socket read). A thread that runs Python code moves on between two
 /// looks, which are at least [`POLL`] apart and each take the GIL from it.
-const STILL: Duration = Duration::from_millis(2);
+const STILL: Duration = Duration::from_millis(5);
+
+/// How long a thread may stay inside the call it acted in before it is no longer waited for
+/// (a safety bound: the call returns right after queuing its frame).
+const STUCK: Duration = Duration::from_secs(1);
+
+/// How many looks in a row must find a thread at the same instruction, over at least
+/// [`STILL`], before it counts as blocked in a call into C.
+const STILL_LOOKS: u32 = 3;
 
 /// Pause between two looks at threads that have not reached their wait yet.
 const POLL: Duration = Duration::from_micros(50);
@@ -49,26 +58,30 @@ pub(crate) fn thread_ident(py: Python<'_>) -> PyResult<u64> {
         .extract()
 }
 
-/// Where a thread was seen last: its top frame and instruction, and since when.
+/// Where a thread was seen last: its top frame and instruction, since when, and how many
+/// looks in a row found it there.
 struct Spot {
     thread: u64,
     frame: Py<PyAny>,
     lasti: i64,
     since: Instant,
+    looks: u32,
 }
 
-/// Wait until every thread that acted waits or acted longer than the reaction time ago
-/// (`true`), or until `deadline` (`false`). Call it without holding the core's lock and
-/// without the GIL.
+/// Wait until every thread that acted waits, or was seen running for longer than the
+/// reaction time since it came back from its act (`true`), or until `deadline` (`false`).
+/// Call it without holding the core's lock and without the GIL.
+///
+/// A thread's time is judged only at a look: while it holds the GIL (a host that preempts it
+/// there, say) no look can happen, and it loses nothing. A thread still inside the call it
+/// acted in is waited for, past `deadline` if need be: it comes back as soon as its frame is
+/// queued.
 pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
     let mut spots: Vec<Spot> = Vec::new();
     loop {
         let acting = shared.lock().acting_threads();
         if acting.is_empty() {
             return true;
-        }
-        if Instant::now() >= deadline {
-            return false;
         }
         // Only a thread back in Python can have reached a wait.
         let threads: Vec<u64> = acting.iter().filter(|a| a.1).map(|a| a.0).collect();
@@ -80,14 +93,27 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
             Python::attach(|py| waiting_threads(py, &threads, &mut spots))
                 .unwrap_or_else(|_| threads.clone())
         };
-        let all = waiting.len() == acting.len();
-        shared
-            .lock()
-            .acting
-            .retain(|a| !waiting.contains(&a.thread));
-        if !all {
-            std::thread::sleep(POLL);
+        let mut core = shared.lock();
+        let limit = core.reaction_time;
+        core.acting.retain(|a| {
+            if a.returned {
+                // Looked at just now: it waits, or has run too long to be waited for.
+                let ran_too_long = threads.contains(&a.thread) && a.since.elapsed() >= limit;
+                !(waiting.contains(&a.thread) || ran_too_long)
+            } else {
+                a.since.elapsed() < STUCK
+            }
+        });
+        let left = core.acting.iter().any(|a| a.returned);
+        let any = !core.acting.is_empty();
+        drop(core);
+        if !any {
+            return true;
         }
+        if left && Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(POLL);
     }
 }
 
@@ -114,7 +140,8 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
         let lasti: i64 = frame.getattr("f_lasti")?.extract()?;
         match spots.iter_mut().find(|s| s.thread == thread) {
             Some(s) if s.frame.bind(py).is(&frame) && s.lasti == lasti => {
-                if s.since.elapsed() >= STILL {
+                s.looks += 1;
+                if s.looks >= STILL_LOOKS && s.since.elapsed() >= STILL {
                     waiting.push(thread);
                 }
             }
@@ -122,12 +149,14 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
                 s.frame = frame.unbind();
                 s.lasti = lasti;
                 s.since = Instant::now();
+                s.looks = 1;
             }
             None => spots.push(Spot {
                 thread,
                 frame: frame.unbind(),
                 lasti,
                 since: Instant::now(),
+                looks: 1,
             }),
         }
     }
