@@ -452,7 +452,6 @@ pub(crate) fn build<D: Commissionable>(
 mod tests {
     use super::*;
     use crate::build::Built;
-    use crate::kinds::cia301::Cia301Node;
     use crate::kinds::common::testing::{build_error, built};
     use cantwin_bus::{PortConfig, PortId};
     use cantwin_can::Duration;
@@ -580,9 +579,9 @@ mod tests {
         assert_eq!(ids.first(), Some(&0x72A), "{ids:x?}");
         assert!(ids.iter().skip(1).all(|i| *i == 0x72A), "{ids:x?}");
         assert_eq!(b.sim.twin(dev).unwrap().canopen_node_id(), Some(42));
-        let node = b.sim.node::<LssNode<Cia301Node>>(dev).unwrap();
-        assert_eq!(node.slave().active_node_id(), 42);
-        assert_eq!(node.device().unwrap().device().node_id(), 42);
+        let twin = b.sim.twin(dev).unwrap();
+        let id = twin.read_object(0x1018, 4).unwrap();
+        assert_eq!(id, 77u32.to_le_bytes());
     }
 
     #[test]
