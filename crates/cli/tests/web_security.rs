@@ -369,7 +369,8 @@ fn web_controls_carry_the_runs_token_and_allow_remote_needs_it_to_read_and_warns
     assert_eq!(token.len(), 32, "{token}");
     assert!(token.bytes().all(|b| b.is_ascii_hexdigit()), "{token}");
     let json = "\r\nContent-Type: application/json";
-    let nmt = r#"{"device":"node5","command":"start"}"#;
+    // To all nodes: no node-ID to learn first.
+    let nmt = r#"{"device":"all","command":"start"}"#;
     let a = post(port, "/api/nmt", &host, json, nmt);
     assert_eq!(a.status, 403, "{}", a.body);
     assert!(a.body.contains("token"), "{}", a.body);
@@ -721,4 +722,55 @@ fn web_connection_flood_under_ulimit_1024_leaves_the_socketcand_gateway_its_rese
         "flood of {FLOOD}: {open} held, {refused_with_503} saw the 503 before the close; descriptors {before} → {during}; SDO upload through socketcand in {took:?}"
     );
     assert!(took < Duration::from_secs(1), "SDO upload took {took:?}");
+}
+
+/// The state of the server's side of the connection from `client` to `server` (ports) in
+/// the kernel's table (`/proc/net/tcp`, `tcp6`): 1 is ESTABLISHED (include/net/tcp_states.h).
+fn server_side_state(server: u16, client: u16) -> Option<u8> {
+    let (local, remote) = (format!(":{server:04X}"), format!(":{client:04X}"));
+    ["/proc/net/tcp", "/proc/net/tcp6"]
+        .iter()
+        .filter_map(|f| std::fs::read_to_string(f).ok())
+        .flat_map(|t| t.lines().map(str::to_owned).collect::<Vec<_>>())
+        .find_map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            (f.len() > 3 && f[1].ends_with(&local) && f[2].ends_with(&remote))
+                .then(|| u8::from_str_radix(f[3], 16).ok())
+                .flatten()
+        })
+}
+
+#[test]
+fn web_closes_an_event_stream_nobody_reads_at_the_idle_timeout() {
+    let sim = sim(&["--web-idle-timeout", "1"]);
+    let port = sim.port;
+    let mut s = TcpStream::connect(("127.0.0.1", port)).unwrap();
+    write!(s, "GET /events HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n").unwrap();
+    let client = s.local_addr().unwrap().port();
+    // Never read: the snapshots (about 35 KB four times a second) fill the socket's buffers,
+    // then nothing moves and the idle timeout (1 s) ends the stream. The kernel would let
+    // the server's send buffer grow to megabytes, taking tens of seconds to fill.
+    let started = Instant::now();
+    let deadline = started + Duration::from_secs(12);
+    loop {
+        if server_side_state(port, client) != Some(1) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the unread stream is still open after {:?}",
+            started.elapsed()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    eprintln!(
+        "an unread event stream was closed after {:?}",
+        started.elapsed()
+    );
+    drop(s);
+    // The dashboard goes on serving.
+    assert_eq!(
+        get(port, "/api/snapshot", &format!("127.0.0.1:{port}"), "").status,
+        200
+    );
 }

@@ -33,6 +33,13 @@ pub struct Limits {
     pub idle_timeout: Duration,
 }
 
+/// The kernel's send buffer per connection (`SO_SNDBUF`, which Linux doubles). Left to
+/// itself the kernel grows it to megabytes for an event stream whose reader stopped reading
+/// (`net.ipv4.tcp_wmem`), which both costs that memory and keeps bytes moving, so the idle
+/// timeout only starts after tens of seconds. 64 KiB still carries the snapshots (tens of
+/// KiB four times a second) over a 100 ms round trip.
+const SEND_BUFFER: usize = 64 * 1024;
+
 /// How long the accept loop pauses after a failed accept (out of descriptors): long enough
 /// not to spin, short enough to serve again as soon as descriptors are free.
 const ACCEPT_BACKOFF: Duration = Duration::from_millis(20);
@@ -77,6 +84,8 @@ pub async fn serve(
 /// Serves one connection; `_slot` is its place under the cap, given back when it ends.
 async fn connection(stream: TcpStream, app: Router, limits: Limits, _slot: OwnedSemaphorePermit) {
     let _ = stream.set_nodelay(true);
+    // Best effort: a socket that keeps the kernel's size is served all the same.
+    let _ = socket2::SockRef::from(&stream).set_send_buffer_size(SEND_BUFFER);
     let epoch = Instant::now();
     let moved = Arc::new(AtomicU64::new(0));
     let io = TokioIo::new(Watched {
