@@ -6,9 +6,14 @@
 //!   Switch on disabled; no transition 16); *shutdown* and *disable operation* disable the
 //!   drive function (the motor coasts); halt (bit 8) slows down on the vl deceleration ramp
 //!   while it is set; the fault reaction disables the drive function.
-//! * **Fault reaction**: the drive trips at once (its alarms disable the power stage), so
-//!   the reaction is complete as soon as it starts: transition 14 follows 13 in the same
-//!   evaluation and the statusword shows Fault.
+//! * **Fault reaction**: the drive's alarms disable the power stage and the motor coasts
+//!   down (0x605E = 0, *disable drive function*). The reaction is complete when the motor
+//!   stands still: FAULT REACTION ACTIVE (statusword `x0xx 1111`) is shown while it coasts,
+//!   then transition 14 to FAULT. A fault at standstill takes 13 and 14 in one evaluation.
+//! * **Quick stop**: transition 11 is shown in at least one statusword, at standstill too:
+//!   transition 12 (0x605A = 2, the stop complete) is taken at an evaluation after the one
+//!   whose statusword showed QUICK STOP ACTIVE; the drive's control task, which runs while
+//!   the power stage is on, brings that evaluation a millisecond later.
 //! * **Start**: after transitions 0 and 1, Switch on disabled.
 //! * The statusword has bit 4 (voltage enabled) in every state in which high voltage may be
 //!   applied, bit 9 (remote) always, bit 10 (target reached) as the drive says; the vl ramp
@@ -31,6 +36,9 @@ pub const OPTIONS: OptionCodes = OptionCodes {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Ds402 {
     machine: PowerStateMachine,
+    /// QUICK STOP ACTIVE was entered and no statusword has shown it yet: the quick stop is
+    /// not complete before it has been shown.
+    unshown_quick_stop: bool,
 }
 
 impl Default for Ds402 {
@@ -42,7 +50,7 @@ impl Default for Ds402 {
 fn facts(fault: bool, stopped: bool) -> Facts {
     Facts {
         fault,
-        fault_reaction_done: true,
+        fault_reaction_done: stopped,
         stopped,
     }
 }
@@ -52,6 +60,7 @@ impl Ds402 {
     pub fn new() -> Self {
         Ds402 {
             machine: PowerStateMachine::switch_on_disabled().with_options(OPTIONS),
+            unshown_quick_stop: false,
         }
     }
 
@@ -70,22 +79,40 @@ impl Ds402 {
     /// stopped (to end a quick stop). Returns whether a fault reset was requested (rising edge
     /// of bit 7).
     pub fn update(&mut self, cw: u16, fault: bool, stopped: bool) -> bool {
-        let step = self.machine.update(cw, facts(fault, stopped));
-        self.trip(fault, stopped);
+        let step = self.machine.update(cw, self.facts(fault, stopped));
+        self.after(step.transitions, fault, stopped);
         step.fault_reset
     }
 
     /// Re-evaluates with the last control word (the motor stopped, a fault appeared).
     pub fn refresh(&mut self, fault: bool, stopped: bool) {
-        self.machine.refresh(facts(fault, stopped));
-        self.trip(fault, stopped);
+        let step = self.machine.refresh(self.facts(fault, stopped));
+        self.after(step.transitions, fault, stopped);
     }
 
-    /// Transition 14 at once: the fault reaction is over when it starts.
-    fn trip(&mut self, fault: bool, stopped: bool) {
-        if self.machine.state() == State::FaultReactionActive {
+    /// The facts of an evaluation: a quick stop not yet shown is not complete.
+    fn facts(&self, fault: bool, stopped: bool) -> Facts {
+        facts(fault, stopped && !self.unshown_quick_stop)
+    }
+
+    /// Transition 14 in the evaluation of 13 when the motor already stands still (the
+    /// reaction is over when it starts); notes a quick stop to be shown.
+    fn after(&mut self, transitions: &[u8], fault: bool, stopped: bool) {
+        if transitions.contains(&11) {
+            self.unshown_quick_stop = true;
+        }
+        if transitions.contains(&13) && stopped {
             self.machine.refresh(facts(fault, stopped));
         }
+    }
+
+    /// The statusword of the evaluation that has just ended, as the dictionary will serve
+    /// it: see [`Ds402::statusword`]. A QUICK STOP ACTIVE it shows has been shown.
+    pub fn publish(&mut self, target_reached: bool) -> u16 {
+        if self.state() == State::QuickStopActive {
+            self.unshown_quick_stop = false;
+        }
+        self.statusword(target_reached)
     }
 
     /// The status word: the state bits, bit 4 voltage enabled, bit 9 remote, bit 10 target
@@ -122,13 +149,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia402_fault_reaction_is_complete_at_once() {
+    fn cia402_fault_at_standstill_is_complete_at_once() {
         let mut m = Ds402::new();
         m.update(0x0006, false, true);
         m.update(0x000F, false, true);
         assert_eq!(m.state(), State::OperationEnabled);
         assert_eq!(m.statusword(true), 0x0637);
-        m.refresh(true, false);
+        m.refresh(true, true);
         assert_eq!(m.state(), State::Fault);
         assert_eq!(m.statusword(false), 0x0218);
         assert!(!m.power());

@@ -95,7 +95,7 @@ impl Station {
     pub(crate) fn update_statusword(&mut self, target: i64) {
         let speed = self.params.value(par::MOTOR_SPEED);
         let reached = self.ds402.state() == PowerState::OperationEnabled && speed == target;
-        self.statusword = self.ds402.statusword(reached);
+        self.statusword = self.ds402.publish(reached);
     }
 
     /// The bytes of parameter `p` as the dictionary gives them.

@@ -64,8 +64,8 @@ fn cia402_state_machine_transitions_from_a_table() {
             SOD,
             "10 quick stop",
         ),
-        // Quick stop at standstill: 11, then 12 at once (the motor is already stopped).
-        (&[0x06, 0x0F], 0x000B, SwitchOnDisabled, SOD, "11+12"),
+        // Quick stop at standstill: 11, shown; 12 follows at the next evaluation.
+        (&[0x06, 0x0F], 0x000B, QuickStopActive, 0x0217, "11"),
         // Commands that do not apply in a state leave it.
         (&[], 0x0007, SwitchOnDisabled, SOD, "switch on in SOD"),
         (&[], 0x000F, SwitchOnDisabled, SOD, "enable in SOD"),
@@ -184,4 +184,84 @@ fn manual_2_velocity_mode_follows_the_ramp_on_sync() {
     );
     // vl velocity demand follows too.
     assert_eq!(h.send("602#4043600000000000"), ["582#4B436000F4010000"]);
+}
+
+#[test]
+fn manual_2_0_fault_reset_acts_on_its_rising_edge_and_takes_priority() {
+    let mut h = at(&[0x06, 0x0F]);
+    h.d.raise_alarm(Alarm::Overcurrent);
+    h.run_to(h.now + MS);
+    assert_eq!(h.d.power_state(), Some(State::Fault));
+    // 0x0086 in FAULT: transition 15 only, never chained into the shutdown of bits 0-3.
+    cw(&mut h, 0x0086);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
+    h.run_to(h.now + 5 * MS);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
+    assert_eq!(sw(&mut h), SOD);
+    // Bit 7 held: the other bits command nothing.
+    cw(&mut h, 0x0006);
+    assert_eq!(h.d.power_state(), Some(State::ReadyToSwitchOn));
+    cw(&mut h, 0x0087);
+    h.run_to(h.now + 5 * MS);
+    assert_eq!(h.d.power_state(), Some(State::ReadyToSwitchOn));
+    // A level of bit 7 held across a fault does not reset it: only a new rising edge does.
+    h.d.raise_alarm(Alarm::Overcurrent);
+    h.run_to(h.now + MS);
+    assert_eq!(h.d.power_state(), Some(State::Fault));
+    cw(&mut h, 0x0087);
+    assert_eq!(h.d.power_state(), Some(State::Fault));
+    cw(&mut h, 0x0007);
+    cw(&mut h, 0x0087);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
+}
+
+#[test]
+fn manual_2_0_fault_reaction_active_while_the_motor_coasts_after_a_fault() {
+    let mut h = at(&[0x06, 0x0F]);
+    h.send("602#2B426000DC050000");
+    h.run_to(h.now + 1600 * MS);
+    assert_eq!(h.d.param(260), Ok(1500));
+    h.d.raise_alarm(Alarm::Overcurrent);
+    h.run_to(h.now + MS);
+    // Transition 13: the drive function is disabled, the motor coasts down; statusword
+    // xxxx xxxx x0xx 1111.
+    assert_eq!(h.d.power_state(), Some(State::FaultReactionActive));
+    let s = sw(&mut h);
+    assert_eq!(s & 0x4F, 0x0F, "{s:#06x}");
+    // Transition 14 once the motor stands still (1500 rpm at the deceleration rate).
+    h.run_to(h.now + 10_000 * MS);
+    assert_eq!(h.d.param(260), Ok(0));
+    assert_eq!(h.d.power_state(), Some(State::Fault));
+    assert_eq!(sw(&mut h), 0x0218);
+}
+
+#[test]
+fn manual_2_0_quick_stop_active_is_observable_at_standstill_then_transition_12() {
+    let mut h = at(&[0x06, 0x0F]);
+    // 11: QUICK STOP ACTIVE in the statusword read right after the command.
+    cw(&mut h, 0x000B);
+    assert_eq!(h.d.power_state(), Some(State::QuickStopActive));
+    assert_eq!(sw(&mut h), 0x0217);
+    // 12 with 0x605A = 2 (slow down, then SWITCH ON DISABLED) at the next evaluation.
+    h.run_to(h.now + 2 * MS);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
+    assert_eq!(sw(&mut h), SOD);
+}
+
+#[test]
+fn manual_2_0_disable_voltage_goes_straight_to_switch_on_disabled() {
+    // 9 from OPERATION ENABLED while running, 12 from QUICK STOP ACTIVE.
+    let mut h = at(&[0x06, 0x0F]);
+    h.send("602#2B426000DC050000");
+    h.run_to(h.now + 500 * MS);
+    cw(&mut h, 0x0000);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
+    assert_eq!(sw(&mut h), SOD);
+    let mut h = at(&[0x06, 0x0F]);
+    h.send("602#2B426000DC050000");
+    h.run_to(h.now + 500 * MS);
+    cw(&mut h, 0x000B);
+    assert_eq!(h.d.power_state(), Some(State::QuickStopActive));
+    cw(&mut h, 0x0000);
+    assert_eq!(h.d.power_state(), Some(State::SwitchOnDisabled));
 }
