@@ -106,7 +106,7 @@ def test_sync_transmit_then_wait_for_reception(way):
         # TPDO1 is synchronous (transmission type 1): sent at every SYNC, and its first entry
         # (0x2100 sub 1) counts the SYNCs (CiA 301 §7.2.2.2).
         at = node.tpdo[1].wait_for_reception(timeout=2)
-        assert at is not None, f"no TPDO1 after SYNC ({way.name})"
+        assert at is not None, ("no TPDO1 after SYNC", way.name, counts, node.nmt.state)
         assert node.tpdo[1].timestamp == at
         counts.append(node.tpdo[1].map[0].raw)
     assert [b - a for a, b in zip(counts, counts[1:])] == [1, 1], counts
@@ -240,5 +240,5 @@ def test_tpdo_add_callback(way):
     for _ in range(3):
         arrived.clear()
         way.net.sync.transmit()
-        assert arrived.wait(timeout=2), f"no callback after SYNC ({way.name})"
+        assert arrived.wait(timeout=2), ("no callback after SYNC", way.name, seen, node.nmt.state)
     assert len(seen) == 3 and [b - a for a, b in zip(seen, seen[1:])] == [1, 1], seen
