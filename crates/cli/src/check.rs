@@ -16,6 +16,13 @@ pub fn run(path: &Path, env: &BuildEnv) -> Result<()> {
             path.display()
         );
     }
+    // Stored state that cannot be used is only found by building (the script's run builds
+    // its own copy and does not hand the warnings back).
+    if env.state_dir.is_some() {
+        for w in scenario.build(&Registry::builtin(), env)?.warnings {
+            eprintln!("cantwin sim: warning: {w}");
+        }
+    }
     let end_ms = scenario.script.end_time().as_nanos() / 1_000_000;
     let bar = crate::output::steps(end_ms, "virtual ms");
     let report = cantwin_scenario::check_with_progress(
