@@ -585,6 +585,26 @@ fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
             u8::from(s.block),
         ))),
         ("help", []) => Ok(Action::Answer(format!("{HELP}OK"))),
+        // CANopenNode's `help datatype` and `help lss`: the parts of the help on types and
+        // on the LSS commands.
+        ("help", [(what, _)]) => {
+            let start: fn(&str) -> bool = match what.to_ascii_lowercase().as_str() {
+                "datatype" => |l| l.starts_with("Types:"),
+                "lss" => |l| l.contains("lss_"),
+                _ => return Err(GwError::SYNTAX),
+            };
+            // A kept line and the indented lines that continue it.
+            let mut keep = false;
+            let mut text = String::new();
+            for l in HELP.lines() {
+                keep = start(l) || (keep && l.starts_with("      "));
+                if keep {
+                    text.push_str(l);
+                    text.push('\n');
+                }
+            }
+            Ok(Action::Answer(format!("{text}OK")))
+        }
         (
             "read" | "r" | "write" | "w" | "start" | "stop" | "preop" | "preoperational" | "reset"
             | "set" | "info" | "help",
@@ -735,6 +755,21 @@ mod tests {
         assert_eq!(answer("set node 3", &mut s), "[4] ERROR:101");
         assert_eq!(answer("[6] set sdo_timeout 0", &mut s), "[6] ERROR:101");
         assert!(answer("[5] help", &mut s).ends_with("\n[5] OK"));
+        let lss = answer("[5] help lss", &mut s);
+        assert!(
+            lss.starts_with("  lss_switch_glob <0|1>") && lss.ends_with("\n[5] OK"),
+            "{lss}"
+        );
+        assert!(
+            lss.contains("9 auto") && !lss.contains("read <index>"),
+            "{lss}"
+        );
+        let types = answer("[5] help datatype", &mut s);
+        assert!(
+            types.starts_with("Types: b i8") && types.contains("hex (bytes"),
+            "{types}"
+        );
+        assert_eq!(answer("[5] help me", &mut s), "[5] ERROR:101");
         assert_eq!(answer("[4294967295] set node 9", &mut s), "[-1] OK");
         assert_eq!(answer("[010] set node 9", &mut s), "[8] OK");
         assert_eq!(answer("", &mut s), "");
