@@ -123,3 +123,26 @@ def test_stored_node_id_survives_runs_with_state_dir(tmp_path):
             net.disconnect()
     finally:
         stop_process(sim.process)
+
+
+def test_network_lss_fast_scan_finds_the_node_without_node_id(lss_sim):
+    net = connect(lss_sim)
+    try:
+        lss = net.lss
+        # Each bit python-canopen reads as 1 costs one response timeout.
+        lss.RESPONSE_TIMEOUT = 0.2
+        found, address = lss.fast_scan()
+        assert found, "fast_scan found no node"
+        assert tuple(address) == ADDRESS
+        # The node found is in LSS configuration.
+        lss.RESPONSE_TIMEOUT = 2.0
+        assert lss.inquire_node_id() == 0xFF
+        lss.configure_node_id(40)
+        boot = BootUps(net, 40)
+        lss.send_switch_state_global(lss.WAITING_STATE)
+        assert boot.seen.wait(TIMEOUT), "no boot-up from node 40"
+        # Configured now: it takes no part in a fastscan.
+        lss.RESPONSE_TIMEOUT = 0.2
+        assert lss.fast_scan() == (False, None)
+    finally:
+        net.disconnect()
