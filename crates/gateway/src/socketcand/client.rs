@@ -202,7 +202,7 @@ impl Drop for Client {
     /// the connection, and a reset discards what the server has not read yet: the last
     /// SDO segment of a transfer, say, which leaves the device's SDO server waiting in the
     /// middle of it. So: half-close, then read until the server closes its side, at most
-    /// [`CLOSE_LINGER`].
+    /// `CLOSE_LINGER`.
     fn drop(&mut self) {
         let writer = relock(&self.writer);
         if writer.shutdown(std::net::Shutdown::Write).is_err() {
