@@ -357,7 +357,12 @@ impl Storage for FileStorage {
             f.write_all(&encode_store(&blobs))?;
             f.sync_all()?;
         }
-        fs::rename(&tmp, &path)?;
+        if let Err(e) = fs::rename(&tmp, &path) {
+            // Something that is not a file is in the store's place (a directory): it stays,
+            // and so does nothing of this attempt.
+            let _ = fs::remove_file(&tmp);
+            return Err(e.into());
+        }
         self.sync_dir()?;
         // A crash before this point leaves the older files beside a whole STORE_FILE, which
         // is read first; the next commit removes them.

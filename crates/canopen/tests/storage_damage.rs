@@ -121,6 +121,7 @@ fn cia301_7_5_2_10_random_bytes_empty_file_and_directory_are_reported() {
         Err(cantwin_canopen::abort::AbortCode::HARDWARE_ERROR)
     );
     assert!(path.is_dir());
+    assert!(!dir.join(format!("{STORE_FILE}.tmp")).exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
