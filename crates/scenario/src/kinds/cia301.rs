@@ -334,7 +334,7 @@ impl DeviceKind for Cia301 {
     }
 
     fn summary(&self) -> &'static str {
-        "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs"
+        "generic CiA 301 device: node_id, heartbeat_ms, device_name, 64 KiB DOMAIN at 0x2000, 4 RPDOs/TPDOs, lss (CiA 305)"
     }
 
     fn build(
