@@ -160,7 +160,7 @@ fn stores_of_one_file_per_group_are_read_and_moved_into_one_file() {
     let dir = scratch("legacy");
     let whole = good_store(&dir);
     // The same groups, written the older way.
-    let mut h = powered_on(&dir);
+    let h = powered_on(&dir);
     let comm = cantwin_canopen::storage::encode(h.dev.od(), Group::Communication);
     let mfr = cantwin_canopen::storage::encode(h.dev.od(), Group::Manufacturer);
     std::fs::remove_file(dir.join(STORE_FILE)).unwrap();
