@@ -26,7 +26,8 @@ pub const DEFAULT_PORT: u16 = 29536;
 /// Both of the daemon's frame modes are served: raw mode (`< rawmode >`: every frame on the
 /// bus) and its default broadcast-manager mode (cyclic jobs with `add`, `update`, `delete`;
 /// frames selected with `subscribe`, `filter`, `muxfilter`, `unsubscribe`, throttled as asked;
-/// see the broadcast manager's module for what each does). What the server accepts beyond the
+/// see the broadcast manager's module for what each does), at most [`Limits::bcm_jobs`] jobs
+/// per connection. What the server accepts beyond the
 /// daemon is listed in [`wire`]: the remote frame form python-can writes, and error replies
 /// for every malformed command (the daemon logs a bad command silently; here it gets
 /// `< error syntax error in send command >` and the like). Control and ISO-TP commands get
