@@ -89,3 +89,27 @@ fn cia305_cantwin_lss_commissions_the_node_found_by_fastscan() {
     assert!(ok, "{err}");
     assert_eq!(out.trim(), "48 (0x00000030)");
 }
+
+#[test]
+fn every_lss_command_has_help_with_examples() {
+    for cmd in [
+        &["lss", "--help"][..],
+        &["lss", "switch", "global", "--help"],
+        &["lss", "switch", "selective", "--help"],
+        &["lss", "set-node", "--help"],
+        &["lss", "conf-bitrate", "--help"],
+        &["lss", "activate-bitrate", "--help"],
+        &["lss", "store", "--help"],
+        &["lss", "inquire", "--help"],
+        &["lss", "identify", "remote", "--help"],
+        &["lss", "identify", "non-configured", "--help"],
+        &["lss", "fastscan", "--help"],
+        &["lss", "commission", "--help"],
+    ] {
+        let (ok, out, _) = cantwin(cmd);
+        assert!(ok, "{cmd:?}");
+        assert!(out.contains("Examples:"), "{cmd:?}: {out}");
+    }
+    let (ok, _, err) = cantwin(&["lss", "--scenario", "x.toml", "set-node", "128"]);
+    assert!(!ok && err.contains("1–127, or 255"), "{err}");
+}
