@@ -66,7 +66,8 @@ pub struct Options {
     #[arg(long, value_name = "N", default_value_t = 16, help_heading = HEADING)]
     pub web_max_streams: usize,
     /// Seconds a request's head may take to arrive (from the connection's opening or the end
-    /// of the previous answer); then the connection is closed.
+    /// of the previous answer), then the connection is closed; and a control's body after
+    /// it, then it is answered 408.
     #[arg(long, value_name = "SECONDS", default_value_t = 10.0, help_heading = HEADING)]
     pub web_header_timeout: f64,
     /// Seconds a web connection may see no byte move either way (a stalled request body, an

@@ -62,6 +62,8 @@ struct AppState {
     /// Places for event streams.
     streams: Arc<Semaphore>,
     max_streams: usize,
+    /// How long a control's body may take to arrive whole.
+    body_timeout: Duration,
 }
 
 /// The running server.
@@ -170,6 +172,7 @@ impl Server {
                 index: Arc::new(INDEX_HTML.replace(TOKEN_SLOT, &token)),
                 streams: Arc::new(Semaphore::new(options.web_max_streams)),
                 max_streams: options.web_max_streams,
+                body_timeout: limits.header_timeout,
             },
             Arc::new(policy),
         );
@@ -388,13 +391,39 @@ fn body(bytes: &Bytes) -> Result<Body, String> {
     }
 }
 
-/// Parses the body with `parse` and runs the command; a bad body is HTTP 400.
+/// The longest control body taken: the controls' JSON objects are well under 1 KiB.
+const MAX_BODY: usize = 64 * 1024;
+
+/// Reads the body whole within the request timeout, so a client that trickles it byte by
+/// byte (never idle, never done) cannot hold its connection; parses it with `parse` and runs
+/// the command. A bad body is HTTP 400, a slow one 408, a long one 413.
 async fn control(
     s: &AppState,
-    bytes: &Bytes,
+    request: axum::body::Body,
     parse: fn(&Body) -> Result<Command, String>,
 ) -> Response {
-    match body(bytes).and_then(|m| parse(&m)) {
+    let bytes =
+        match tokio::time::timeout(s.body_timeout, axum::body::to_bytes(request, MAX_BODY)).await {
+            Ok(Ok(bytes)) => bytes,
+            Ok(Err(_)) => {
+                return answer(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    false,
+                    format!("the request body is cut off or longer than {MAX_BODY} bytes"),
+                );
+            }
+            Err(_) => {
+                return answer(
+                    StatusCode::REQUEST_TIMEOUT,
+                    false,
+                    format!(
+                        "the request body did not arrive within {} s (--web-header-timeout)",
+                        s.body_timeout.as_secs_f64()
+                    ),
+                );
+            }
+        };
+    match body(&bytes).and_then(|m| parse(&m)) {
         Ok(command) => run(s, command).await,
         Err(e) => bad(e),
     }
@@ -431,8 +460,8 @@ fn parse_int(s: &str) -> Option<i64> {
     Some(if neg { -v } else { v })
 }
 
-async fn nmt(State(s): State<AppState>, bytes: Bytes) -> Response {
-    control(&s, &bytes, nmt_command).await
+async fn nmt(State(s): State<AppState>, request: axum::body::Body) -> Response {
+    control(&s, request, nmt_command).await
 }
 
 fn nmt_command(m: &Body) -> Result<Command, String> {
@@ -457,8 +486,8 @@ fn nmt_command(m: &Body) -> Result<Command, String> {
     Ok(Command::Nmt { device, cs })
 }
 
-async fn input(State(s): State<AppState>, bytes: Bytes) -> Response {
-    control(&s, &bytes, input_command).await
+async fn input(State(s): State<AppState>, request: axum::body::Body) -> Response {
+    control(&s, request, input_command).await
 }
 
 fn input_command(m: &Body) -> Result<Command, String> {
@@ -521,8 +550,8 @@ fn encode_value(ty: &str, value: &str) -> Result<Vec<u8>, String> {
     })
 }
 
-async fn sdo(State(s): State<AppState>, bytes: Bytes) -> Response {
-    control(&s, &bytes, sdo_command).await
+async fn sdo(State(s): State<AppState>, request: axum::body::Body) -> Response {
+    control(&s, request, sdo_command).await
 }
 
 fn sdo_command(m: &Body) -> Result<Command, String> {
@@ -547,8 +576,8 @@ fn sdo_command(m: &Body) -> Result<Command, String> {
     })
 }
 
-async fn power(State(s): State<AppState>, bytes: Bytes) -> Response {
-    control(&s, &bytes, |m| {
+async fn power(State(s): State<AppState>, request: axum::body::Body) -> Response {
+    control(&s, request, |m| {
         Ok(Command::PowerCycle {
             device: text(m, "device")?.to_string(),
         })
@@ -556,8 +585,8 @@ async fn power(State(s): State<AppState>, bytes: Bytes) -> Response {
     .await
 }
 
-async fn fault(State(s): State<AppState>, bytes: Bytes) -> Response {
-    control(&s, &bytes, fault_command).await
+async fn fault(State(s): State<AppState>, request: axum::body::Body) -> Response {
+    control(&s, request, fault_command).await
 }
 
 /// The body as an `[[at]]` table of the scenario files.
