@@ -1238,8 +1238,9 @@ impl<H: OdHooks> Core<H> {
             (0x1019, 0) if !self.sync.period().is_zero() => Some(AbortCode::DEVICE_STATE),
             (0x1019, 0) => (v == 1 || v > 240).then_some(invalid),
             (0x1029, 1..) => Reaction::from_u8(v as u8).is_none().then_some(invalid),
-            // §7.5.2.33, §7.5.2.34: the node-ID of the SDO client (server) is 1..=127.
-            (0x1201..=0x12FF, 3) => (v == 0 || v > 127).then_some(invalid),
+            // §7.5.2.33, §7.5.2.34: the node-ID of the SDO client (server) is 1..=127;
+            // 0, no node-ID assigned, is the entry's default, which a DCF carries back.
+            (0x1201..=0x12FF, 3) => (v > 127).then_some(invalid),
             (0x1400..=0x1BFF, _) => self
                 .pdo
                 .as_ref()

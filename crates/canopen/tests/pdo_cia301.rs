@@ -678,8 +678,9 @@ fn cia301_7_5_2_36_a_count_above_the_entries_the_object_holds_is_0x06040042_in_a
                 "{map:04X} = {n}"
             );
         }
-        // A count in range is refused while the PDO is valid (0x06010000), as is an entry.
-        assert_eq!(h.write_u8(map, 0, 1, t), Err(AbortCode::UNSUPPORTED_ACCESS));
+        // A count in range that changes the mapping is refused while the PDO is valid
+        // (0x06010000), as is an entry.
+        assert_eq!(h.write_u8(map, 0, 0, t), Err(AbortCode::UNSUPPORTED_ACCESS));
         assert_eq!(
             h.write_u32(map, 1, IN8, t),
             Err(AbortCode::UNSUPPORTED_ACCESS)

@@ -26,7 +26,8 @@
 //!   OPERATIONAL).
 //! * **RPDO length** (§7.2.2.2): fewer bytes than mapped are not processed
 //!   ([`PdoEvent::LengthError`] with 0x8210); more bytes are processed (the mapped bytes
-//!   are used, the excess ignored) and reported with 0x8220.
+//!   are used, the excess ignored) and reported with 0x8220, unless the device chose
+//!   otherwise ([`PdoEngine::set_excess_length_processed`]).
 //! * **RPDO data go through the device's hooks** as an SDO download does (CiA 301
 //!   §7.2.2.2 leaves the use of received data to the application): every mapped entry is
 //!   checked first (the dictionary's value checks and [`OdHooks::validate`], with the
@@ -290,6 +291,8 @@ pub struct PdoEngine {
     sync_rx_pending: Vec<u16>,
     operational: bool,
     dummy_mapping: bool,
+    /// See [`PdoEngine::set_excess_length_processed`].
+    excess_processed: bool,
     events: VecDeque<PdoEvent>,
 }
 
@@ -423,6 +426,7 @@ impl PdoEngine {
             sync_rx_pending: Vec::new(),
             operational: false,
             dummy_mapping: true,
+            excess_processed: true,
             events: VecDeque::new(),
         };
         let result = engine.configure(od, Instant::ZERO);
@@ -433,6 +437,13 @@ impl PdoEngine {
     /// later mapping checks and the next [`PdoEngine::configure`].
     pub fn set_dummy_mapping(&mut self, supported: bool) {
         self.dummy_mapping = supported;
+    }
+
+    /// Whether an RPDO longer than its mapping is processed (the default: the mapped bytes
+    /// are used and 0x8220 reported) or, as some devices' manuals say, not processed and
+    /// reported with 0x8210 like a short one (§7.2.2.2 leaves the choice to the device).
+    pub fn set_excess_length_processed(&mut self, processed: bool) {
+        self.excess_processed = processed;
     }
 
     /// (Re)reads every PDO object of `od`: at start-up and after NMT reset communication.
@@ -814,7 +825,7 @@ impl PdoEngine {
         };
         let len = frame.len();
         let mapped = plan.len();
-        if len < mapped {
+        if len < mapped || (len > mapped && !self.excess_processed) {
             push_event(
                 &mut self.events,
                 PdoEvent::LengthError {
@@ -931,6 +942,11 @@ impl PdoEngine {
             return Ok(());
         };
         let v = le_value(data);
+        // §7.5.2.35–38 forbid changing the entries of a valid PDO; a download of the value
+        // an entry already holds (a configuration tool writing a DCF back) changes nothing.
+        if od.get_unsigned(index, sub) == Some(u64::from(v)) {
+            return Ok(());
+        }
         match obj {
             PdoObject::Comm(dir, n) => {
                 let cur = match dir {
