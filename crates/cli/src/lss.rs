@@ -10,7 +10,10 @@ use cantwin_canopen::lss::wire::{UNCONFIGURED, table_index_of};
 use cantwin_canopen::lss::{Address, Master, Mode, Outcome, Part, Service};
 use std::time::Duration as WallDuration;
 
+use serde_json::json;
+
 use crate::connect::{Link, Target};
+use crate::output;
 
 /// Arguments of `cantwin lss`.
 #[derive(Debug, clap::Args)]
@@ -204,6 +207,15 @@ fn node_id(text: &str) -> Result<u8, String> {
     }
 }
 
+/// Prints a result: `text`, or with `--json` the object.
+fn say(text: impl std::fmt::Display, value: serde_json::Value) -> Result<()> {
+    output::result(text, || value).context("writing the result")
+}
+
+fn address_json(a: &Address) -> serde_json::Value {
+    json!({"vendor": a.vendor, "product": a.product, "revision": a.revision, "serial": a.serial})
+}
+
 fn address(a: &Address) -> String {
     format!(
         "vendor 0x{:08X} product 0x{:08X} revision 0x{:08X} serial 0x{:08X}",
@@ -277,7 +289,7 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
                 State::Configuration => Mode::Configuration,
             };
             run(l, m, Service::SwitchGlobal(mode))?;
-            println!("OK");
+            say("OK", json!({"service": "switch global", "ok": true}))?;
         }
         LssCommand::Switch(Switch::Selective {
             vendor,
@@ -295,32 +307,49 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
                 "switch state selective",
                 run(l, m, Service::SwitchSelective(a))?,
             )?;
-            println!("OK: {} is in LSS configuration", address(&a));
+            say(
+                format_args!("OK: {} is in LSS configuration", address(&a)),
+                json!({"service": "switch selective", "ok": true, "address": address_json(&a)}),
+            )?;
         }
         LssCommand::SetNode { node_id } => {
             confirmed(
                 "configure node-ID",
                 run(l, m, Service::ConfigureNodeId(*node_id))?,
             )?;
-            println!("OK: node-ID {node_id} pending (active at the next reset communication)");
+            say(
+                format_args!(
+                    "OK: node-ID {node_id} pending (active at the next reset communication)"
+                ),
+                json!({"service": "configure node-ID", "ok": true, "node_id": node_id}),
+            )?;
         }
         LssCommand::ConfBitrate { rate } => {
             let index = table_index_of(*rate)
                 .with_context(|| format!("{rate} has no entry in the CiA 301 bit timing table"))?;
             let s = Service::ConfigureBitTiming { table: 0, index };
             confirmed("configure bit timing", run(l, m, s)?)?;
-            println!("OK: {rate} pending (table index {index})");
+            say(
+                format_args!("OK: {rate} pending (table index {index})"),
+                json!({"service": "configure bit timing", "ok": true, "bit_rate": rate.bits_per_second(), "table_index": index}),
+            )?;
         }
         LssCommand::ActivateBitrate { delay_ms } => {
             run(l, m, Service::ActivateBitTiming(*delay_ms))?;
-            println!("OK");
+            say(
+                "OK",
+                json!({"service": "activate bit timing", "ok": true, "delay_ms": delay_ms}),
+            )?;
         }
         LssCommand::Store => {
             confirmed(
                 "store configuration",
                 run(l, m, Service::StoreConfiguration)?,
             )?;
-            println!("OK: stored");
+            say(
+                "OK: stored",
+                json!({"service": "store configuration", "ok": true}),
+            )?;
         }
         LssCommand::Inquire { what } => {
             let service = match what {
@@ -332,10 +361,12 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
                 What::NodeId => Service::InquireNodeId,
             };
             match run(l, m, service)? {
-                Outcome::Address(a) => println!("{}", address(&a)),
-                Outcome::Value(v) => println!("0x{v:08X}"),
-                Outcome::NodeId(UNCONFIGURED) => println!("0xFF (no node-ID)"),
-                Outcome::NodeId(n) => println!("{n}"),
+                Outcome::Address(a) => say(address(&a), json!({"address": address_json(&a)}))?,
+                Outcome::Value(v) => say(format_args!("0x{v:08X}"), json!({"value": v}))?,
+                Outcome::NodeId(UNCONFIGURED) => {
+                    say("0xFF (no node-ID)", json!({"node_id": UNCONFIGURED}))?
+                }
+                Outcome::NodeId(n) => say(n, json!({"node_id": n}))?,
                 Outcome::Timeout => bail!("no LSS slave in configuration answered"),
                 other => bail!("unexpected answer {other:?}"),
             }
@@ -358,12 +389,17 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
                 Identify::NonConfigured => Service::IdentifyNonConfigured,
             };
             match run(l, m, service)? {
-                Outcome::Identified(n) => println!("{n} node(s) answered"),
+                Outcome::Identified(n) => {
+                    say(format_args!("{n} node(s) answered"), json!({"answered": n}))?
+                }
                 other => bail!("unexpected answer {other:?}"),
             }
         }
         LssCommand::Fastscan => match run(l, m, Service::Fastscan)? {
-            Outcome::Address(a) => println!("{} (now in LSS configuration)", address(&a)),
+            Outcome::Address(a) => say(
+                format_args!("{} (now in LSS configuration)", address(&a)),
+                json!({"address": address_json(&a)}),
+            )?,
             _ => bail!("fastscan found no node without node-ID"),
         },
         LssCommand::Commission {
@@ -418,7 +454,10 @@ pub fn run_lss(args: &LssArgs) -> Result<()> {
             run(l, m, Service::SwitchGlobal(Mode::Waiting))?;
             // A node that had no node-ID boots with it now; one that had one takes it at its
             // next reset communication (CiA 305 §4.4.1).
-            println!("OK: {} has node-ID {node_id}", address(&found));
+            say(
+                format_args!("OK: {} has node-ID {node_id}", address(&found)),
+                json!({"ok": true, "address": address_json(&found), "node_id": node_id}),
+            )?;
         }
     }
     // Let the last frame (switch state global and activate bit timing get no answer) leave

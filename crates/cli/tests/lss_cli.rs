@@ -26,6 +26,7 @@ fn cia305_cantwin_lss_commissions_a_node_selected_by_its_address() {
     );
     assert_eq!(lss(&["inquire", "node-id"]), "0xFF (no node-ID)");
     assert_eq!(lss(&["inquire", "serial"]), "0x00000030");
+    assert_eq!(lss(&["--json", "inquire", "node-id"]), r#"{"node_id":255}"#);
     let (ok, _, err) = cantwin(&["lss", "--socketcand", &addr, "conf-bitrate", "100k"]);
     assert!(
         !ok && err.contains("no entry in the CiA 301 bit timing table"),
