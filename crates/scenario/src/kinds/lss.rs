@@ -4,7 +4,8 @@
 //! The node answers LSS on 0x7E5/0x7E4 with the LSS address of its 0x1018 sub 1–4. A node
 //! without node-ID (`node_id = 0xFF` or `"unconfigured"`) waits for LSS: no boot-up,
 //! heartbeat, SDO or NMT until it has been given a node-ID (CiA 305 §3.3; CANopenNode does
-//! the same). A configured node-ID becomes active at reset communication or reset node
+//! the same: its NMT does not run before, so an NMT reset does not apply a node-ID
+//! configured in that state; leaving LSS configuration does). A configured node-ID becomes active at reset communication or reset node
 //! (§4.4.1) and when a node that had none leaves LSS configuration; the device then starts
 //! with the new node-ID as after its boot (a reset communication keeps the values of the
 //! manufacturer and profile objects, a reset node does not). Store configuration keeps the
