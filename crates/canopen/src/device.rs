@@ -149,6 +149,11 @@ pub struct DeviceConfig {
     /// that failed as bits (bit 2 communication, 3 application, 4 manufacturer). `None`
     /// for a device whose application reports it its own way ([`Event::StorageLoadFailed`]).
     pub storage_fault: Option<u16>,
+    /// The error raised when a monitored heartbeat producer or the life guarding master is
+    /// lost (§7.2.7.1): [`EMCY_LIFE_GUARD_HEARTBEAT`]. `None` for a device whose
+    /// application reports it its own way ([`Event::HeartbeatLost`],
+    /// [`Event::LifeGuardingLost`]); the communication error reaction is applied either way.
+    pub error_control_fault: Option<u16>,
 }
 
 impl DeviceConfig {
@@ -163,6 +168,7 @@ impl DeviceConfig {
             acceptance_filter: true,
             sdo: SdoCapabilities::FULL,
             storage_fault: Some(EMCY_STORED_PARAMETERS),
+            error_control_fault: Some(EMCY_LIFE_GUARD_HEARTBEAT),
         }
     }
 }
@@ -923,8 +929,11 @@ impl<H: OdHooks> Core<H> {
     }
 
     fn partner_recovered(&mut self) {
-        if !self.consumer.any_lost() && !self.guarding.is_lost() {
-            self.clear(EMCY_LIFE_GUARD_HEARTBEAT);
+        if !self.consumer.any_lost()
+            && !self.guarding.is_lost()
+            && let Some(code) = self.config.error_control_fault
+        {
+            self.clear(code);
         }
     }
 
@@ -946,12 +955,16 @@ impl<H: OdHooks> Core<H> {
         });
         for node in lost[..n_lost].iter().copied().chain(more) {
             self.push_event(Event::HeartbeatLost { node });
-            self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [node, 0, 0, 0, 0]);
+            if let Some(code) = self.config.error_control_fault {
+                self.raise(code, [node, 0, 0, 0, 0]);
+            }
             self.communication_error(now, out);
         }
         if self.guarding.on_tick(now) {
             self.push_event(Event::LifeGuardingLost);
-            self.raise(EMCY_LIFE_GUARD_HEARTBEAT, [0; 5]);
+            if let Some(code) = self.config.error_control_fault {
+                self.raise(code, [0; 5]);
+            }
             self.communication_error(now, out);
         }
         if self.heartbeat.poll(now) {
