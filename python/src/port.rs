@@ -20,7 +20,9 @@
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, PoisonError};
 
-use cantwin_bus::{PortConfig, PortId, Received, RxClosed, RxQueue, TxOrder};
+use cantwin_bus::{
+    BusId, PortConfig, PortId, Received, RxClosed, RxQueue, Simulation as BusSim, TxOrder,
+};
 use cantwin_can::{Duration, ExtendedId, Frame, Id, Instant, Node, Outbox, StandardId};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -123,6 +125,29 @@ fn to_py(r: Received) -> PyFrame {
         r.frame.data_bytes().to_vec(),
         r.at.since_start().as_secs_f64(),
     )
+}
+
+/// How many events [`run_to`] runs on past its target to reach a moment when no frame is on
+/// the wire (a frame's end, an error frame, the next frame of a burst): a bound, so a bus
+/// that is never idle still hands over.
+const WIRE_EVENTS: usize = 8;
+
+/// Run the simulation to `t`, then on until no frame is on the port's bus (at most
+/// [`WIRE_EVENTS`] events). Python then gets its turn between frames: what it sends next is
+/// queued behind no frame that had already started. A heartbeat already on the wire when an
+/// NMT command is queued reports the old state (CiA 301 §7.2.8.3.2.1) and would be what
+/// `wait_for_heartbeat()` after the command sees.
+fn run_to(sim: &mut BusSim, bus: BusId, t: Instant) {
+    sim.run_until(t);
+    for _ in 0..WIRE_EVENTS {
+        if sim.bus(bus).and_then(|b| b.transmitting()).is_none() {
+            return;
+        }
+        match sim.next_event_time() {
+            Some(n) => sim.run_until(n),
+            None => return,
+        }
+    }
 }
 
 /// The error of every call on a closed port.
@@ -273,7 +298,7 @@ impl Port {
                 }
             }
             match (target, deadline) {
-                (Some(n), _) => sim.run_until(n),
+                (Some(n), _) => run_to(sim, self.port.bus(), n),
                 (None, Some(d)) => {
                     sim.run_until(d);
                     return self.take();
