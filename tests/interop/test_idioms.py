@@ -41,9 +41,9 @@ class Way:
         self.sim = sim
 
     def operational(self):
-        """NMT start, then the heartbeat that reports it."""
+        """NMT start from pre-operational, then the heartbeat that reports it."""
         self.node.nmt.state = "OPERATIONAL"
-        assert heartbeat_reports(self, "OPERATIONAL")
+        assert heartbeat_reports(self, "OPERATIONAL", before="PRE-OPERATIONAL")
 
 
 def heartbeat_reports(way, state, before=None):
