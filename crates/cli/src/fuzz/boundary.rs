@@ -36,6 +36,10 @@ const RSS_GROWTH_KIB: u64 = 64 * 1024;
 /// a few for its own use).
 const FD_GROWTH: usize = 8;
 
+/// The descriptor limit the server runs under (RLIMIT_NOFILE through `prlimit`, when
+/// installed).
+const SERVER_NOFILE: u32 = 1024;
+
 /// The scenario the server runs: one CiA 301 device, node 5, whose 0x1018 sub 1 the good
 /// client reads.
 const SCENARIO: &str = r#"name = "boundary fuzz"
@@ -167,7 +171,19 @@ impl Server {
     fn start(opts: &Options) -> Result<Server> {
         let scenario = opts.scratch.join("boundary.toml");
         std::fs::write(&scenario, SCENARIO)?;
-        let mut child = Command::new(&opts.exe)
+        // Under the descriptor limit of a common default (`ulimit -n 1024`), so that a server
+        // without connection caps runs out of descriptors within the attack, as it would
+        // for a user.
+        let mut cmd = if have_prlimit() {
+            let mut c = Command::new("prlimit");
+            c.arg(format!("--nofile={SERVER_NOFILE}"))
+                .arg("--")
+                .arg(&opts.exe);
+            c
+        } else {
+            Command::new(&opts.exe)
+        };
+        let mut child = cmd
             .args(["-q", "sim"])
             .arg(&scenario)
             .args(["--socketcand", "0", "--slcan", "0", "--web", "0"])
