@@ -335,6 +335,10 @@ impl Port {
     /// When the port's transmit queue is full the call waits for room, at most `timeout`
     /// seconds (default 1 s): of bus time in virtual time (the simulation runs meanwhile),
     /// of wall time when paced.
+    ///
+    /// From then on, receivers neither run the simulation nor hand over a frame until the
+    /// calling thread waits (the turn rule, module documentation), so the answer is there
+    /// for the wait that follows the send.
     #[pyo3(signature = (arbitration_id, data, *, extended=false, remote=false, dlc=None, timeout=None))]
     #[allow(clippy::too_many_arguments)]
     fn send(
@@ -375,7 +379,8 @@ impl Port {
 
     /// The next frame as ``(arbitration_id, extended, remote, dlc, data, time)`` (time: bus time
     /// in seconds at its end of frame), or `None` after `timeout` seconds (`None`: wait until
-    /// one arrives). In virtual time the wait runs the simulation (module documentation).
+    /// one arrives). In virtual time the wait runs the simulation (module documentation),
+    /// once every thread that sent a frame or changed a device waits too (the turn rule).
     ///
     /// `wait_for_answers` applies the reaction rule (let other threads answer a frame before
     /// the simulation runs past it); a thread that both receives and answers passes `False`.
