@@ -112,6 +112,21 @@ class CantwinBus(can.BusABC):
         except (ValueError, CantwinError) as e:
             raise can.CanOperationError(str(e)) from e
 
+    def recv(self, timeout: Optional[float] = None) -> Optional[can.Message]:
+        """The next frame that passes the filters, or ``None`` after `timeout` seconds: of bus
+        time in virtual time (python-can's own loop counts the wall clock, and would run the
+        simulation for as much bus time as it can in that wall time), of wall time paced."""
+        if self._sim.paced:
+            return super().recv(timeout)
+        end = None if timeout is None else self._sim.now + timeout
+        while True:
+            left = None if end is None else max(0.0, end - self._sim.now)
+            msg, already_filtered = self._recv_internal(left)
+            if msg is not None and (already_filtered or self._matches_filters(msg)):
+                return msg
+            if end is not None and (msg is None or self._sim.now >= end):
+                return None
+
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
         try:
             got = self._port.recv(

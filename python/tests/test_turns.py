@@ -114,3 +114,34 @@ def test_a_device_change_waits_for_its_thread_too():
     finally:
         notifier.stop()
         bus.shutdown()
+
+
+QUIET = """
+[[bus]]
+name = "can0"
+bit_rate = "500k"
+
+[[device]]
+name = "node5"
+kind = "cia301"
+bus = "can0"
+node_id = 5
+heartbeat_ms = 0
+"""
+
+
+def test_recv_timeout_is_bus_time_in_virtual_time():
+    sim = cantwin.Simulation.from_toml(QUIET)
+    with can.Bus(interface="cantwin", channel="can0", sim=sim) as bus:
+        boot_up = bus.recv(0.1)
+        assert boot_up is not None and boot_up.arbitration_id == 0x700 + NODE_ID
+        at = sim.now
+        # Nothing else is ever sent: the wait ends after half a second of bus time, however
+        # little wall time that takes (python-can's own loop would count the wall clock).
+        assert bus.recv(0.5) is None
+        assert 0.5 <= sim.now - at < 0.5 + 1e-3
+        # A filter that nothing passes: the same bound.
+        bus.set_filters([{"can_id": 0x123, "can_mask": 0x7FF}])
+        at = sim.now
+        assert bus.recv(0.25) is None
+        assert 0.25 <= sim.now - at < 0.25 + 1e-3
