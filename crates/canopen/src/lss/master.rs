@@ -57,6 +57,43 @@ pub enum Service {
     IdentifyNonConfigured,
     /// Fastscan: find one non-configured slave and switch it to configuration.
     Fastscan,
+    /// Fastscan with a plan per address part (vendor, product, revision, serial): searched
+    /// bit by bit, matched against a known value, or skipped (CANopenNode's `lss_allnodes`
+    /// scan types 0, 2 and 1).
+    FastscanWith([Scan; 4]),
+}
+
+/// How a fastscan treats one part of the address.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Scan {
+    /// Found bit by bit.
+    Search,
+    /// Not compared: the slaves move past it (LSSNext skips it). Shown as 0 in the result.
+    Skip,
+    /// Only a slave with this value goes on (one confirmation, no bit search).
+    Match(u32),
+}
+
+/// The plan of a fastscan service.
+fn plan_of(service: Service) -> [Scan; 4] {
+    match service {
+        Service::FastscanWith(plan) => plan,
+        _ => [Scan::Search; 4],
+    }
+}
+
+/// The first part after `sub` (or from the start, `None`) that the plan does not skip.
+fn part_after(plan: &[Scan; 4], sub: Option<u8>) -> Option<u8> {
+    let from = sub.map_or(0, |s| s + 1);
+    (from..4).find(|i| plan[usize::from(*i)] != Scan::Skip)
+}
+
+/// The LSSNext of the confirmation of `sub`: the next part compared, or the first one again
+/// after the last (CiA 305 §4.7: a slave sent back to an earlier part enters configuration).
+fn next_of(plan: &[Scan; 4], sub: u8) -> u8 {
+    part_after(plan, Some(sub))
+        .or_else(|| part_after(plan, None))
+        .unwrap_or(0)
 }
 
 /// How a service ended.
@@ -226,7 +263,7 @@ impl Master {
                 out.push(Request::IdentifyNonConfigured.encode());
                 Step::Collect(0)
             }
-            Service::Fastscan => {
+            Service::Fastscan | Service::FastscanWith(_) => {
                 out.push(scan(0, FASTSCAN_CONFIRM, 0, 0).encode());
                 Step::ScanReset
             }
@@ -253,18 +290,18 @@ impl Master {
             deadline: now + self.timeout,
             answered: false,
         };
+        let plan = plan_of(r.service);
         match r.step {
             Step::ScanReset => {
                 if !answered {
                     return self.finish(Outcome::Timeout);
                 }
-                out.push(scan(0, 31, 0, 0).encode());
-                self.running = Some(next(Step::ScanBit {
-                    sub: 0,
-                    bit: 31,
-                    found: 0,
-                    address: Address::default(),
-                }));
+                match part_after(&plan, None) {
+                    Some(sub) => {
+                        self.running = Some(next(begin(&plan, sub, Address::default(), out)))
+                    }
+                    None => self.finish(Outcome::Timeout),
+                }
             }
             Step::ScanBit {
                 sub,
@@ -275,7 +312,7 @@ impl Master {
                 // No answer for a 0 in this bit: every candidate has a 1 there.
                 let found = if answered { found } else { found | (1 << bit) };
                 if bit == 0 {
-                    out.push(scan(found, 0, sub, (sub + 1) & 3).encode());
+                    out.push(scan(found, 0, sub, next_of(&plan, sub)).encode());
                     self.running = Some(next(Step::ScanConfirm {
                         sub,
                         found,
@@ -303,19 +340,37 @@ impl Master {
                     return self.finish(Outcome::Timeout);
                 };
                 address.set_part(part, found);
-                if sub == 3 {
-                    return self.finish(Outcome::Address(address));
+                match part_after(&plan, Some(sub)) {
+                    Some(n) => self.running = Some(next(begin(&plan, n, address, out))),
+                    None => self.finish(Outcome::Address(address)),
                 }
-                out.push(scan(0, 31, sub + 1, sub + 1).encode());
-                self.running = Some(next(Step::ScanBit {
-                    sub: sub + 1,
-                    bit: 31,
-                    found: 0,
-                    address,
-                }));
             }
             Step::Answer | Step::Address(..) | Step::Collect(_) => {
                 self.finish(Outcome::Timeout);
+            }
+        }
+    }
+}
+
+/// The first request for part `sub` of a fastscan: its bit 31, or the confirmation of the
+/// value it must match.
+fn begin(plan: &[Scan; 4], sub: u8, address: Address, out: &mut Outbox) -> Step {
+    match plan[usize::from(sub)] {
+        Scan::Match(v) => {
+            out.push(scan(v, 0, sub, next_of(plan, sub)).encode());
+            Step::ScanConfirm {
+                sub,
+                found: v,
+                address,
+            }
+        }
+        Scan::Search | Scan::Skip => {
+            out.push(scan(0, 31, sub, sub).encode());
+            Step::ScanBit {
+                sub,
+                bit: 31,
+                found: 0,
+                address,
             }
         }
     }

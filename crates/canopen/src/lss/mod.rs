@@ -34,7 +34,7 @@ pub mod slave;
 pub mod store;
 pub mod wire;
 
-pub use master::{Busy, Master, Outcome, Service};
+pub use master::{Busy, Master, Outcome, Scan, Service};
 pub use slave::{Slave, SlaveEvent};
 pub use store::{FileStore, MemoryStore, Store, Stored};
 pub use wire::{Address, IdentifyField, Mode, Part, Request, Response, UNCONFIGURED};

@@ -157,6 +157,46 @@ fn cia305_master_selective_switch_inquiry_and_identify_remote() {
     );
 }
 
+#[test]
+fn cia305_4_7_fastscan_matches_known_parts_and_skips_others() {
+    let other = Slave::new(
+        Address {
+            vendor: 0x0000_0099,
+            product: 1,
+            revision: 1,
+            serial: 1,
+        },
+        UNCONFIGURED,
+        BitRate::R500K,
+        Box::new(MemoryStore::new()),
+    );
+    let mut net = Net::new(vec![slave(0x0000_0500, UNCONFIGURED), other]);
+    let plan = [
+        Scan::Match(0x5A5A_0001),
+        Scan::Skip,
+        Scan::Search,
+        Scan::Search,
+    ];
+    let Outcome::Address(a) = net.run(Service::FastscanWith(plan)) else {
+        panic!("no slave found");
+    };
+    assert_eq!(
+        a,
+        Address {
+            vendor: 0x5A5A_0001,
+            product: 0,
+            revision: 0x0001_0000,
+            serial: 0x0000_0500
+        }
+    );
+    assert_eq!(net.slaves[0].mode(), Mode::Configuration);
+    assert_eq!(net.slaves[1].mode(), Mode::Waiting);
+    // Nothing matches an absent vendor.
+    net.run(Service::SwitchGlobal(Mode::Waiting));
+    let none = [Scan::Match(0x1234), Scan::Search, Scan::Skip, Scan::Skip];
+    assert_eq!(net.run(Service::FastscanWith(none)), Outcome::Timeout);
+}
+
 mod properties {
     use super::*;
     use cantwin_can::Frame;
