@@ -1,7 +1,7 @@
 //! Request lines: `[<seq>] [[<net>] <node>] <command>`, parsed into an answer now or a bus
 //! operation whose result [`Pending::finish`] turns into the answer line.
 
-use cantwin_canopen::lss::{Address, Mode, Outcome, Part, Service};
+use cantwin_canopen::lss::{Address, Mode, Outcome, Part, Scan, Service};
 use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::NmtCs;
 
@@ -60,6 +60,8 @@ pub enum LssOp {
         start: u8,
         /// Whether each node stores its node-ID.
         store: bool,
+        /// How fastscan treats each part of the address (vendor, product, revision, serial).
+        plan: [Scan; 4],
     },
 }
 
@@ -408,15 +410,19 @@ fn lss(cmd: &str, args: &[&str]) -> Result<Action, GwError> {
                 [_, start, store, ..] => (ranged(start, 1, 127)? as u8, ranged(store, 0, 1)? == 1),
                 _ => (2, true),
             };
+            let mut plan = [Scan::Search; 4];
             if rest.len() == 11 {
-                for pair in rest[3..].chunks(2) {
-                    // Scan types: 0 fastscan, 1 ignore, 2 match the value; only a full
-                    // fastscan of every part is offered.
-                    let scan = ranged(pair[0], 0, 2)?;
-                    ranged(pair[1], 0, u32::MAX)?;
-                    if scan != 0 {
-                        return Err(GwError::NOT_SUPPORTED);
-                    }
+                for (part, pair) in plan.iter_mut().zip(rest[3..].chunks(2)) {
+                    // Scan types: 0 search, 1 skip, 2 match the value given.
+                    let value = ranged(pair[1], 0, u32::MAX)?;
+                    *part = match ranged(pair[0], 0, 2)? {
+                        0 => Scan::Search,
+                        1 => Scan::Skip,
+                        _ => Scan::Match(value),
+                    };
+                }
+                if plan.iter().all(|p| *p == Scan::Skip) {
+                    return Err(GwError::SYNTAX);
                 }
             }
             Action::Bus {
@@ -424,6 +430,7 @@ fn lss(cmd: &str, args: &[&str]) -> Result<Action, GwError> {
                     timeout_ms: if ms == 0 { FASTSCAN_TIMEOUT_MS } else { ms },
                     start,
                     store,
+                    plan,
                 }),
                 show: Show::Lss(LssShow::Ok),
             }
@@ -631,8 +638,10 @@ Request: [<seq>] [[<net>] <node>] <command>; answer: [<seq>] OK | <value> | ERRO
   lss_inquire_addr [<0..3>]            LSS inquire address (or one part)
   lss_get_node                         LSS inquire node-ID
   _lss_fastscan [<timeout_ms>]         LSS fastscan (default 100 ms per step)
-  lss_allnodes [<timeout_ms> [<first node-ID> <store 0|1>]]   fastscan every node,
-                                       give node-IDs from 2 and store them
+  lss_allnodes [<timeout_ms> [<first node-ID> <store 0|1> [<scan> <vendor> <scan>
+      <product> <scan> <revision> <scan> <serial>]]]   fastscan every node, give
+                                       node-IDs from 2 and store them (scan: 0 search,
+                                       1 skip, 2 match the value)
   info | help
 Types: b i8 i16 i24 i32 i40 i48 i56 i64 u8 u16 u24 u32 u40 u48 u56 u64 x8 x16 x32 x64
        r32 r64 vs (\"text\") os us d (base64, RFC 2045) hex (bytes: C8 3D BB 00)
@@ -870,7 +879,8 @@ mod tests {
             Ok(LssOp::AllNodes {
                 timeout_ms: 100,
                 start: 2,
-                store: true
+                store: true,
+                plan: [Scan::Search; 4]
             })
         );
         assert_eq!(
@@ -878,8 +888,26 @@ mod tests {
             Ok(LssOp::AllNodes {
                 timeout_ms: 50,
                 start: 10,
-                store: false
+                store: false,
+                plan: [Scan::Search; 4]
             })
+        );
+        assert_eq!(
+            lss_op("lss_allnodes 50 10 1 2 0xCA7 1 0 0 0 0 0"),
+            Ok(LssOp::AllNodes {
+                timeout_ms: 50,
+                start: 10,
+                store: true,
+                plan: [Scan::Match(0xCA7), Scan::Skip, Scan::Search, Scan::Search]
+            })
+        );
+        assert_eq!(
+            lss_op("lss_allnodes 50 10 1 1 0 1 0 1 0 1 0").err(),
+            Some(GwError::SYNTAX)
+        );
+        assert_eq!(
+            lss_op("lss_allnodes 50 10 1 3 0 0 0 0 0 0 0").err(),
+            Some(GwError::SYNTAX)
         );
         assert_eq!(lss_op("lss_allnodes 50 10").err(), Some(GwError::SYNTAX));
         assert_eq!(

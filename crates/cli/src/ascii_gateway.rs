@@ -127,7 +127,7 @@ fn execute_lss(
     master: &mut lss::Master,
     op: LssOp,
 ) -> Result<Result<LssResult, GwError>> {
-    let (timeout_ms, start, store) = match op {
+    let (timeout_ms, start, store, plan) = match op {
         LssOp::Service {
             service,
             timeout_ms,
@@ -138,7 +138,8 @@ fn execute_lss(
             timeout_ms,
             start,
             store,
-        } => (timeout_ms, start, store),
+            plan,
+        } => (timeout_ms, start, store, plan),
     };
     let mut assigned = Vec::new();
     let mut id = start;
@@ -149,7 +150,8 @@ fn execute_lss(
         _ => Err(code),
     };
     let end = loop {
-        let address = match lss_service(link, master, lss::Service::Fastscan, timeout_ms)? {
+        let scan = lss::Service::FastscanWith(plan);
+        let address = match lss_service(link, master, scan, timeout_ms)? {
             Ok(lss::Outcome::Address(a)) => a,
             Ok(lss::Outcome::Timeout) => break Ok(true),
             Ok(_) => break Err(GwError::STATE),

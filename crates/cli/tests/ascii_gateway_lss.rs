@@ -76,9 +76,9 @@ fn cia309_3_lss_commands_commission_a_node_without_node_id() {
     assert_eq!(lines, expected, "{text}");
 }
 
-/// `lss_allnodes` on the in-process scenario: the node without node-ID is found by fastscan
-/// (50 ms per step, about 7 s), given node-ID 10 and stored, and the search ends when no
-/// node is left.
+/// `lss_allnodes` on the in-process scenario, the vendor-ID matched and the product code
+/// skipped: the node without node-ID is found by fastscan (50 ms per step, about 3.5 s),
+/// given node-ID 10 and stored, and the search ends when no node is left.
 #[test]
 fn cia309_3_lss_allnodes_gives_each_node_without_node_id_one() {
     let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
@@ -95,7 +95,7 @@ fn cia309_3_lss_allnodes_gives_each_node_without_node_id_one() {
         .unwrap();
     {
         let mut stdin = gw.stdin.take().unwrap();
-        writeln!(stdin, "[1] lss_allnodes 50 10 1").unwrap();
+        writeln!(stdin, "[1] lss_allnodes 50 10 1 2 0xCA7 1 0 0 0 0 0").unwrap();
         writeln!(stdin, "[2] 10 read 0x1018 4 x32").unwrap();
     }
     let out = gw.wait_with_output().unwrap();
@@ -106,7 +106,7 @@ fn cia309_3_lss_allnodes_gives_each_node_without_node_id_one() {
     );
     assert_eq!(
         String::from_utf8(out.stdout).unwrap(),
-        "# Node-ID 10 assigned to: 0x00000CA7 0x00000131 0x00010000 0x00000030\n\
+        "# Node-ID 10 assigned to: 0x00000CA7 0x00000000 0x00010000 0x00000030\n\
          # Found 1 nodes, search finished.\n[1] OK\n[2] 0x00000030\n"
     );
 }
