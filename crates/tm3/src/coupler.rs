@@ -29,7 +29,15 @@
 //! * **0x1029** applies to SYNC timeout and RPDO deadline too (manual: 1029H lists SYNC
 //!   timeout and PDO event time errors besides bus-off and error control).
 //! * **SYNC timeout.** With 0x1006 ≠ 0, the watchdog is armed by the first SYNC and fires
-//!   when no SYNC came for 1.5 cycle periods; the next SYNC clears 0xF001.
+//!   when no SYNC came for 1.5 cycle periods; the next SYNC clears 0xF001. While it is
+//!   active the error register has bit 4 set (manual 1001H: communication error).
+//! * **No EMCY before boot-up** (CiA 301 §7.3.2.2.1: EMCY is a service of PRE-OPERATIONAL
+//!   and OPERATIONAL, entered with the boot-up message). The errors raised again by a
+//!   power-up or reset communication are queued behind the boot-up message and handed to
+//!   the controller only once it was sent: queued together, the EMCY's lower identifier
+//!   would win arbitration and reach the bus first.
+//! * **RPDO length.** A received RPDO longer or shorter than its mapping is not processed
+//!   and raises 0x8210 (manual, EMCY table: PDO_LENGTH); 0x8220 is not used.
 //! * **Queues.** The firmware's receive queue (capacity and service time in
 //!   [`CouplerConfig`]) overflows under overload: the frame is lost and 0x6101 raised until
 //!   the queue is empty again. A frame the controller's transmit queue dropped raises
@@ -43,8 +51,10 @@
 //!   0x6423 to TRUE clears it.
 //! * **Downloads the manual restricts** are refused with 0x06090030: 0x1006 outside 0 and
 //!   10 000..=10 000 000 µs in 1 ms steps, 29-bit identifiers where "not supported" (0x1005,
-//!   0x1014, TPDOs), TPDO bit 30, RPDO transmission types 241–254, TPDO transmission types
-//!   241–254 (manual: transmission type tables), 0x1016 sub 1 with bits 24–31 set. Checked
+//!   0x1014, 0x1201 sub 1/2, RPDOs, TPDOs), 0x1014 bits 30–31 ("reserved", 0), 0x1029
+//!   sub 1 above 2 ("03h-FFh reserved"), TPDO bit 30, RPDO transmission types 241–254, TPDO
+//!   transmission types 241–254 (manual: transmission type tables), 0x1016 sub 1 with bits
+//!   24–31 set. Checked
 //!   where the value is written ([`ManualLimits`], the device's object hooks), so expedited,
 //!   segmented and block downloads are refused alike.
 //! * **Error register.** Besides the CiA 301 bits, bit 7 (manufacturer-specific) is set
@@ -62,6 +72,10 @@ use cantwin_canopen::pdo::PdoEvent;
 use cantwin_cia401::inputs::{self, AnalogTriggers};
 use cantwin_cia401::{objects as cia401, outputs};
 use std::sync::Arc;
+
+/// The most EMCYs held behind an unsent boot-up message: more than the coupler can have
+/// active at once (one per module error and coupler error).
+const MAX_HELD_EMCYS: usize = 64;
 
 /// How the coupler is set up.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -148,11 +162,21 @@ impl ManualLimits {
             (0x1006, 0) => {
                 value != 0 && (!(10_000..=10_000_000).contains(&value) || value % 1000 != 0)
             }
-            // Manual 1005H, 1014H: 29-bit identifiers are not supported.
-            (0x1005, 0) | (0x1014, 0) => value & (1 << 29) != 0,
+            // Manual 1005H: 29-bit identifiers are not supported.
+            (0x1005, 0) => value & (1 << 29) != 0,
+            // Manual 1014H: bits 31 and 30 are reserved (0), 29-bit identifiers are not
+            // supported.
+            (0x1014, 0) => value & (7 << 29) != 0,
+            // Manual 1029H: 00h-02h; 03h-FFh are reserved (including CiA 301's
+            // manufacturer-specific 80h-FFh).
+            (0x1029, 1) => value > 2,
+            // Manual 1200H/1201H: 29-bit identifiers are not supported.
+            (0x1201, 1 | 2) => value & (1 << 29) != 0,
             // Manual 1016H: bits 31-24 are 0.
             (0x1016, 1) => value >> 24 != 0,
-            // Manual 1400H-141CH: transmission types 0-240 and 255.
+            // Manual 1400H-141CH: 29-bit identifiers are not supported; transmission types
+            // 0-240 and 255.
+            (0x1400..=0x141C, 1) => value & (1 << 29) != 0,
             (0x1400..=0x141C, 2) => (241..=254).contains(&ttype),
             // Manual 1800H-1837H: 29-bit identifiers and "no RTR" are not supported;
             // transmission types 0-240 and 255.
@@ -247,6 +271,9 @@ pub struct Tm3Coupler {
     rx_level: u64,
     rx_last: Instant,
     now: Instant,
+    /// The EMCYs raised since the last boot-up message, while that message is not sent
+    /// yet (`Some`); `None` once it was.
+    held: Option<Vec<Frame>>,
     /// The CiA 301 layer's events, passed on to [`Tm3Coupler::poll_event`].
     events: std::collections::VecDeque<Event>,
 }
@@ -270,6 +297,27 @@ fn device_config(node_id: u8) -> DeviceConfig {
     }
 }
 
+/// Whether `f` is the boot-up message on `id` (CiA 301 §7.2.8.3.3: one byte, 0; a node
+/// guarding answer on the same identifier never carries 0).
+fn is_boot_up(f: &Frame, id: u32) -> bool {
+    !f.is_extended() && !f.is_remote() && f.id().as_raw() == id && f.data_bytes() == [0]
+}
+
+/// The CiA 301 device of a coupler at `node_id`.
+fn coupler_device(
+    desc: Arc<OdDescription>,
+    node_id: u8,
+) -> Result<Device<CouplerHooks>, DeviceError> {
+    let mut device = Device::with_hooks(desc, device_config(node_id), CouplerHooks::default())?;
+    // Manual, EMCY table, 0x8210 PDO_LENGTH: "PDO not processed because the length of the
+    // received data does not match the expected one" — too long as well as too short
+    // (CiA 301 §7.2.2.2 leaves the longer case to the device).
+    if let Some(p) = device.pdo_mut() {
+        p.set_excess_length_processed(false);
+    }
+    Ok(device)
+}
+
 impl Tm3Coupler {
     /// A coupler with every configured module fitted. It is unpowered until
     /// [`Node::on_power_up`].
@@ -289,11 +337,7 @@ impl Tm3Coupler {
             return Err(CouplerError::OtherIsland);
         }
         let desc = Arc::clone(shared.description());
-        let device = Device::with_hooks(
-            desc.clone(),
-            device_config(config.node_id),
-            CouplerHooks::default(),
-        )?;
+        let device = coupler_device(desc.clone(), config.node_id)?;
         let n = config.island.modules().len();
         let fitted = config
             .island
@@ -319,6 +363,7 @@ impl Tm3Coupler {
             rx_level: 0,
             rx_last: Instant::ZERO,
             now: Instant::ZERO,
+            held: None,
             events: std::collections::VecDeque::new(),
             config,
         })
@@ -637,6 +682,10 @@ impl Tm3Coupler {
             // Manual 1001H bit 5: problems related to the device profile.
             self.device.emcy().set_register_bits(0x20, true);
         }
+        if code == diag::SYNC_TIMEOUT {
+            // Manual 1001H bit 4: communication error (the SYNC is a communication object).
+            self.device.emcy().set_register_bits(0x10, true);
+        }
         self.raised.push((code, module));
         self.device.emcy().report(code, [0, 0, 0, 0, module]);
         self.flush = true;
@@ -646,6 +695,8 @@ impl Tm3Coupler {
     fn clear(&mut self, code: u16) {
         if code == diag::ANALOG_DISABLE {
             self.device.emcy().set_register_bits(0x20, false);
+        } else if code == diag::SYNC_TIMEOUT && self.device.emcy_active(code) {
+            self.device.emcy().set_register_bits(0x10, false);
         } else if !self.device.emcy_active(code) {
             // Nothing to clear (the common case, e.g. 0x6102 after every frame sent): asked
             // without `emcy()`, which would make the device recompute its timers.
@@ -700,6 +751,51 @@ impl Tm3Coupler {
 
     /// Runs `f` on the coupler and then everything that follows a call into the device.
     fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
+        let before = out.len();
+        self.run_inner(now, out, f);
+        self.hold_emcys(before, out);
+    }
+
+    /// Takes the EMCYs queued from `from` on out of `out` while the boot-up message is not
+    /// sent yet (a boot-up message among the new frames starts the wait). See the module
+    /// documentation, "No EMCY before boot-up".
+    fn hold_emcys(&mut self, from: usize, out: &mut Outbox) {
+        let boot_up = 0x700 + u32::from(self.device.node_id());
+        let is_boot_up = |f: &Frame| is_boot_up(f, boot_up);
+        let new = out.frames().get(from..).unwrap_or_default();
+        if self.held.is_none() && !new.iter().any(is_boot_up) {
+            return;
+        }
+        let emcy = self.device.od().get_unsigned(0x1014, 0).unwrap_or(0) as u32 & 0x7FF;
+        let frames: Vec<Frame> = out.drain().collect();
+        for (i, f) in frames.into_iter().enumerate() {
+            if i < from {
+                out.push(f);
+            } else if is_boot_up(&f) {
+                // A new boot-up: the errors held for an earlier one were raised again by
+                // the reset that sent it.
+                self.held = Some(Vec::new());
+                out.push(f);
+            } else if !f.is_extended()
+                && f.id().as_raw() == emcy
+                && let Some(held) = &mut self.held
+            {
+                // Bounded by the active errors: each is raised once per reset.
+                if held.len() < MAX_HELD_EMCYS {
+                    held.push(f);
+                }
+            } else {
+                out.push(f);
+            }
+        }
+    }
+
+    fn run_inner(
+        &mut self,
+        now: Instant,
+        out: &mut Outbox,
+        f: impl FnOnce(&mut Self, &mut Outbox),
+    ) {
         self.now = now;
         let timed_out = self.device.emcy_active(diag::RPDO_TIMEOUT);
         f(self, out);
@@ -841,11 +937,7 @@ impl Tm3Coupler {
 impl Node for Tm3Coupler {
     fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
         if self.switch != self.device.node_id()
-            && let Ok(mut d) = Device::with_hooks(
-                self.desc.clone(),
-                device_config(self.switch),
-                CouplerHooks::default(),
-            )
+            && let Ok(mut d) = coupler_device(self.desc.clone(), self.switch)
         {
             // The stored parameters belong to the coupler, not to its node-ID.
             d.set_storage(self.device.take_storage());
@@ -884,6 +976,16 @@ impl Node for Tm3Coupler {
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        let boot_up = 0x700 + u32::from(self.device.node_id());
+        if is_boot_up(frame, boot_up)
+            && let Some(held) = self.held.take()
+            && matches!(self.state(), State::PreOperational | State::Operational)
+        {
+            // The boot-up message is on the bus: the EMCYs behind it may follow.
+            for f in held {
+                out.push(f);
+            }
+        }
         self.run(now, out, |c, o| {
             c.device.on_sent(frame, now, o);
             c.clear(diag::TX_QUEUE_OVERRUN);

@@ -10,7 +10,7 @@ use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 pub fn eds(island: &Island) -> Result<Eds, OdBuildError> {
     let desc = od::description(island)?;
     let info = DeviceInfo {
-        vendor_name: Some("Schneider Electric".into()),
+        vendor_name: Some(od::VENDOR_NAME.into()),
         product_name: Some(od::DEVICE_NAME.into()),
         order_code: Some(od::DEVICE_NAME.into()),
         granularity: Some(8),

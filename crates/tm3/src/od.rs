@@ -33,6 +33,8 @@ pub const REVISION: u32 = 0x0001_0015;
 pub const SOFTWARE_VERSION: &str = "01.00.15";
 /// 0x1008.
 pub const DEVICE_NAME: &str = "TM3BCCO";
+/// The manufacturer, as its EDS names it (`VendorName`).
+pub const VENDOR_NAME: &str = "Schneider Electric";
 /// Entries of 0x1003.
 pub const ERROR_HISTORY: u8 = 10;
 /// Receive PDOs, 0x1400–0x141C.
@@ -227,10 +229,22 @@ pub fn communication_objects(mut b: OdBuilder, island: &Island) -> OdBuilder {
         .array(
             0x1016,
             "Consumer heartbeat time",
-            [(
-                1,
-                SubObject::unsigned32("Consumer heartbeat time", Access::Rw, 0),
-            )],
+            [
+                // Manual 1016H: sub-index 0 "Numero di sottoindici", access RO.
+                (
+                    0,
+                    SubObject::new(
+                        "Highest sub-index supported",
+                        DataType::Unsigned8,
+                        Access::Ro,
+                    )
+                    .default(Value::Unsigned8(1)),
+                ),
+                (
+                    1,
+                    SubObject::unsigned32("Consumer heartbeat time", Access::Rw, 0),
+                ),
+            ],
         )
         .var(
             0x1017,
@@ -331,6 +345,8 @@ pub fn description(island: &Island) -> Result<OdDescription, OdBuildError> {
     // coupler's `ManualLimits` hooks.
     let b = communication_objects(OdBuilder::new(), island)
         .hook(0x1005..=0x1016)
+        .hook(0x1029..=0x1029)
+        .hook(0x1201..=0x1201)
         .hook(0x1400..=0x1BFF);
     cia401::add_objects(b, &island.layout()).build()
 }

@@ -24,19 +24,19 @@ fn unpowered(refs: &[&str]) -> Tm3Coupler {
 fn power_up(c: &mut Tm3Coupler, t: Instant) -> Vec<String> {
     let mut out = Outbox::new();
     c.on_power_up(t, &mut out);
-    take(&mut out)
+    acked(c, t, &mut out)
 }
 
 fn event(c: &mut Tm3Coupler, t: Instant, e: ControllerEvent) -> Vec<String> {
     let mut out = Outbox::new();
     c.on_controller_event(e, t, &mut out);
-    take(&mut out)
+    acked(c, t, &mut out)
 }
 
 fn fit(c: &mut Tm3Coupler, t: Instant, module: usize, what: Fitted) -> Vec<String> {
     let mut out = Outbox::new();
     c.fit(module, what, t, &mut out).unwrap();
-    take(&mut out)
+    acked(c, t, &mut out)
 }
 
 /// A started coupler with a digital input and a relay output module whose outputs are
@@ -321,11 +321,11 @@ fn manual_f001_sync_timeout() {
     assert_eq!(c.next_deadline(), None);
     send(&mut c, ms(20), 0x080, &[]);
     assert_eq!(c.next_deadline(), Some(ms(35)));
-    assert_eq!(tick(&mut c, ms(35)), ["083#01F0010000000000"]);
+    assert_eq!(tick(&mut c, ms(35)), ["083#01F0110000000000"]);
     assert!(c.in_failure_state());
     assert_eq!(c.state(), State::PreOperational, "0x1029 = 0");
     assert_eq!(send(&mut c, ms(40), 0x080, &[]), ["083#0000000000000000"]);
-    assert_eq!(read_u32(&mut c, ms(41), 0x1003, 1), Ok(0x0001_F001));
+    assert_eq!(read_u32(&mut c, ms(41), 0x1003, 1), Ok(0x0011_F001));
 }
 
 #[test]
@@ -383,7 +383,7 @@ fn manual_1029_stopped_on_sync_timeout_sends_the_emcy_first() {
         Ok(())
     );
     send(&mut c, ms(10), 0x080, &[]);
-    assert_eq!(tick(&mut c, ms(40)), ["083#01F0010000000000"]);
+    assert_eq!(tick(&mut c, ms(40)), ["083#01F0110000000000"]);
     assert_eq!(c.state(), State::Stopped);
     assert_eq!(outputs(&c), 0);
 }

@@ -60,7 +60,8 @@ fn manual_1006_cycle_period_limits_hold_for_segmented_and_block_downloads() {
 #[test]
 fn manual_1005_1014_no_29_bit_identifiers_on_any_transfer() {
     restricted(0x1005, 0, &[0x81], &[0x2000_0080], 4);
-    restricted(0x1014, 0, &[0x8000_0083], &[0x2000_0083], 4);
+    // 1014H bit 31 is "reserved" (0) in the manual, not CiA 301's "EMCY not valid".
+    restricted(0x1014, 0, &[0x83], &[0x2000_0083, 0x8000_0083], 4);
 }
 
 #[test]

@@ -28,7 +28,28 @@ pub fn coupler(refs: &[&str]) -> Tm3Coupler {
     let mut out = Outbox::new();
     c.on_power_up(Instant::ZERO, &mut out);
     assert_eq!(out.frames(), [Frame::std(0x703, &[0]).unwrap()]);
+    let boot_up = out.frames()[0];
+    out.clear();
+    c.on_sent(&boot_up, Instant::ZERO, &mut out);
+    assert!(out.is_empty());
     c
+}
+
+/// The frames of `out` as `ID#DATA` strings, emptied, as the bus sends them: a boot-up
+/// message among them is reported sent at `t` ([`Node::on_sent`]), and what the coupler
+/// queues on that (the EMCYs held behind it) follows.
+pub fn acked(c: &mut Tm3Coupler, t: Instant, out: &mut Outbox) -> Vec<String> {
+    let mut sent = Vec::new();
+    while !out.is_empty() {
+        let frames: Vec<Frame> = out.drain().collect();
+        for f in frames {
+            sent.push(f.to_string());
+            if f.id().as_raw() == 0x700 + u32::from(NODE) && f.data_bytes() == [0] {
+                c.on_sent(&f, t, out);
+            }
+        }
+    }
+    sent
 }
 
 /// The frames of `out` as `ID#DATA` strings, emptied.
@@ -40,14 +61,14 @@ pub fn take(out: &mut Outbox) -> Vec<String> {
 pub fn send(c: &mut Tm3Coupler, t: Instant, id: u16, data: &[u8]) -> Vec<String> {
     let mut out = Outbox::new();
     c.on_frame(&Frame::std(id, data).unwrap(), t, &mut out);
-    take(&mut out)
+    acked(c, t, &mut out)
 }
 
 /// Ticks at `t` and returns what the coupler sent.
 pub fn tick(c: &mut Tm3Coupler, t: Instant) -> Vec<String> {
     let mut out = Outbox::new();
     c.on_tick(t, &mut out);
-    take(&mut out)
+    acked(c, t, &mut out)
 }
 
 /// NMT start at `t`; returns what the coupler sent.
