@@ -17,11 +17,22 @@
 //!   accepted for any parameter, an upload returns the parameter's size.
 //! * **Runtime faults** raise Opt Bus Fault (EMCY 0xFF11, sub-code in the manufacturer bytes)
 //!   while the drive's enable command is on, or always with `Fieldbus alarm mode` = 1: 0
-//!   bus loss (no SYNC within 1.5 × 0x1006, or enable while not Operational), 8130 guarding
+//!   bus loss (no SYNC within 0x1006 × 0x100D, §1.1.3, or enable while not Operational), 8130 guarding
 //!   or heartbeat loss, 8110 receive overrun, FFC5 NMT message of the wrong length, FFC6
 //!   invalid NMT command, FFC7 bus-off, 8100 bus-off again within [`BUS_OFF_REPEAT`] of
 //!   recovering from the previous one. DeviceNet: FFC8 for a poll command whose length is not
 //!   the PDC's Master→Slave size.
+//! * **EMCY after boot-up** (CiA 301 §7.2.7.1: EMCY in PRE-OPERATIONAL and OPERATIONAL
+//!   only): the alarms active when the boot-up message has been sent ([`Node::on_sent`]),
+//!   a `Cfg` code found at the drive reset among them, are signalled then, one EMCY each,
+//!   and again after every reset communication (which clears the stack's error register),
+//!   so a master that starts later and resets the node learns them; 0x1001 and `Active
+//!   alarm` (PAR 1072) show them meanwhile. The card has no 0x1003: table 1.1.5 does not
+//!   list it (an upload is 0x06020000).
+//! * **One alarm, one EMCY** (§1.1.3, §1.5): a guarding or heartbeat loss is Opt Bus Fault
+//!   8130 alone (not also the stack's 0x8130); CiA 301's default reaction without 0x1029
+//!   takes the card to PRE-OPERATIONAL (§7.5.2.32), and that is no second Bus Loss for a
+//!   drive already tripped on a fieldbus fault.
 //! * **Two codes for one bus-off** (§1.5 lists FFC7 "CAN bus off — check line state for
 //!   problems" and 8100 "CAN bus off — check line state for hardware problems"; the DeviceNet
 //!   table of §3.7.1 only FFC7): a bus-off is FFC7; one that follows the recovery from the
@@ -99,10 +110,16 @@ struct Card {
     /// Where the dictionary keeps 0x1006 (communication cycle period), located once: the
     /// bus-loss deadline reads it at every call.
     cycle_period: Option<EntryId>,
+    /// Where the dictionary keeps 0x100D (life time factor), for the same deadline.
+    life_time_factor: Option<EntryId>,
     /// The objects served by the drive that event-driven TPDOs (transmission type 0, 254,
     /// 255: §1.1.7 "254...255 if asynchronous") map, with the bytes they had at the last
     /// evaluation: a change is the application event that sends the TPDO.
     watched: Vec<(u16, u8, [u8; 4])>,
+    /// The boot-up message of the last power-up or reset communication has not been sent
+    /// yet: the drive's alarms wait for it (CiA 301 §7.2.7.1: EMCY in PRE-OPERATIONAL and
+    /// OPERATIONAL only, and the boot-up ends initialisation).
+    booting: bool,
 }
 
 /// The objects served by the drive that the event-driven TPDOs of `dev` map, with their
@@ -565,6 +582,10 @@ impl Adv200 {
                 // Memory that cannot be read is the drive's Param error (§1.5), not the
                 // generic 0x5000.
                 c.storage_fault = None;
+                // A guarding or heartbeat loss is Opt Bus Fault 8130 (§1.5), raised by the
+                // drive's rule (only while enabled, or with alarm mode 1), not the stack's
+                // own 0x8130: one alarm, one EMCY.
+                c.error_control_fault = None;
                 let mut dev = Device::with_hooks(d, c, Station::default()).ok()?;
                 if let Some(m) = &self.memory {
                     dev.set_storage(m.card_storage());
@@ -579,6 +600,7 @@ impl Adv200 {
         core::mem::swap(dev.hooks_mut(), &mut self.home);
         dev.on_power_up(now, out);
         let cycle_period = dev.od().locate(0x1006, 0).ok();
+        let life_time_factor = dev.od().locate(0x100D, 0).ok();
         dev.hooks_mut().remapped = true;
         self.card = Some(Card {
             dev,
@@ -586,7 +608,9 @@ impl Adv200 {
             pdc,
             last_sync: None,
             cycle_period,
+            life_time_factor,
             watched: Vec::new(),
+            booting: true,
         });
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
@@ -780,7 +804,10 @@ impl Adv200 {
             let _ = st.params.force(par::FIELDBUS_STATE, fieldbus_state);
             not_operational = state != State::Operational;
         }
-        if not_operational && self.drive_enable_cmd() {
+        // Enable outside Operational is bus loss (§1.5), unless the drive has already
+        // tripped on a fieldbus fault: a guarding or heartbeat loss takes the card out of
+        // Operational itself (CiA 301 §7.5.2.32), and one loss is one alarm.
+        if not_operational && self.drive_enable_cmd() && self.opt_bus_faults().is_empty() {
             self.bus_fault(opt_bus::BUS_LOSS);
         }
         let sticky = self.sticky;
@@ -833,6 +860,11 @@ impl Adv200 {
             while self.home.drive.poll_event().is_some() {}
             return;
         };
+        if c.booting {
+            // The alarms active when the boot-up has gone are sent then ([`Adv200::booted`]).
+            while c.dev.hooks_mut().drive.poll_event().is_some() {}
+            return;
+        }
         while let Some(e) = c.dev.hooks_mut().drive.poll_event() {
             match e {
                 AlarmEvent::Raised(a) => {
@@ -896,20 +928,30 @@ impl Adv200 {
         }));
     }
 
+    /// §1.1.3 table: with SYNC the Bus Loss threshold is SYNC_PERIOD (0x1006) ×
+    /// LIFE_TIME_FACTOR (0x100D), the factor 3 "if not indicated by the master": a factor
+    /// of 0 is taken as not indicated (0 would trip at every SYNC).
     fn sync_deadline(&self) -> Option<Instant> {
         let c = self.card.as_ref()?;
-        let period = c.cycle_period.map_or(0, |id| {
-            let raw = c.dev.od().raw(id);
-            let mut b = [0u8; 4];
-            let n = raw.len().min(4);
-            b[..n].copy_from_slice(&raw[..n]);
-            u64::from(u32::from_le_bytes(b))
-        });
+        let read = |id: Option<EntryId>| {
+            id.map_or(0, |id| {
+                let raw = c.dev.od().raw(id);
+                let mut b = [0u8; 4];
+                let n = raw.len().min(4);
+                b[..n].copy_from_slice(&raw[..n]);
+                u64::from(u32::from_le_bytes(b))
+            })
+        };
+        let period = read(c.cycle_period);
         if period == 0 || c.dev.state() == State::Stopped {
             return None;
         }
+        let factor = match read(c.life_time_factor) {
+            0 => 3,
+            f => f,
+        };
         let last = c.last_sync?;
-        last.checked_add(Duration::from_micros(period * 3 / 2))
+        last.checked_add(Duration::from_micros(period * factor))
     }
 
     /// Takes the device's events; returns whether there were any.
@@ -929,8 +971,12 @@ impl Adv200 {
                         to: State::Operational,
                         ..
                     } => c.last_sync = Some(now),
-                    // The TPDO parameters are back at their power-on values.
-                    Event::ResetCommunication => c.dev.hooks_mut().remapped = true,
+                    // The TPDO parameters are back at their power-on values; the errors
+                    // the stack recorded are cleared and the boot-up is on its way.
+                    Event::ResetCommunication => {
+                        c.dev.hooks_mut().remapped = true;
+                        c.booting = true;
+                    }
                     Event::StorageLoadFailed(_) => memory_fault = true,
                     _ => {}
                 }
@@ -1048,9 +1094,32 @@ impl Adv200 {
         .min()
     }
 
+    /// The boot-up message has been sent: every alarm active now is signalled, one EMCY
+    /// each, and recorded in 0x1001, so that a configuration fault found at the drive reset
+    /// (§1.5, `Cfg` codes) reaches the bus after the boot-up and again after every reset
+    /// communication, where a master starting later resets the nodes it finds.
+    fn booted(&mut self) {
+        let Some(c) = &mut self.card else { return };
+        c.booting = false;
+        while c.dev.hooks_mut().drive.poll_event().is_some() {}
+        let active: Vec<Alarm> = c.dev.hooks().drive.alarms().to_vec();
+        for a in active {
+            c.dev.emcy().signal(a.emcy_code(), a.manufacturer_bytes());
+        }
+    }
+
     fn sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        let mut booted = false;
         if let Some(c) = &mut self.card {
             c.dev.on_sent(frame, now, out);
+            let boot_up = u32::from(0x700 + u16::from(c.dev.node_id()));
+            booted = c.booting
+                && !frame.is_remote()
+                && frame.id().as_raw() == boot_up
+                && frame.data_bytes() == [0x00];
+        }
+        if booted {
+            self.booted();
         }
         if self.with_dnet(|s| s.on_sent(frame, now, out)) {
             self.dnet_events(now);

@@ -27,7 +27,8 @@
 //!   alarms listed with a bare number n use 0xFF00 + n ([`alarms`]).
 //! * **PDC**: a value-format placeholder (`ipa` = 0) closes the PDO; Fill is inserted; a
 //!   32-bit item that would straddle two PDOs raises the channel's size code ([`pdc`]).
-//! * **Bus loss from 0x1006**: no SYNC within 1.5 communication cycle periods ([`card`]).
+//! * **Bus loss from 0x1006**: no SYNC within SYNC_PERIOD × LIFE_TIME_FACTOR (0x1006 ×
+//!   0x100D, 3 when 0x100D is 0), the §1.1.3 table ([`card`]).
 //! * **TPDO RTR**: COB-ID bit 30 set (no RTR), the meaning of §1.1.7 ([`od`]).
 //! * **LEDs**: AL on in every NMT state but Operational (the §1.6.2.1 table) and with Opt
 //!   Bus Fault; PWR/+5VC on while the card is powered ([`card`]).

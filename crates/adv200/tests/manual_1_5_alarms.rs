@@ -5,7 +5,7 @@ mod common;
 
 use cantwin_adv200::alarms::{Alarm, CardFault};
 use cantwin_adv200::params::par;
-use cantwin_adv200::{Adv200, Leds};
+use cantwin_adv200::{Adv200, Adv200Config, Leds};
 use cantwin_can::{ControllerEvent, Instant, Node, Outbox};
 use common::*;
 
@@ -134,11 +134,7 @@ fn manual_1_1_3_life_guarding_loss_raises_bus_fault_8130() {
     // Life time 60 ms × 3 = 180 ms later the card loses the master.
     h.run_to(300 * MS);
     let got = h.since(from);
-    assert_eq!(got[0], (190 * MS, "08C#3081110000000000".to_string()));
-    assert_eq!(
-        got[1],
-        (190 * MS, emcy(0xFF11, 0x91, [0x30, 0x81, 0, 0, 0]))
-    );
+    assert_eq!(got, [(190 * MS, emcy(0xFF11, 0x81, [0x30, 0x81, 0, 0, 0]))]);
     assert!(h.d.opt_bus_faults().contains(&0x8130));
 }
 
@@ -154,13 +150,33 @@ fn manual_1_5_communication_cycle_period_exceeded_is_bus_loss() {
     }
     assert!(h.d.opt_bus_faults().is_empty());
     let from = h.log.len();
-    // The last SYNC at 30 ms; none within 1.5 periods: bus loss (sub-code 0) at 45 ms.
+    // §1.1.3: the last SYNC at 30 ms; none within SYNC_PERIOD × LIFE_TIME_FACTOR (3 by
+    // default): bus loss (sub-code 0) at 60 ms.
     h.run_to(100 * MS);
     assert_eq!(
         h.since(from),
-        [(45 * MS, emcy(0xFF11, 0x81, [0, 0, 0, 0, 0]))]
+        [(60 * MS, emcy(0xFF11, 0x81, [0, 0, 0, 0, 0]))]
     );
     assert_eq!(h.d.opt_bus_faults(), [0x0000]);
+}
+
+#[test]
+fn manual_1_1_3_sync_bus_loss_threshold_is_sync_period_times_life_time_factor() {
+    let mut h = H::canopen(|d| d.set_param(par::FIELDBUS_ALARM_MODE, 1).unwrap());
+    // 0x1006 = 10 ms, 0x100D = 5: 50 ms without SYNC.
+    h.send("60C#2306100010270000");
+    assert_eq!(h.send("60C#2F0D100005000000"), ["58C#600D100000000000"]);
+    h.send("000#010C");
+    h.run_to(10 * MS);
+    h.send("080#");
+    h.run_to(59 * MS);
+    assert!(h.d.opt_bus_faults().is_empty(), "not yet at 49 ms");
+    let from = h.log.len();
+    h.run_to(100 * MS);
+    assert_eq!(
+        h.since(from),
+        [(60 * MS, emcy(0xFF11, 0x81, [0, 0, 0, 0, 0]))]
+    );
 }
 
 #[test]
@@ -310,4 +326,86 @@ fn manual_1_5_bus_off_is_ffc7_and_8100_when_it_repeats_after_recovery() {
     controller(&mut h, ControllerEvent::BusOffRecovered, 4);
     controller(&mut h, ControllerEvent::BusOff, 5);
     assert!(h.d.opt_bus_faults().is_empty());
+}
+
+/// A drive whose PDC maps M2S channel 2 on a value (FF15, a `Cfg` code of §1.5).
+fn misconfigured(d: &mut Adv200) {
+    d.set_param_str(par::FIELDBUS_TYPE, "CANopen").unwrap();
+    d.set_param_str(par::FIELDBUS_BAUDRATE, "500k").unwrap();
+    d.set_param(par::FIELDBUS_ADDRESS, 12).unwrap();
+    d.set_param_str(par::m2s_sys(1), "Count 16").unwrap();
+    d.set_param(par::m2s_ipa(1), i64::from(par::WORD_DECOMP_SRC))
+        .unwrap();
+    d.set_param_str(par::m2s_sys(2), "Eu").unwrap();
+    d.set_param(par::m2s_ipa(2), i64::from(par::DIG_RAMP_REF_1))
+        .unwrap();
+}
+
+#[test]
+fn manual_1_5_configuration_fault_emcy_follows_every_boot_up() {
+    let fault = emcy(0xFF11, 0x81, [0x15, 0xFF, 0, 0, 0]);
+    // Until the boot-up has gone out, no EMCY: both queued at once, the EMCY would win
+    // arbitration and precede it.
+    let mut d = Adv200::new(Adv200Config::default());
+    misconfigured(&mut d);
+    let mut out = Outbox::new();
+    d.on_power_up(Instant::ZERO, &mut out);
+    let mut frames: Vec<String> = out.drain().map(|f| f.to_string()).collect();
+    while let Some(t) = d.next_deadline().filter(|t| t.as_nanos() <= 10 * MS) {
+        d.on_tick(t, &mut out);
+        frames.extend(out.drain().map(|f| f.to_string()));
+    }
+    assert_eq!(frames, ["70C#00"]);
+    d.on_sent(&f("70C#00"), Instant::from_nanos(10 * MS), &mut out);
+    while let Some(t) = d.next_deadline().filter(|t| t.as_nanos() <= 10 * MS) {
+        d.on_tick(t, &mut out);
+    }
+    let frames: Vec<String> = out.drain().map(|f| f.to_string()).collect();
+    assert_eq!(frames, std::slice::from_ref(&fault));
+    // A master that starts later resets communication: boot-up, then the fault again, and
+    // the error register shows it.
+    let mut h = H::new(Adv200Config::default(), misconfigured);
+    assert_eq!(h.frames(), ["70C#00", fault.as_str()]);
+    h.run_to(100 * MS);
+    assert_eq!(h.send("000#820C"), ["70C#00", fault.as_str()]);
+    assert_eq!(register(&h), 0x81);
+    assert_eq!(h.send("60C#4001100000000000"), ["58C#4F01100081000000"]);
+    // The drive's Active alarm parameter (PAR 1072 at 0x2430 sub 1) shows Opt Bus Fault.
+    assert!(h.d.opt_bus_faults().contains(&0xFF15));
+    assert_eq!(h.send("60C#4030240100000000"), ["58C#4B30240111FF0000"]);
+    // §1.1.5 lists no pre-defined error field: 0x1003 does not exist.
+    assert_eq!(h.send("60C#4003100000000000"), ["58C#8003100000000206"]);
+}
+
+#[test]
+fn manual_1_1_3_heartbeat_loss_is_one_alarm_one_emcy_and_pre_operational() {
+    // Master heartbeat (node 1) consumed with 100 ms; the drive enabled from terminal 1.
+    let mut h = H::canopen(|_| {});
+    h.send("000#010C");
+    assert_eq!(h.send("60C#2316100164000100"), ["58C#6016100100000000"]);
+    h.d.set_digital_input(1, true);
+    h.send("701#05");
+    let from = h.log.len();
+    h.run_to(500 * MS);
+    // One EMCY, Opt Bus Fault 8130; CiA 301's default reaction without 0x1029:
+    // OPERATIONAL → PRE-OPERATIONAL, which is no second alarm.
+    assert_eq!(
+        h.since(from),
+        [(100 * MS, emcy(0xFF11, 0x81, [0x30, 0x81, 0, 0, 0]))]
+    );
+    assert_eq!(h.d.opt_bus_faults(), [0x8130]);
+    assert_eq!(
+        h.d.nmt_state(),
+        Some(cantwin_canopen::nmt::State::PreOperational)
+    );
+    // Disabled with alarm mode 0: no alarm and no EMCY at all (§1.5).
+    let mut h = H::canopen(|_| {});
+    h.send("000#010C");
+    h.send("60C#2316100164000100");
+    h.send("701#05");
+    let from = h.log.len();
+    h.run_to(500 * MS);
+    assert_eq!(h.since(from), []);
+    assert!(h.d.opt_bus_faults().is_empty());
+    assert_eq!(register(&h), 0);
 }

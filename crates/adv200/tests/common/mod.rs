@@ -64,9 +64,18 @@ impl H {
         })
     }
 
+    /// Logs the frames `out` holds and confirms each as sent, as the bus does
+    /// ([`Node::on_sent`]); the frames the confirmations bring are logged too.
     fn take(&mut self, out: &mut Outbox) {
-        for fr in out.drain() {
-            self.log.push((self.now, fr.to_string()));
+        loop {
+            let frames: Vec<Frame> = out.drain().collect();
+            if frames.is_empty() {
+                return;
+            }
+            for fr in frames {
+                self.log.push((self.now, fr.to_string()));
+                self.d.on_sent(&fr, Instant::from_nanos(self.now), out);
+            }
         }
     }
 
