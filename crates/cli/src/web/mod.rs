@@ -52,7 +52,7 @@ const HEADING: &str = "Web dashboard";
 #[derive(Debug, Clone, clap::Args)]
 pub struct Options {
     /// With --allow-remote, a further name the dashboard answers to in the Host header,
-    /// besides 127.0.0.1, localhost, [::1] and the bound address; repeatable. NAME takes the
+    /// besides 127.0.0.1, localhost, ::1 and the bound address; repeatable. NAME takes the
     /// served port, NAME:PORT its own (behind a proxy). Requests naming any other host are
     /// refused, which defeats DNS rebinding. E.g. `--web 0.0.0.0:8080 --allow-remote
     /// --allow-host plant.lan`.

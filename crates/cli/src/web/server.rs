@@ -3,9 +3,9 @@
 //! on its own thread with a single-threaded runtime and reaches the simulation only through
 //! the request queue and the snapshot watch channel.
 //!
-//! Every request passes the [`Policy`] of [`guard`](super::guard) (Host, Origin, content
+//! Every request passes the [`Policy`] of [`guard`] (Host, Origin, content
 //! type, the run's token) before its handler; every answer carries the security headers;
-//! [`listen`](super::listen) bounds the connections and their time.
+//! [`listen`] bounds the connections and their time.
 
 use std::convert::Infallible;
 use std::net::SocketAddr;
