@@ -128,3 +128,35 @@ fn cia306_eds_export_of_a_twin_keeps_dummy_objects_and_text() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A DCF's ParameterValues configure the twin that runs as the node it was commissioned
+/// for; run as another node, the twin keeps the file's DefaultValues (hard-written COB-IDs
+/// of the other node would move its services).
+#[test]
+fn cia306_dcf_values_configure_the_node_they_were_made_for() {
+    let dir = temp_dir("eds-dcf-node");
+    let scenario = dir.join("s.toml");
+    for (node, heartbeat) in [(33, "DefaultValue=0x32"), (5, "DefaultValue=0x0")] {
+        std::fs::write(
+            &scenario,
+            format!(
+                "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n[[device]]\nname = \"dev\"\nkind = \"eds\"\nbus = \"can0\"\nfile = \"{}\"\nnode_id = {node}\n",
+                corpus("irregular/i12_dcf.dcf")
+            ),
+        )
+        .unwrap();
+        let (ok, out, err) = cantwin(&[
+            "eds",
+            "export",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--device",
+            "dev",
+        ]);
+        assert!(ok, "{err}");
+        let start = out.find("[1017]\n").unwrap();
+        let section = out[start..].split("\n\n").next().unwrap();
+        assert!(section.contains(heartbeat), "node {node}: {section}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

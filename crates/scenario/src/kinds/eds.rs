@@ -14,12 +14,14 @@
 //! The file is the device's truth: every VAR, DOMAIN, ARRAY and RECORD object of the file
 //! (and the DEFTYPE entries of basic types, such as the dummy entries 0x0002–0x0007) becomes
 //! an object of the dictionary with the file's data type, access, limits and default value
-//! (`$NODEID` resolved with the node-ID). Files are read as they are written in the field
+//! (`$NODEID` resolved with the node-ID). A DCF's `ParameterValue`s configure the device
+//! when its `[DeviceComissioning]` is for the device's node-ID (or names none); otherwise
+//! they are left aside with a warning. Files are read as they are written in the field
 //! (`cantwin_eds::load`): what CiA 306 does not allow is read past, the way `cantwin eds
 //! check` reports it, and only a file no dictionary can hold (an entry without a data type)
-//! is refused. A DCF's `ParameterValue`s replace the defaults, so
-//! the device comes up configured after power-up and after every reset, as a commissioned
-//! device would (CiA 306 DCF: the values the device is configured with).
+//! is refused. Applied `ParameterValue`s replace the defaults, so the device comes up
+//! configured after power-up and after every reset, as a commissioned device would (CiA 306
+//! DCF: the values the device is configured with).
 //!
 //! The device offers the CiA 301 services whose objects the file has, and only those:
 //!
@@ -85,9 +87,8 @@ impl DeviceKind for EdsKind {
         // means (`cantwin eds check` prints what was read past). Only a file no dictionary can
         // hold is refused, by `to_od` below.
         let loaded = load_bytes(&bytes);
-        let mut eds = configured(&loaded.eds);
 
-        let from_dcf = eds.commissioning.as_ref().and_then(|c| c.node_id);
+        let from_dcf = loaded.eds.commissioning.as_ref().and_then(|c| c.node_id);
         let lss: bool = s.get_or("lss", false)?;
         let node_id: u8 = match (super::lss::node_id(s, lss)?, from_dcf) {
             (Some(n), _) | (None, Some(n)) => n,
@@ -104,6 +105,27 @@ impl DeviceKind for EdsKind {
         if !lss {
             check_node_id(s, node_id)?;
         }
+        // A DCF's ParameterValues are the configuration of one commissioned node (CiA 306
+        // DCF): COB-IDs among them are often written out for that node-ID. They configure
+        // the device when the file says it is commissioned ([DeviceComissioning]) for the
+        // node-ID the device runs with; stray values in an EDS, or a DCF for another node,
+        // would put its SDO server and PDOs on another node's identifiers.
+        let commissioned = loaded
+            .eds
+            .commissioning
+            .as_ref()
+            .is_some_and(|c| c.node_id.is_none_or(|n| n == node_id));
+        let mut eds = if commissioned {
+            configured(&loaded.eds)
+        } else {
+            if loaded.eds.is_dcf() {
+                s.warn(format!(
+                    "{}: the ParameterValues are not applied: the file is not commissioned for node {node_id} ([DeviceComissioning] NodeID); the device runs on the DefaultValues",
+                    path.display()
+                ));
+            }
+            loaded.eds.clone()
+        };
 
         if let Some(ms) = s.get::<u16>("heartbeat_ms")? {
             let Some(hb) = eds.objects.get_mut(&0x1017) else {
