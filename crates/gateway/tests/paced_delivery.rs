@@ -160,14 +160,11 @@ fn a_slow_reader_gets_every_frame_and_every_reply_whole_and_in_order() {
     let (mut frames, mut replies, mut scanned) = (0u32, 0usize, 0usize);
     loop {
         // Every element is longer than 8 bytes, so a new one starts at or after `scanned`.
-        for start in scanned..stream.len() {
-            let rest = &stream[start..];
-            if rest.len() < 8 {
-                break;
-            }
+        while stream.len() >= scanned + 8 {
+            let rest = &stream[scanned..];
             frames += u32::from(rest.starts_with(b"< frame"));
             replies += usize::from(rest.starts_with(b"< echo >"));
-            scanned = start + 1;
+            scanned += 1;
         }
         if frames == FRAMES && replies == echoes {
             break;
