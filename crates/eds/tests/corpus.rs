@@ -20,7 +20,7 @@ fn corpus() -> Vec<(String, Vec<u8>)> {
         })
         .collect();
     files.sort();
-    assert_eq!(files.len(), 4, "the corpus files");
+    assert_eq!(files.len(), 7, "the corpus files");
     files
 }
 
