@@ -32,7 +32,7 @@
 //! * **One alarm, one EMCY** (§1.1.3, §1.5): a guarding or heartbeat loss is Opt Bus Fault
 //!   8130 alone (not also the stack's 0x8130); CiA 301's default reaction without 0x1029
 //!   takes the card to PRE-OPERATIONAL (§7.5.2.32), and that is no second Bus Loss for a
-//!   drive already tripped on a fieldbus fault.
+//!   drive already tripped on the loss.
 //! * **Two codes for one bus-off** (§1.5 lists FFC7 "CAN bus off — check line state for
 //!   problems" and 8100 "CAN bus off — check line state for hardware problems"; the DeviceNet
 //!   table of §3.7.1 only FFC7): a bus-off is FFC7; one that follows the recovery from the
@@ -805,9 +805,12 @@ impl Adv200 {
             not_operational = state != State::Operational;
         }
         // Enable outside Operational is bus loss (§1.5), unless the drive has already
-        // tripped on a fieldbus fault: a guarding or heartbeat loss takes the card out of
-        // Operational itself (CiA 301 §7.5.2.32), and one loss is one alarm.
-        if not_operational && self.drive_enable_cmd() && self.opt_bus_faults().is_empty() {
+        // tripped on a guarding or heartbeat loss: that loss takes the card out of
+        // Operational itself (CiA 301 §7.5.2.32), and one loss is one alarm (§1.1.3).
+        if not_operational
+            && self.drive_enable_cmd()
+            && !self.opt_bus_faults().contains(&opt_bus::GUARDING)
+        {
             self.bus_fault(opt_bus::BUS_LOSS);
         }
         let sticky = self.sticky;

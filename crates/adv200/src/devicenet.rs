@@ -356,4 +356,16 @@ mod tests {
         assert_eq!(req(&mut a, 0x35, 0x66, 600, &[db_t::INT, 0x10]), code(11));
         assert_eq!(req(&mut a, 0x34, 0x66, 600, &[9]), code(11));
     }
+
+    #[test]
+    fn manual_3_4_2_enumeration_values_outside_the_list_are_code_11() {
+        let mut a = app();
+        let code = |c: u16| Some(Reply::Data(c.to_le_bytes().to_vec()));
+        // PAR 4000 = 9, PAR 4004 = 7: "valore non ammesso" (11), not "maximum exceeded".
+        assert_eq!(req(&mut a, 0x33, 0x66, 4000, &[9, 0]), code(11));
+        assert_eq!(req(&mut a, 0x33, 0x66, 4004, &[7, 0]), code(11));
+        // PAR 4006 above 127 (§1.2): maximum exceeded.
+        assert_eq!(req(&mut a, 0x33, 0x66, 4006, &[200, 0]), code(9));
+        assert_eq!(req(&mut a, 0x33, 0x66, 4006, &[63, 0]), code(0));
+    }
 }

@@ -441,8 +441,9 @@ fn build_catalog() -> Vec<ParamDef> {
         ),
         ParamDef::new(par::FIELDBUS_TYPE, "Fieldbus type", Enum(FIELDBUS_TYPES)).after_reset(),
         ParamDef::new(par::FIELDBUS_BAUDRATE, "Fieldbus baudrate", Enum(BAUDRATES)).after_reset(),
+        // §1.2: "valori ammessi da 1 a 127"; 0 is the factory value, no address (FF03).
         ParamDef::new(par::FIELDBUS_ADDRESS, "Fieldbus address", U16)
-            .limits(0, 255)
+            .limits(0, 127)
             .after_reset(),
         ParamDef::new(
             par::FIELDBUS_MS_ENABLE,
@@ -719,6 +720,13 @@ impl ParamDb {
         if d.access == ParamAccess::Ro {
             return Err(ParamError::ReadOnly);
         }
+        // An enumeration has values, not a range: any other number is "invalid value"
+        // (§1.4 table; code 11 "valore non ammesso" of table 3.4.1), never "too high".
+        if let ParamType::Enum(values) = d.ty
+            && !values.iter().any(|v| i64::from(v.0) == value)
+        {
+            return Err(ParamError::Invalid);
+        }
         if value > d.max {
             return Err(ParamError::AboveMax);
         }
@@ -837,7 +845,7 @@ mod tests {
         assert_eq!(db.set(600, 9000), Err(ParamError::AboveMax));
         assert_eq!(db.set(600, -9000), Err(ParamError::BelowMin));
         assert_eq!(db.set(260, 0), Err(ParamError::ReadOnly));
-        assert_eq!(db.set(4004, 7), Err(ParamError::AboveMax));
+        assert_eq!(db.set(4004, 7), Err(ParamError::Invalid));
         assert_eq!(db.set(534, 0), Err(ParamError::ReadOnly));
         assert_eq!(db.set(610, 3), Err(ParamError::Invalid));
         assert_eq!(

@@ -189,6 +189,11 @@ impl OdHooks for Station {
         let width = ty.fixed_size().filter(|w| (1..=4).contains(w))?;
         Some((|| {
             let v = ParamDb::decode(p, data).map_err(|e| e.abort_code())?;
+            // A value an enumeration or a src does not have is "invalid value" before the
+            // dictionary's limits would call it too high or too low (§1.4 table).
+            if let Err(e @ crate::params::ParamError::Invalid) = self.params.check(p, v) {
+                return Err(e.abort_code());
+            }
             let bits = 8 * width as u32;
             let signed = matches!(
                 ty,
@@ -209,6 +214,28 @@ impl OdHooks for Station {
             buf[..width].copy_from_slice(&v.to_le_bytes()[..width]);
             Ok(width)
         })())
+    }
+
+    /// §1.1.6, §1.1.7: the PDOs' transmission types are 1 (with SYNC), 254 and 255
+    /// (asynchronous); a TPDO's COB-ID keeps bit 30 set, CiA 301's "no RTR allowed" (the
+    /// manual's "= 0 because RTR is not supported" states the meaning, the standard's bit
+    /// value says it with 1), so transmission types 252 and 253 (on RTR only) are refused
+    /// too. Any other value is 0x06090030 "invalid value".
+    fn validate(
+        &mut self,
+        _od: &ObjectDictionary,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<(), AbortCode> {
+        let pdo = matches!(index, 0x1400..=0x1403 | 0x1800..=0x1803);
+        match (pdo, sub, data) {
+            (true, 2, [ty]) if !matches!(ty, 1 | 254 | 255) => Err(AbortCode::INVALID_VALUE),
+            (true, 1, [_, _, _, b3]) if index >= 0x1800 && b3 & 0x40 == 0 => {
+                Err(AbortCode::INVALID_VALUE)
+            }
+            _ => Ok(()),
+        }
     }
 
     fn written(&mut self, _od: &mut ObjectDictionary, index: u16, _sub: u8) {

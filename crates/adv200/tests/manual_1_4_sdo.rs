@@ -151,3 +151,65 @@ fn manual_1_1_2_nmt_reset_node_keeps_the_drive_parameters() {
     assert_eq!(h.send("000#820C"), ["70C#00"]);
     assert_eq!(h.d.param(par::DIG_RAMP_REF_1), Ok(100));
 }
+
+#[test]
+fn manual_1_1_7_tpdo_cob_id_bit_30_stays_set_and_rtr_types_are_refused() {
+    let mut h = H::canopen(|d| {
+        d.set_param_str(par::s2m_sys(1), "Count 16").unwrap();
+        d.set_param(par::s2m_ipa(1), i64::from(par::MOTOR_SPEED))
+            .unwrap();
+    });
+    let invalid = |i: &str, s: &str| format!("58C#80{i}{s}30000906");
+    // PDO invalid (bit 31) with bit 30 cleared: 0x06090030; with bit 30 set: accepted.
+    assert_eq!(h.send("60C#230018018C010080"), [invalid("0018", "01")]);
+    assert_eq!(h.send("60C#230018018C0100C0"), ["58C#6000180100000000"]);
+    // Transmission types 252 and 253 need RTR: refused; 1, 254, 255 accepted.
+    assert_eq!(h.send("60C#2F001802FC000000"), [invalid("0018", "02")]);
+    assert_eq!(h.send("60C#2F001802FD000000"), [invalid("0018", "02")]);
+    for ty in ["01", "FE", "FF"] {
+        assert_eq!(
+            h.send(&format!("60C#2F001802{ty}000000")),
+            ["58C#6000180200000000"]
+        );
+    }
+    // A remote request is not answered.
+    h.send("60C#230018010C018040");
+    h.send("000#010C");
+    assert_eq!(h.send("18C#R"), Vec::<String>::new());
+}
+
+#[test]
+fn manual_1_1_6_transmission_types_are_1_254_and_255() {
+    let mut h = H::canopen(|_| {});
+    let invalid = |i: &str| format!("58C#80{i}0230000906");
+    for (index, ok) in [
+        ("0014", "58C#6000140200000000"),
+        ("0018", "58C#6000180200000000"),
+    ] {
+        for ty in ["00", "05", "F0", "FC", "FD"] {
+            assert_eq!(
+                h.send(&format!("60C#2F{index}02{ty}000000")),
+                [invalid(index)],
+                "{index} type {ty}"
+            );
+        }
+        for ty in ["01", "FE", "FF"] {
+            assert_eq!(
+                h.send(&format!("60C#2F{index}02{ty}000000")),
+                [ok],
+                "{index} {ty}"
+            );
+        }
+    }
+}
+
+#[test]
+fn manual_1_2_fieldbus_enumerations_refuse_other_values_as_invalid() {
+    let mut h = H::canopen(|_| {});
+    // PAR 4000 (0x2FA0) = 9, PAR 4004 (0x2FA4) = 7: 0x06090030 "invalid value" (§1.4).
+    assert_eq!(h.send("60C#2BA02F0109000000"), ["58C#80A02F0130000906"]);
+    assert_eq!(h.send("60C#2BA42F0107000000"), ["58C#80A42F0130000906"]);
+    // PAR 4006 (0x2FA6): 1–127 (§1.2), 200 is too high.
+    assert_eq!(h.send("60C#2BA62F01C8000000"), ["58C#80A62F0131000906"]);
+    assert_eq!(h.send("60C#2BA62F017F000000"), ["58C#60A62F0100000000"]);
+}
