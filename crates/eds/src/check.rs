@@ -1,5 +1,7 @@
-//! Consistency checks of a parsed file (CiA 306 object lists and object descriptions): what a tool should refuse
-//! (errors) and what it should point out (warnings).
+//! Consistency checks of a parsed file (CiA 306 object lists and object descriptions):
+//! what CiA 306 does not allow and how a dictionary is built instead (errors), what it asks
+//! for that the file leaves out harmlessly (warnings), and what was read with a guess
+//! (notes). The values are judged by the same function [`crate::to_od`] builds from.
 
 use crate::judge::judge;
 use crate::model::{Eds, Entry, ObjectList};
@@ -120,9 +122,11 @@ impl fmt::Display for Report {
 const OBJECT_CODES: [u8; 7] = [0x0, 0x2, 0x5, 0x6, 0x7, 0x8, 0x9];
 
 impl Eds {
-    /// Checks the file: mandatory objects present, object lists agree with the objects,
-    /// `SubNumber` agrees with the sub-objects, object codes, data types and access types
-    /// valid, values within their type's range and within the limits.
+    /// Checks the file: `EDSVersion`, mandatory objects present, object lists agree with the
+    /// objects, `SubNumber` agrees with the sub-objects, sub-index 0 of ARRAY and RECORD,
+    /// object codes, data types and access types valid, values within their type's range and
+    /// within the limits, limits in order. The findings carry no lines; [`crate::load`] adds
+    /// them.
     pub fn check(&self) -> Report {
         let mut r = Report::default();
         match self.file_info.eds_version.as_deref() {
