@@ -720,3 +720,45 @@ mod tests {
         assert_eq!(frames[4].2, reset_at + Duration::from_millis(100));
     }
 }
+
+#[cfg(test)]
+mod stored_parameters {
+    use super::Cia301Node;
+    use crate::{BuildEnv, Registry, Scenario};
+    use cantwin_can::Instant;
+    use cantwin_canopen::storage::STORE_FILE;
+
+    const SCENARIO: &str = "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n[[device]]\nname = \"io\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = 5\n";
+
+    #[test]
+    fn cia301_7_5_2_10_an_unreadable_store_is_a_build_warning_naming_the_file_and_an_emcy() {
+        let dir = std::env::temp_dir().join(format!("cantwin-warn-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(dir.join("io")).unwrap();
+        let file = dir.join("io").join(STORE_FILE);
+        std::fs::write(&file, b"").unwrap();
+        let env = BuildEnv {
+            state_dir: Some(dir.clone()),
+        };
+        let scenario = Scenario::parse(SCENARIO, "t.toml").unwrap();
+        let mut built = scenario.build(&Registry::builtin(), &env).unwrap();
+        assert_eq!(built.warnings.len(), 1, "{:?}", built.warnings);
+        let w = &built.warnings[0];
+        assert!(
+            w.contains("\"io\"") && w.contains(&file.display().to_string()) && w.contains("empty"),
+            "{w}"
+        );
+        built.sim.run_until(Instant::from_nanos(10_000_000));
+        let port = built.device("io").unwrap().port;
+        let node = built.sim.node::<Cia301Node>(port).unwrap();
+        // EMCY 0x5000 is active and sets the generic bit of the error register (CiA 301
+        // §7.5.2.2); alone on the bus the device is error passive too (0x8120, bit 4).
+        assert!(node.device().emcy_active(0x5000));
+        assert_eq!(node.device().error_register() & 0x01, 0x01);
+        // A whole store builds without a warning.
+        std::fs::remove_file(&file).unwrap();
+        let built = scenario.build(&Registry::builtin(), &env).unwrap();
+        assert!(built.warnings.is_empty(), "{:?}", built.warnings);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
