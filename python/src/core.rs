@@ -86,25 +86,6 @@ pub(crate) fn secs(seconds: f64) -> PyResult<Duration> {
     Ok(Duration::from_secs_f64(seconds))
 }
 
-impl Shared {
-    /// Lock the core on behalf of the calling Python thread, which is about to act on the
-    /// simulation: bus time waits for it (`crate::turns`).
-    ///
-    /// An act answers the frames handed to Python as a sent frame does (the reaction rule of
-    /// `crate::port`); receivers waiting for an answer are woken, and see the change once
-    /// the caller releases the lock.
-    pub fn lock_acting(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Core>> {
-        let thread = crate::turns::thread_ident(py)?;
-        let mut core = self.lock();
-        core.acted(thread, true);
-        self.delivery
-            .pending
-            .store(false, std::sync::atomic::Ordering::Release);
-        self.changed.notify_all();
-        Ok(core)
-    }
-}
-
 impl Core {
     /// Note that `thread` acted just now; `returned`: it holds the GIL (module `turns`).
     pub fn acted(&mut self, thread: u64, returned: bool) {

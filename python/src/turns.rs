@@ -27,7 +27,9 @@ use std::time::{Duration, Instant};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::core::Shared;
+use std::sync::MutexGuard;
+
+use crate::core::{Core, Shared};
 
 /// How long a thread may stay at the same instruction before it counts as blocked in a call
 /// into C (`time.sleep`, a socket read). A thread that runs Python code moves on between two
@@ -49,6 +51,25 @@ const POLL: Duration = Duration::from_micros(50);
 /// (`wait_for_reception`, `wait_for_heartbeat`, `emcy.wait`, the SDO client's response
 /// queue) is a `Condition.wait`.
 const THREADING_WAITS: [&str; 3] = ["wait", "join", "_wait_for_tstate_lock"];
+
+impl Shared {
+    /// Lock the core on behalf of the calling Python thread, which is about to act on the
+    /// simulation: bus time waits for it (this module).
+    ///
+    /// An act answers the frames handed to Python as a sent frame does (the reaction rule of
+    /// `crate::port`); receivers waiting for an answer are woken, and see the change once
+    /// the caller releases the lock.
+    pub fn lock_acting(&self, py: Python<'_>) -> PyResult<MutexGuard<'_, Core>> {
+        let thread = thread_ident(py)?;
+        let mut core = self.lock();
+        core.acted(thread, true);
+        self.delivery
+            .pending
+            .store(false, std::sync::atomic::Ordering::Release);
+        self.changed.notify_all();
+        Ok(core)
+    }
+}
 
 /// `threading.get_ident()` of the calling thread.
 pub(crate) fn thread_ident(py: Python<'_>) -> PyResult<u64> {
