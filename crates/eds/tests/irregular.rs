@@ -370,3 +370,120 @@ fn i16_crlf_latin1_and_utf8_text() {
         assert_eq!(&again.eds, eds);
     }
 }
+
+fn shaped(name: &str) -> Loaded {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/corpus")
+        .join(name);
+    load_bytes(&std::fs::read(p).unwrap())
+}
+
+/// Shaped like python-canopen's `test/sample.eds`.
+#[test]
+fn sample_like_dcf_loads_with_its_quirks_as_warnings() {
+    let l = shaped("sample_like.dcf");
+    assert!(l.report.is_ok(), "{}", l.report);
+    assert_eq!(l.eds.manufacturer_objects, vec![0x2000]);
+    diag(
+        &l,
+        Severity::Warning,
+        502,
+        "ManufacturerObjects",
+        Some("SupportedObjects"),
+        "says 0, 1 entries",
+    );
+    diag(
+        &l,
+        Severity::Warning,
+        114,
+        "OptionalObjects",
+        Some("SupportedObjects"),
+        "says 10, 11 entries",
+    );
+    let d = od(&l);
+    let subs = |i| {
+        d.object(i)
+            .unwrap()
+            .subs()
+            .map(|(s, _)| s)
+            .collect::<Vec<u8>>()
+    };
+    assert_eq!(subs(0x1018), [0, 1, 2, 4]);
+    assert_eq!(subs(0x1003), [0, 1, 3, 5]);
+    assert_eq!(subs(0x3003), [0]);
+    assert_eq!(subs(0x3004), [0, 1, 2, 3]);
+    assert_eq!(d.get(0x2020, 0).unwrap().data_type, DataType::Domain);
+    assert_eq!(d.get(0x3010, 0).unwrap().data_type, DataType::Real32);
+    let s = d.get(0x3040, 0).unwrap();
+    assert_eq!(
+        (s.low_limit.clone(), s.high_limit.clone()),
+        (Some(Value::Integer64(-10)), Some(Value::Integer64(10)))
+    );
+    // The DCF's ParameterValue is the configured value.
+    assert_eq!(default(&d, 0x3002, 0), Some(Value::Real32(5.2)));
+    let o = ObjectDictionary::new(Arc::new(d), 0x12);
+    assert_eq!(o.get(0x1400, 1).unwrap(), Value::Unsigned32(0x212));
+    assert_eq!(o.get(0x1401, 1).unwrap(), Value::Unsigned32(0x312));
+}
+
+/// Shaped like python-canopen's `test/datatypes.eds`.
+#[test]
+fn datatypes_like_eds_has_every_type_and_a_domain_written_with_at() {
+    let l = shaped("datatypes_like.eds");
+    assert!(l.report.is_ok(), "{}", l.report);
+    assert!(
+        l.report
+            .warnings()
+            .any(|i| i.message.contains("mandatory object 0x1000"))
+    );
+    let d = od(&l);
+    assert_eq!(
+        default(&d, 0x200F, 0),
+        Some(Value::Domain(b"WXYZ".to_vec()))
+    );
+    assert_eq!(
+        default(&d, 0x200A, 0),
+        Some(Value::OctetString(vec![0x0A, 0x0B, 0x0C]))
+    );
+    assert_eq!(
+        default(&d, 0x200B, 0),
+        Some(Value::UnicodeString("añb".encode_utf16().collect()))
+    );
+    assert_eq!(default(&d, 0x2015, 0), Some(Value::Integer64(-64)));
+    assert_eq!(default(&d, 0x201B, 0), Some(Value::Unsigned64(64)));
+    assert_eq!(d.objects().filter(|o| o.index() >= 0x2000).count(), 23);
+}
+
+/// Shaped like python-canopen's `examples/eds/e35.eds`.
+#[test]
+fn servo_like_eds_loads_with_its_version_count_and_dummy_objects() {
+    let l = shaped("servo_like.eds");
+    assert!(l.report.is_ok(), "{}", l.report);
+    diag(
+        &l,
+        Severity::Note,
+        5,
+        "FileInfo",
+        Some("EDSVersion"),
+        "\"402\" is not a CiA 306 version",
+    );
+    diag(
+        &l,
+        Severity::Warning,
+        118,
+        "ManufacturerObjects",
+        Some("SupportedObjects"),
+        "says 12, 10 entries",
+    );
+    let d = od(&l);
+    for index in 0x0002..=0x0007u16 {
+        assert_eq!(
+            d.object(index).unwrap().code(),
+            ObjectCode::DefType,
+            "{index:#06X}"
+        );
+    }
+    assert_eq!(default(&d, 0x0003, 0), Some(Value::Unsigned32(16)));
+    assert_eq!(d.get(0x6040, 0).unwrap().access, Access::Rww);
+    assert!(!d.get(0x6502, 0).unwrap().pdo_mappable);
+}
