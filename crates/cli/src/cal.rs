@@ -119,8 +119,9 @@ enum ParamAction {
     Write {
         /// Name or number.
         mux: String,
-        /// The 16-bit data (see `param list` for units).
-        value: u16,
+        /// The value in the multiplexor's unit, the manual's (Hz for max-frequency, s for
+        /// stop-delay, % for thermal-current; see `param list`), rounded to its resolution.
+        value: String,
     },
 }
 
@@ -279,21 +280,27 @@ pub fn run(args: &Args) -> Result<()> {
                 .map(|e| {
                     serde_json::json!({
                         "mux": e.mux, "name": e.name, "readable": e.readable,
-                        "writable": e.writable, "data": e.data,
+                        "writable": e.writable, "data": e.data, "unit": e.unit,
                     })
                 })
                 .collect();
             crate::output::emit(&serde_json::json!({ "multiplexors": list }))?;
             return Ok(());
         }
-        println!("{:<6} {:<18} {:<3} data", "mux", "name", "r/w");
+        println!(
+            "{:<6} {:<18} {:<3} {:<5} data",
+            "mux", "name", "r/w", "unit"
+        );
         for e in messages::MUX_TABLE {
             let rw = format!(
                 "{}{}",
                 if e.readable { "r" } else { "-" },
                 if e.writable { "w" } else { "-" }
             );
-            println!("0x{:02X}   {:<18} {rw:<3} {}", e.mux, e.name, e.data);
+            println!(
+                "0x{:02X}   {:<18} {rw:<3} {:<5} {}",
+                e.mux, e.name, e.unit, e.data
+            );
         }
         return Ok(());
     }
@@ -378,27 +385,47 @@ pub fn run(args: &Args) -> Result<()> {
                     if !e.writable {
                         bail!("{} (0x{:02X}) is read-only", e.name, e.mux);
                     }
+                    let data = value
+                        .trim()
+                        .parse::<f64>()
+                        .ok()
+                        .and_then(|v| e.data_of(v))
+                        .with_context(|| {
+                            format!(
+                                "{} {value:?}: not a value in {} that fits its 16-bit data",
+                                e.name,
+                                if e.unit.is_empty() { "units" } else { e.unit }
+                            )
+                        })?;
                     (
                         e.name,
                         Request::WriteMux(
                             messages::mux(e).context("multiplexor")?,
-                            Payload::u16(*value),
+                            Payload::u16(data),
                         ),
                     )
                 }
             };
             let data = exchange(&mut link, &mut client, MESSAGE_2, request, t)?;
+            let entry = mux_entry(name);
+            let value = data
+                .as_u16()
+                .and_then(|v| entry.map(|e| (e.value_of(v), e.unit)));
             if crate::output::json() {
                 crate::output::emit(&serde_json::json!({
                     "name": name,
-                    "value": data.as_u16(),
+                    "value": value.map(|(v, _)| v),
+                    "unit": value.map(|(_, u)| u),
                     "data": crate::output::hex(data.as_slice()),
                 }))?;
                 return Ok(());
             }
-            match data.as_u16() {
-                Some(v) => println!("{name} = {v} (0x{v:04X})"),
-                None => println!("{name} = {:02X?}", data.as_slice()),
+            match (data.as_u16(), value) {
+                (Some(d), Some((v, unit))) if !unit.is_empty() => {
+                    println!("{name} = {v} {unit} (data {d} = 0x{d:04X})")
+                }
+                (Some(d), _) => println!("{name} = {d} (0x{d:04X})"),
+                (None, _) => println!("{name} = {:02X?}", data.as_slice()),
             }
             Ok(())
         }

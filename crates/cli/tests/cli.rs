@@ -602,7 +602,18 @@ fn cal_commands_drive_the_opendrive_twin_through_socketcand() {
     );
     let (ok, out, err) = cal(&["param", "read", "max-frequency"]);
     assert!(ok, "{err}");
-    assert_eq!(out.trim(), "max-frequency = 5000 (0x1388)");
+    assert_eq!(out.trim(), "max-frequency = 60 Hz (data 6000 = 0x1770)");
+    // One unit per quantity, the manual's: Hz as for `cmd --ref`, seconds for the delay.
+    let (ok, out, err) = cal(&["param", "write", "max-frequency", "55"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "max-frequency = 55 Hz (data 5500 = 0x157C)");
+    let (ok, out, err) = cal(&["param", "write", "stop-delay", "1.5"]);
+    assert!(ok, "{err}");
+    assert_eq!(out.trim(), "stop-delay = 1.5 s (data 15 = 0x000F)");
+    // 0.5 s is a value in seconds, sent as data 5; P94 starts at 1 s, so the drive refuses.
+    let (ok, _, err) = cal(&["param", "write", "stop-delay", "0.5"]);
+    assert!(!ok);
+    assert!(err.contains("error code 2 (value not allowed)"), "{err}");
     // A value the drive refuses comes back as its error code.
     let (ok, _, err) = cal(&["param", "write", "thermal-current", "5"]);
     assert!(!ok);

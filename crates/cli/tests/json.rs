@@ -291,8 +291,10 @@ fn cal_read_and_param_commands_print_json() {
     assert_eq!(v["start"], false);
     let v = json(&["cal", "--scenario", s, "param", "read", "max-frequency"]);
     assert_eq!(v["name"], "max-frequency");
-    assert_eq!(v["value"], 5000);
-    assert_eq!(v["data"], "8813");
+    // fMAX = P68, default 120 % of 50 Hz, in the manual's unit.
+    assert_eq!(v["value"], 60.0);
+    assert_eq!(v["unit"], "Hz");
+    assert_eq!(v["data"], "7017");
     let v = json(&["cal", "param", "list"]);
     let list = v["multiplexors"].as_array().unwrap();
     assert!(

@@ -39,7 +39,7 @@
 //!
 //! | mux | function | parameters | data |
 //! |---|---|---|---|
-//! | 0x00 | maximum frequency | P63 = data / (fnom × 100) | 0.01 Hz; P63 20.0–400.0 % |
+//! | 0x00 | maximum frequency fMAX | P68 = data / (fnom × 100) | 0.01 Hz; 1000–20000 at fnom = 50 Hz (P68 20.0–400.0 %) |
 //! | 0x18 | current threshold reaction | C40 = 1 for 1, 2, else 0; P94 = 1 s for 1 | 0–4 |
 //! | 0x19 | thermal current limit | P70 = data × 200 % / 256 | 13–256 (P70 10.0–200.0 %) |
 //! | 0x1B | stop delay | P94 = data / 10 s | 10–1000 (1–100 s) |
@@ -52,8 +52,18 @@
 //!   remote first in the most significant pair. CAN-Start and CAN-Reverse codes are applied
 //!   only when command remote is set after the byte's own command remote code; resetting
 //!   command remote also resets them, so switching back to remote never restarts the motor.
-//! * A reference above the maximum frequency (P63) is refused with code 2 and nothing of
-//!   the write is applied; a write of other than 3 bytes gets code 0. The CAN reference is
+//! * The maximum frequency is fMAX, P68 (defaults table: 20.0–400.0 %, default 120.0 % of
+//!   the motor's rated frequency). The §3.3 table writes "P63" beside mux 0x00, a
+//!   parameter no table of the manual has; the range it gives is P68's, and the defaults
+//!   P73 = 83.3 % of fMAX (V/f point 1) only meet the rated frequency with fMAX = 120 %: the
+//!   twin reads "P63" as P68. Ramps P21–P24 run from 0 to fMAX.
+//! * Mux 0x00's data is checked against P68's range in 0.01 Hz (`ceil(200 × fnom_centi /
+//!   1000)` to `floor(4000 × fnom_centi / 1000)`: 1000–20000 at 50 Hz) before it is turned
+//!   into P68's 0.1 % steps, so 999 or 20001 is code 2 and cannot round into the range.
+//! * Message 0 has no error data in the manual (§3.1): a reference above fMAX is taken,
+//!   with its command bits, and limited to fMAX where it is used; the answer carries the
+//!   reference in use. Only a write of other than 3 bytes (a malformed CMS request) gets
+//!   code 0. The CAN reference is
 //!   used when reference remote is set and references from the field bus are enabled
 //!   (C52 or a logic input with function 114) and DIP S1 was off at power-up.
 //! * Logic input meanings C01–C08 hold `function − 100`: 0 start (100), 12 reverse (112),
@@ -63,10 +73,15 @@
 //!   S1 loads "free and reserved" values, §2.3 says all but the reserved: the twin follows
 //!   §2.3, which describes the procedure. The 0 → 1 change is detected against the position
 //!   stored in flash at the previous power-up.
-//! * Mux 0x18 reads back 0 (C40 = 0), 1 (C40 = 1 and P94 = 1 s) or 2; mux 0x34 and any
-//!   multiplexor not in the table answer code 1; 0x3A accepts only 1 and reads 0.
-//! * P63, P70 and C40 are not in the manual's tables: P63 20.0–400.0 % (default 100.0 %),
-//!   P70 10.0–200.0 % (default 100.0 %), C40 0–1 (default 0). C50's printed range is
+//! * Mux 0x18 reads back 0 while C40 = 0, else the code last written (1 or 2, both C40 =
+//!   1; 2 reads 2 also while P94 = 1 s); after mains return, which restores C40 and P94
+//!   from flash only, a STOP reaction reads 1 with P94 = 1 s and 2 otherwise. Mux 0x34 and
+//!   any multiplexor not in the table answer code 1; 0x3A accepts only 1 and reads 0.
+//! * Tools take each multiplexor's value in the manual's unit ([`messages::MuxEntry`]:
+//!   Hz for 0x00 as message 0's reference, s for 0x1B, % for 0x19), rounded to the data's
+//!   resolution.
+//! * P70 and C40 are not in the manual's tables: P70 10.0–200.0 % (default 100.0 %), C40
+//!   0–1 (default 0). C50's printed range is
 //!   unreadable; it is taken as 0/1, default 1, like its neighbours.
 //! * Ramp times P21–P24 are from 0 to the maximum frequency; acceleration or deceleration
 //!   time by the direction of rotation (CW = reverse reset).

@@ -170,6 +170,26 @@ pub struct MuxEntry {
     pub writable: bool,
     /// Whether it can be read.
     pub readable: bool,
+    /// The quantity's unit as the manual gives it ("" for a code).
+    pub unit: &'static str,
+    /// Data per unit, as a fraction (numerator, denominator): 0.01 Hz, 0.1 s, 256 = 200 %.
+    pub data_per_unit: (u32, u32),
+}
+
+impl MuxEntry {
+    /// The 16-bit data for `value` in [`MuxEntry::unit`], rounded to the data's
+    /// resolution; `None` if it is not a number or outside 0..=65535 once scaled.
+    pub fn data_of(&self, value: f64) -> Option<u16> {
+        let (num, den) = self.data_per_unit;
+        let raw = (value * f64::from(num) / f64::from(den.max(1))).round();
+        (raw.is_finite() && (0.0..=65535.0).contains(&raw)).then_some(raw as u16)
+    }
+
+    /// The value in [`MuxEntry::unit`] that `data` carries.
+    pub fn value_of(&self, data: u16) -> f64 {
+        let (num, den) = self.data_per_unit;
+        f64::from(data) * f64::from(den) / f64::from(num.max(1))
+    }
 }
 
 /// Message 2's multiplexors (manual §3.3).
@@ -177,9 +197,11 @@ pub const MUX_TABLE: &[MuxEntry] = &[
     MuxEntry {
         mux: 0x00,
         name: "max-frequency",
-        data: "maximum frequency, 0.01 Hz (P63)",
+        data: "maximum frequency fMAX, Hz in 0.01 Hz, P68 20.0-400.0 % of fnom (P68)",
         writable: true,
         readable: true,
+        unit: "Hz",
+        data_per_unit: (100, 1),
     },
     MuxEntry {
         mux: 0x18,
@@ -187,20 +209,26 @@ pub const MUX_TABLE: &[MuxEntry] = &[
         data: "0 none, 1 STOP with minimum delay, 2 STOP delayed, 3-4 as 0 (C40, P94)",
         writable: true,
         readable: true,
+        unit: "",
+        data_per_unit: (1, 1),
     },
     MuxEntry {
         mux: 0x19,
         name: "thermal-current",
-        data: "thermal current limit, 256 = 200 % of the motor's rated current (P70)",
+        data: "thermal current limit, % of the motor's rated current, data 256 = 200 % (P70)",
         writable: true,
         readable: true,
+        unit: "%",
+        data_per_unit: (32, 25),
     },
     MuxEntry {
         mux: 0x1B,
         name: "stop-delay",
-        data: "stop delay, 0.1 s (P94)",
+        data: "stop delay, s in 0.1 s, 1-100 s (P94)",
         writable: true,
         readable: true,
+        unit: "s",
+        data_per_unit: (10, 1),
     },
     MuxEntry {
         mux: 0x34,
@@ -208,6 +236,8 @@ pub const MUX_TABLE: &[MuxEntry] = &[
         data: "firmware version",
         writable: false,
         readable: true,
+        unit: "",
+        data_per_unit: (1, 1),
     },
     MuxEntry {
         mux: 0x3A,
@@ -215,6 +245,8 @@ pub const MUX_TABLE: &[MuxEntry] = &[
         data: "write 1 to save to flash (C63)",
         writable: true,
         readable: true,
+        unit: "",
+        data_per_unit: (1, 1),
     },
 ];
 

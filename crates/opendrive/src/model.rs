@@ -9,13 +9,13 @@ use cantwin_can::{Duration, Instant};
 
 pub use crate::messages::Commands;
 use crate::messages::{Code, CommandByte};
-use crate::params::{self, C32, C35, C40, C47, C50, C52, P21, P22, P23, P24, P61, P63, P68};
+use crate::params::{self, C32, C35, C40, C47, C50, C52, P21, P22, P23, P24, P61, P68};
 use crate::params::{P66, P70, P72, P73, P94, ParId, ParamError, Params};
 
 /// The motor's data and the driven load's inertia.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MotorData {
-    /// Rated frequency (Hz); the base of P63 and P68.
+    /// Rated frequency (Hz); the base of P68.
     pub rated_frequency_hz: f64,
     /// Rated power (kW): the scale of the power that flows back into the DC bus.
     pub rated_power_kw: f64,
@@ -258,6 +258,9 @@ pub struct Drive {
     time_in_limit_s: f64,
     in_limit: bool,
     limit_stop: bool,
+    /// Message 2 mux 0x18's code while C40 = 1: 1 STOP with the minimum delay, 2 STOP
+    /// delayed by P94 (C40 = 1 for both, manual §3.3).
+    stop_reaction: u16,
     needs_start_edge: bool,
     alarms: Alarms,
     thermal_warning: bool,
@@ -300,6 +303,7 @@ impl Drive {
             time_in_limit_s: 0.0,
             in_limit: false,
             limit_stop: false,
+            stop_reaction: 2,
             needs_start_edge: false,
             alarms: Alarms::NONE,
             thermal_warning: false,
@@ -551,26 +555,21 @@ impl Drive {
         }
     }
 
-    /// The maximum frequency (Hz): P63 of the motor's rated frequency.
+    /// The maximum frequency fMAX (Hz): P68 of the motor's rated frequency.
     pub fn fmax_hz(&self) -> f64 {
-        f64::from(self.params.get(P63)) / 1000.0 * self.motor.rated_frequency_hz
-    }
-
-    fn fmax_centi(&self) -> u32 {
-        (self.fmax_hz() * 100.0).round() as u32
+        f64::from(self.params.get(P68)) / 1000.0 * self.motor.rated_frequency_hz
     }
 
     /// The frequency reference in use (Hz, magnitude): the CAN reference with the
     /// "reference remote" bit and references enabled from the field bus, the terminal's
-    /// otherwise; limited to P63 and P68.
+    /// otherwise; limited to fMAX (P68).
     pub fn reference_hz(&self) -> f64 {
         let r = if self.commands.reference_remote && self.fieldbus_enabled() && !self.s1_locked {
             f64::from(self.can_reference) / 100.0
         } else {
             self.analog_reference_hz
         };
-        let p68 = f64::from(self.params.get(P68)) / 1000.0 * self.motor.rated_frequency_hz;
-        r.min(self.fmax_hz()).min(p68)
+        r.min(self.fmax_hz())
     }
 
     // ---- power ---------------------------------------------------------------------------
@@ -594,6 +593,9 @@ impl Drive {
         }
         self.flash.dip_s1 = self.dip_s1;
         self.s1_locked = self.dip_s1;
+        // The flash holds C40 and P94, not the code written to mux 0x18: after mains
+        // return a STOP reaction with P94 = 1 s reads as 1 (the minimum delay).
+        self.stop_reaction = if self.params.get(P94) == 10 { 1 } else { 2 };
         self.alarms = if self.params.get(C35) == 1 {
             Alarms::NONE
         } else {
@@ -847,10 +849,10 @@ impl Drive {
     /// error data codes.
     pub fn message0_write(&mut self, data: &[u8]) -> Result<[u8; 3], u16> {
         let [cmd, lo, hi] = <[u8; 3]>::try_from(data).map_err(|_| ERR_UNDEFINED)?;
+        // Manual §3.1 gives message 0 no error data: a reference above fMAX is taken and
+        // limited to fMAX where it is used (`reference_hz`), and the answer carries the
+        // reference in use.
         let reference = u16::from_le_bytes([lo, hi]);
-        if u32::from(reference) > self.fmax_centi() {
-            return Err(ERR_VALUE);
-        }
         let codes = CommandByte::decode(cmd);
         let apply = |bit: &mut bool, code: Code| match code {
             Code::Set => *bit = true,
@@ -879,13 +881,12 @@ impl Drive {
     pub fn mux_read(&self, mux: u8) -> Result<u16, u16> {
         let fnom_centi = (self.motor.rated_frequency_hz * 100.0).round();
         Ok(match mux {
-            0x00 => (f64::from(self.params.get(P63)) * fnom_centi / 1000.0)
+            0x00 => (f64::from(self.params.get(P68)) * fnom_centi / 1000.0)
                 .round()
                 .min(65535.0) as u16,
-            0x18 => match (self.params.get(C40), self.params.get(P94)) {
-                (0, _) => 0,
-                (_, 10) => 1,
-                _ => 2,
+            0x18 => match self.params.get(C40) {
+                0 => 0,
+                _ => self.stop_reaction,
             },
             0x19 => (f64::from(self.params.get(P70)) * 256.0 / 2000.0).round() as u16,
             0x1B => self.params.get(P94) as u16,
@@ -901,10 +902,18 @@ impl Drive {
         let set = |p: &mut Params, id, x: i32| p.set(id, x).map_err(|_| ERR_VALUE);
         match mux {
             0x00 => {
-                // P63 = data / (fnom × 100), in % of the rated frequency.
+                // fMAX: P68 = data / (fnom × 100), in % of the rated frequency. The data's
+                // range is P68's printed 20.0–400.0 % in 0.01 Hz (1000–20000 at 50 Hz),
+                // checked on the data itself so that no value outside rounds into it.
                 let fnom_centi = (self.motor.rated_frequency_hz * 100.0).round();
-                let p63 = (v * 1000.0 / fnom_centi).round() as i32;
-                set(&mut self.params, P63, p63)?;
+                let def = params::def(P68).ok_or(ERR_UNDEFINED)?;
+                let lo = (f64::from(def.min) * fnom_centi / 1000.0).ceil();
+                let hi = (f64::from(def.max) * fnom_centi / 1000.0).floor();
+                if v < lo || v > hi {
+                    return Err(ERR_VALUE);
+                }
+                let p68 = (v * 1000.0 / fnom_centi).round() as i32;
+                set(&mut self.params, P68, p68.clamp(def.min, def.max))?;
             }
             0x18 => {
                 // 0 none, 1 STOP with the minimum delay (P94 = 1 s), 2 STOP delayed by P94,
@@ -916,6 +925,9 @@ impl Drive {
                 set(&mut self.params, C40, i32::from(stop))?;
                 if value == 1 {
                     set(&mut self.params, P94, 10)?;
+                }
+                if stop {
+                    self.stop_reaction = value;
                 }
             }
             0x19 => {
@@ -975,16 +987,20 @@ mod tests {
             d.message0_write(&[0b00_01_00_00, 0x88, 0x13]),
             Ok([0b10_01_01_01, 0x88, 0x13])
         );
-        assert_eq!(d.message0_write(&[0, 0x89, 0x13]), Err(ERR_VALUE));
+        // Above fMAX (60.00 Hz): taken, the state carries the reference in use.
+        assert_eq!(
+            d.message0_write(&[0, 0x10, 0x27]),
+            Ok([0b10_01_01_01, 0x70, 0x17])
+        );
         assert_eq!(d.message0_write(&[0, 0]), Err(ERR_UNDEFINED));
     }
 
     #[test]
     fn mux_normalisations() {
         let mut d = drive();
-        assert_eq!(d.mux_read(0x00), Ok(5000));
-        assert_eq!(d.mux_write(0x00, 6000), Ok(6000));
-        assert_eq!(d.param(P63), 1200);
+        assert_eq!(d.mux_read(0x00), Ok(6000));
+        assert_eq!(d.mux_write(0x00, 5000), Ok(5000));
+        assert_eq!(d.param(P68), 1000);
         assert_eq!(d.mux_write(0x19, 256), Ok(256));
         assert_eq!(d.param(P70), 2000);
         assert_eq!(d.mux_write(0x19, 128), Ok(128));
@@ -1036,8 +1052,9 @@ mod vf_tests {
             d.step(Duration::from_millis(1), t);
         }
         assert_eq!(d.output_hz(), 25.0);
-        // Point 1 at 83.3 % of 50 Hz and 100 % voltage; boost 5.7 % at rated current.
-        let expected = 100.0 * 25.0 / (50.0 * 0.833) + 5.7 * d.current_pct() / 100.0;
+        // Point 1 at 83.3 % of fMAX (P68 = 120 % of 50 Hz: point 1 falls at the rated
+        // frequency) and 100 % voltage; boost 5.7 % at rated current.
+        let expected = 100.0 * 25.0 / (60.0 * 0.833) + 5.7 * d.current_pct() / 100.0;
         assert!((d.output_voltage_pct() - expected).abs() < 1e-9);
         d.set_analog_reference_hz(50.0);
         for _ in 0..2000 {

@@ -77,11 +77,10 @@ pub const P31: ParId = p(31);
 pub const P32: ParId = p(32);
 /// P61 motor rated current (0.1 % of the drive's rated current).
 pub const P61: ParId = p(61);
-/// P63 maximum frequency (0.1 % of the motor's rated frequency), message 2 mux 0x00.
-pub const P63: ParId = p(63);
 /// P66 voltage drop on Rs (0.1 % of the motor's rated voltage).
 pub const P66: ParId = p(66);
-/// P68 maximum working frequency of the motor (0.1 % of its rated frequency).
+/// P68 maximum working frequency of the motor fMAX (0.1 % of its rated frequency), message
+/// 2 mux 0x00.
 pub const P68: ParId = p(68);
 /// P70 thermal current limit (0.1 % of the motor's rated current), message 2 mux 0x19.
 pub const P70: ParId = p(70);
@@ -171,7 +170,7 @@ const fn d(
 }
 
 /// Every parameter and connection of the twin. Reserved ones are those the §2.3 table marks
-/// with `r`; P63, P70 and C40 (reached through message 2) and C63 are not in the manual's
+/// with `r`; P70 and C40 (reached through message 2) and C63 are not in the manual's
 /// tables and take the ranges documented in the crate docs.
 pub const TABLE: &[ParDef] = &[
     d(
@@ -229,14 +228,6 @@ pub const TABLE: &[ParDef] = &[
         1,
         "% I nom Az",
         true,
-    ),
-    d(
-        P63,
-        "Frequenza massima",
-        (200, 4000, 1000),
-        1,
-        "% f nom mot",
-        false,
     ),
     d(
         P66,

@@ -40,7 +40,7 @@ fn master_starts_the_drive_and_receives_the_overload_notification() {
         ClientEvent::EventState { enabled: true, .. }
     ));
     assert!(
-        matches!(ev[2], ClientEvent::Confirmed { object: MESSAGE_2, data, .. } if data.as_u16() == Some(5000))
+        matches!(ev[2], ClientEvent::Confirmed { object: MESSAGE_2, data, .. } if data.as_u16() == Some(6000))
     );
 
     r.drive_mut().set_load_torque_pct(500.0);

@@ -5,7 +5,7 @@
 mod common;
 use std::sync::{Arc, Mutex};
 
-use cantwin_opendrive::params::P63;
+use cantwin_opendrive::params::P68;
 use cantwin_opendrive::{Flash, FlashStorage, OpenDrive};
 use common::*;
 
@@ -29,16 +29,16 @@ fn save_reaches_the_storage_and_a_new_drive_starts_from_it() {
     let images = mem.0.lock().unwrap().len();
     assert_eq!(images, 1, "the power-up image, once");
     // A working change alone is not stored; the save is.
-    r.exchange(f(1100, &[0x00, 0x70, 0x17]));
+    r.exchange(f(1100, &[0x00, 0x7C, 0x15]));
     assert_eq!(mem.0.lock().unwrap().len(), 1);
     r.exchange(f(1100, &[0x3A, 0x01, 0x00]));
     let last = mem.0.lock().unwrap().last().cloned().unwrap();
-    assert!(last.contains("P63 = 1200\n"), "{last}");
+    assert!(last.contains("P68 = 1100\n"), "{last}");
 
     let mut next = OpenDrive::new(Default::default(), Default::default());
     next.drive_mut().set_flash(Flash::from_text(&last).unwrap());
     let mut r = rig_with(next);
     r.run_ms(1);
-    assert_eq!(r.drive().param(P63), 1200);
-    assert_eq!(r.exchange(f(1100, &[0x80])), ["44C#80", "44B#007017"]);
+    assert_eq!(r.drive().param(P68), 1100);
+    assert_eq!(r.exchange(f(1100, &[0x80])), ["44C#80", "44B#007C15"]);
 }

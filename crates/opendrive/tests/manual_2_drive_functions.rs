@@ -43,14 +43,15 @@ fn ramps_reach_the_reference_in_the_configured_time_per_direction() {
     // A load keeps the deceleration motoring, so the DC bus stays at the mains level.
     r.drive_mut().set_load_torque_pct(50.0);
     let steps = [
-        // (command byte, expected output, ramp time in ms)
-        (0b10_10_10_01u8, 50.0, 2000u64), // CW start: P21
+        // (command byte, expected output, ramp time in ms); the ramps run from 0 to fMAX
+        // (P68 = 120 % of 50 Hz).
+        (0b10_10_10_01u8, 60.0, 2000u64), // CW start: P21
         (0b00_00_01_00, 0.0, 1500),       // CW stop: P22
-        (0b00_00_10_10, -50.0, 1000),     // CCW start: P23
+        (0b00_00_10_10, -60.0, 1000),     // CCW start: P23
         (0b00_00_01_00, 0.0, 2500),       // CCW stop: P24
     ];
     for (cmd, target, ramp_ms) in steps {
-        let t0 = command(&mut r, cmd, 5000);
+        let t0 = command(&mut r, cmd, 6000);
         let reached = until(&mut r, 5000, |r| r.drive().output_hz() == target);
         let expected = t0 + ramp_ms * MS;
         assert!(
@@ -64,8 +65,8 @@ fn ramps_reach_the_reference_in_the_configured_time_per_direction() {
 #[test]
 fn ramp_to_half_the_maximum_frequency_takes_half_the_time() {
     let mut r = rig();
-    let t0 = command(&mut r, 0b10_10_10_01, 2500);
-    let reached = until(&mut r, 5000, |r| r.drive().output_hz() == 25.0);
+    let t0 = command(&mut r, 0b10_10_10_01, 3000);
+    let reached = until(&mut r, 5000, |r| r.drive().output_hz() == 30.0);
     assert!(reached.abs_diff(t0 + 1500 * MS) <= MS);
 }
 

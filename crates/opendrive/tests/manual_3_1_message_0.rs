@@ -120,12 +120,6 @@ fn read_answers_reference_and_command_state_by_data_and_remote_frame() {
 #[test]
 fn error_responses_carry_r_and_the_error_code() {
     let mut r = rig();
-    // Above the maximum frequency (P63 = 100 % of 50 Hz): value not allowed, nothing applied.
-    assert_eq!(
-        r.exchange(f(440, &[0, 0b10_10_10_00, 0x89, 0x13])),
-        ["1B8#00A88913", "1B7#800200"]
-    );
-    assert_eq!(r.drive().commands(), Default::default());
     // Too short, reserved bits, a read with data: undefined error.
     assert_eq!(r.exchange(f(440, &[0, 0xA0])), ["1B8#00A0", "1B7#800000"]);
     assert_eq!(
@@ -147,4 +141,23 @@ fn cob_ids_come_from_p180_p181_at_power_up() {
     let mut r = rig_with(d);
     assert_eq!(r.exchange(f(440, &[0x80])), ["1B8#80"]);
     assert_eq!(r.exchange(f(0x100, &[0x80])), ["100#80", "0FF#00550000"]);
+}
+
+#[test]
+fn manual_3_1_a_reference_above_fmax_is_taken_and_limited_to_fmax_p68() {
+    let mut r = rig();
+    // 55.00 Hz is within fMAX (P68 = 120 % of 50 Hz = 60.00 Hz): used as sent.
+    assert_eq!(
+        r.exchange(f(440, &[0, 0b10_10_10_00, 0x7C, 0x15])),
+        ["1B8#00A87C15", "1B7#00A97C15"]
+    );
+    // Message 0 has no error data (manual §3.1): 100.00 Hz is taken, its commands applied,
+    // and the reference in use, which the answer carries, is fMAX.
+    assert_eq!(
+        r.exchange(f(440, &[0, 0b10_10_10_00, 0x10, 0x27])),
+        ["1B8#00A81027", "1B7#00A97017"]
+    );
+    assert_eq!(r.drive().can_reference(), 10_000);
+    assert!(r.drive().commands().can_start);
+    assert_eq!(r.drive().reference_hz(), 60.0);
 }

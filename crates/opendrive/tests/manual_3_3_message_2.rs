@@ -3,7 +3,7 @@
 #![allow(clippy::unwrap_used)]
 
 mod common;
-use cantwin_opendrive::params::{C40, P63, P70, P94};
+use cantwin_opendrive::params::{C40, P68, P70, P94};
 use common::*;
 
 fn write(r: &mut Rig, mux: u8, value: u16) -> Vec<String> {
@@ -16,18 +16,33 @@ fn read(r: &mut Rig, mux: u8) -> Vec<String> {
 }
 
 #[test]
-fn mux_00_max_frequency_p63_in_hundredths_of_hz() {
+fn mux_00_max_frequency_fmax_p68_in_hundredths_of_hz() {
     let mut r = rig();
-    assert_eq!(read(&mut r, 0x00), ["44C#80", "44B#008813"]);
-    assert_eq!(write(&mut r, 0x00, 6000), ["44C#007017", "44B#007017"]);
-    assert_eq!(r.drive().param(P63), 1200);
+    // fMAX = P68, default 120.0 % of 50 Hz = 60.00 Hz (manual's defaults table).
     assert_eq!(read(&mut r, 0x00), ["44C#80", "44B#007017"]);
-    // Limits: P63 20.0 % – 400.0 % of 50 Hz = 10.00 Hz – 200.00 Hz.
+    assert_eq!(write(&mut r, 0x00, 5500), ["44C#007C15", "44B#007C15"]);
+    assert_eq!(r.drive().param(P68), 1100);
+    assert_eq!(read(&mut r, 0x00), ["44C#80", "44B#007C15"]);
+    // Limits: P68 20.0 % – 400.0 % of 50 Hz = 10.00 Hz – 200.00 Hz.
     assert_eq!(write(&mut r, 0x00, 1000), ["44C#00E803", "44B#00E803"]);
     assert_eq!(write(&mut r, 0x00, 20000), ["44C#00204E", "44B#00204E"]);
-    assert_eq!(write(&mut r, 0x00, 900), ["44C#008403", "44B#800200"]);
-    assert_eq!(write(&mut r, 0x00, 20010), ["44C#002A4E", "44B#800200"]);
-    assert_eq!(r.drive().param(P63), 4000);
+    assert_eq!(r.drive().param(P68), 4000);
+}
+
+#[test]
+fn mux_00_data_outside_p68_20_0_400_0_percent_is_value_not_allowed() {
+    let mut r = rig();
+    // 999 and 20001 would round into P68's range at its 0.1 % resolution: refused on the
+    // data itself, code 2, nothing applied.
+    for v in [999u16, 20001, 900, 0, 65535] {
+        let [lo, hi] = v.to_le_bytes();
+        assert_eq!(
+            write(&mut r, 0x00, v),
+            [format!("44C#00{lo:02X}{hi:02X}"), "44B#800200".to_string()],
+            "{v}"
+        );
+    }
+    assert_eq!(r.drive().param(P68), 1200);
 }
 
 #[test]
@@ -53,6 +68,16 @@ fn mux_18_current_threshold_reaction_c40_and_p94() {
         assert_eq!(read(&mut r, 0x18), ["44C#98", "44B#180000"]);
     }
     assert_eq!(write(&mut r, 0x18, 5), ["44C#180500", "44B#980200"]);
+}
+
+#[test]
+fn mux_18_stop_delayed_reads_back_2_while_p94_is_1_s() {
+    let mut r = rig();
+    // 1 sets P94 = 1 s; 2 then keeps P94 and reads back as written, "STOP ritardato".
+    assert_eq!(write(&mut r, 0x18, 1), ["44C#180100", "44B#180100"]);
+    assert_eq!(write(&mut r, 0x18, 2), ["44C#180200", "44B#180200"]);
+    assert_eq!((r.drive().param(C40), r.drive().param(P94)), (1, 10));
+    assert_eq!(read(&mut r, 0x18), ["44C#98", "44B#180200"]);
 }
 
 #[test]
@@ -95,14 +120,14 @@ fn mux_3a_save_to_flash_survives_a_power_cycle() {
     r.power_cycle(10);
     r.run_ms(1);
     // Not saved: back to the flash value.
-    assert_eq!(r.drive().param(P63), 1000);
-    write(&mut r, 0x00, 6000);
+    assert_eq!(r.drive().param(P68), 1200);
+    write(&mut r, 0x00, 5000);
     assert_eq!(write(&mut r, 0x3A, 0), ["44C#3A0000", "44B#BA0200"]);
     assert_eq!(write(&mut r, 0x3A, 1), ["44C#3A0100", "44B#3A0100"]);
     assert_eq!(read(&mut r, 0x3A), ["44C#BA", "44B#3A0000"]);
     r.power_cycle(10);
     r.run_ms(1);
-    assert_eq!(r.drive().param(P63), 1200);
+    assert_eq!(r.drive().param(P68), 1000);
 }
 
 #[test]

@@ -11,7 +11,7 @@
 //! | `reference_hz` | 0 | the terminal frequency reference |
 //! | `load_torque_pct` | 0 | load torque, % of the motor's rated torque |
 //! | `ambient_c` | 40 | ambient temperature around the heatsink |
-//! | `motor_rated_frequency_hz` | 50 | motor rated frequency (base of P63, P68) |
+//! | `motor_rated_frequency_hz` | 50 | motor rated frequency (base of P68) |
 //! | `motor_rated_power_kw` | 4 | motor rated power |
 //! | `motor_magnetising_current_pct` | 35 | magnetising current, % of rated current |
 //! | `motor_starting_time_s` | 0.5 | mechanical starting time (inertia) |
@@ -312,7 +312,7 @@ mod tests {
     #[test]
     fn state_dir_keeps_the_saved_parameters_between_runs() {
         use crate::BuildEnv;
-        use cantwin_opendrive::params::P63;
+        use cantwin_opendrive::params::P68;
         let dir = std::env::temp_dir().join(format!("cantwin-opendrive-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let env = BuildEnv {
@@ -322,9 +322,9 @@ mod tests {
         let mut built = scenario.build(&Registry::builtin(), &env).unwrap();
         let port = built.device("drive").unwrap().port;
         let bus = built.bus("can0").unwrap();
-        // Max frequency 60.00 Hz, then save (message 2 mux 0x00, 0x3A), handed to the
+        // Max frequency 55.00 Hz, then save (message 2 mux 0x00, 0x3A), handed to the
         // drive as if received.
-        for frame in [[0x00u8, 0x70, 0x17], [0x3A, 0x01, 0x00]] {
+        for frame in [[0x00u8, 0x7C, 0x15], [0x3A, 0x01, 0x00]] {
             built
                 .sim
                 .bus_mut(bus)
@@ -337,10 +337,10 @@ mod tests {
         }
         built.sim.run_until(Instant::from_nanos(10_000_000));
         let text = std::fs::read_to_string(dir.join("drive").join("flash.txt")).unwrap();
-        assert!(text.contains("P63 = 1200"), "{text}");
+        assert!(text.contains("P68 = 1100"), "{text}");
         let built = scenario.build(&Registry::builtin(), &env).unwrap();
         let node = built.sim.node::<OpenDrive>(port).unwrap();
-        assert_eq!(node.drive().saved_param(P63), 1200);
+        assert_eq!(node.drive().saved_param(P68), 1100);
         assert!(built.warnings.is_empty(), "{:?}", built.warnings);
         // Replaced atomically: no temporary file stays behind.
         assert!(!dir.join("drive").join("flash.txt.tmp").exists());
@@ -353,11 +353,11 @@ mod tests {
             let built = scenario.build(&Registry::builtin(), &env).unwrap();
             assert_eq!(built.warnings.len(), 1, "cut {cut}: {:?}", built.warnings);
         }
-        let default = cantwin_opendrive::params::def(P63).unwrap().default;
+        let default = cantwin_opendrive::params::def(P68).unwrap().default;
         for (what, bytes) in [
             ("empty", &b""[..]),
             ("binary", &[0xFF, 0xFE, 0x00, 0x9C][..]),
-            ("damaged", &b"P63 = 12x0\n"[..]),
+            ("damaged", &b"P68 = 12x0\n"[..]),
         ] {
             std::fs::write(&file, bytes).unwrap();
             let built = scenario.build(&Registry::builtin(), &env).unwrap();
@@ -368,7 +368,7 @@ mod tests {
                 built.warnings[0]
             );
             let node = built.sim.node::<OpenDrive>(port).unwrap();
-            assert_eq!(node.drive().saved_param(P63), default, "{what}");
+            assert_eq!(node.drive().saved_param(P68), default, "{what}");
         }
         std::fs::remove_file(&file).unwrap();
         std::fs::create_dir(&file).unwrap();
