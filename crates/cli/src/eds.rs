@@ -157,7 +157,15 @@ fn export(scenario: &Path, device: &str) -> Result<String> {
         _ => None,
     };
     let mut info = cantwin_eds::DeviceInfo {
-        vendor_name: Some("cantwin".into()),
+        // The manufacturer of a twinned product (CiA 306 `VendorName`); the generic
+        // CiA 301 devices are the project's own.
+        vendor_name: Some(
+            match dev.kind.as_str() {
+                "tm3" => cantwin_tm3::od::VENDOR_NAME,
+                _ => "cantwin",
+            }
+            .into(),
+        ),
         product_name: text(0x1008, 0).or_else(|| Some(device.to_string())),
         granularity: Some(8),
         nr_of_rx_pdo: Some(count(0x1400..=0x15FF)),
