@@ -46,11 +46,14 @@ impl fmt::Display for Issue {
             Severity::Warning => "warning",
             Severity::Error => "error",
         };
-        write!(f, "{sev}: ")?;
+        write!(f, "{sev}:")?;
         if let Some(l) = self.line {
-            write!(f, "line {l} ")?;
+            write!(f, " line {l}")?;
         }
-        write!(f, "[{}]", self.section)?;
+        // A line outside any section has no section to name.
+        if !self.section.is_empty() {
+            write!(f, " [{}]", self.section)?;
+        }
         if let Some(k) = &self.key {
             write!(f, " {k}")?;
         }
