@@ -25,11 +25,17 @@
 //!   it is little-endian, `23 58 22 01 E8 03 00 00` for PAR 600 = 1000.
 //! * **Opt Bus Fault** travels as EMCY 0xFF11 with its sub-code in manufacturer bytes 0–1;
 //!   alarms listed with a bare number n use 0xFF00 + n ([`alarms`]).
-//! * **PDC**: a value-format placeholder (`ipa` = 0) closes the PDO; Fill is inserted; a
+//! * **PDC**: a value-format placeholder (`ipa` = 0) closes the PDO; so does a Fill with
+//!   `ipa` = 0 directly after an assigned datum, as the §1.3.1 example needs (RPDO1 and
+//!   RPDO2 of 2 words each); any other Fill is padding, a CiA 301 dummy entry in an RPDO; a
 //!   32-bit item that would straddle two PDOs raises the channel's size code ([`pdc`]).
 //! * **Bus loss from 0x1006**: no SYNC within SYNC_PERIOD × LIFE_TIME_FACTOR (0x1006 ×
 //!   0x100D, 3 when 0x100D is 0), the §1.1.3 table ([`card`]).
-//! * **TPDO RTR**: COB-ID bit 30 set (no RTR), the meaning of §1.1.7 ([`od`]).
+//! * **TPDO RTR**: COB-ID bit 30 set (no RTR), the meaning of §1.1.7; a write that clears
+//!   it, and transmission types other than 1, 254, 255 (§1.1.6, §1.1.7; 252/253 need RTR),
+//!   abort 0x06090030 ([`station`]).
+//! * **Invalid values**: a value an enumeration does not list is 0x06090030 (DeviceNet code
+//!   11), not "too high"; PAR 4006 takes 0 (factory: no address) to 127 (§1.2 "1 a 127").
 //! * **LEDs**: AL on in every NMT state but Operational (the §1.6.2.1 table) and with Opt
 //!   Bus Fault; PWR/+5VC on while the card is powered ([`card`]).
 //!

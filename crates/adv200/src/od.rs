@@ -70,6 +70,7 @@ fn param_objects(mut b: OdBuilder, pdc: &Pdc) -> OdBuilder {
     let placed: Vec<(u16, DataType)> = pdc
         .m2s
         .items()
+        .filter(|i| !i.fill)
         .map(|i| (par::m2s_mon(i.channel), i.data_type()))
         .chain(
             pdc.s2m

@@ -10,9 +10,17 @@
 //!   twin uses the channel's "data size is wrong" code, FF34+ / FF54+);
 //! * a channel with `ipa = 0` and a value format (Count 16, Count 32, Eu) after an assigned
 //!   datum closes the current PDO, so that PDOs shorter than 4 words can be made; it takes no
-//!   room itself. Fill 16 / Fill 32 are always inserted as padding (the N.B. of §1.3.1). The
-//!   manual's own example in §1.3.1 uses Fill 32 as the terminator, which contradicts its
-//!   N.B.; the twin follows the rule's text;
+//!   room itself;
+//! * **Fill 16 / Fill 32**: the N.B. of §1.3.1 says a Fill "is inserted all the same", but
+//!   the manual's own example ("RPDO1 of 2 words and RPDO2 of 2 words": Eu, Count 16, then
+//!   channel 3 `ipa = 0` Fill 32, then Count 32) only comes out as printed if that Fill closes
+//!   the PDO. A master configured from the manual expects the example's sizes, so the twin
+//!   follows the example: a Fill with `ipa = 0` directly after an assigned datum closes the
+//!   PDO and takes no room (RPDO1 = M->S1 + M->S2, RPDO2 = M->S4, 4 bytes each). Elsewhere a
+//!   Fill is inserted as padding of its size: in an RPDO a CiA 301 dummy entry (0x0006
+//!   UNSIGNED16 / 0x0007 UNSIGNED32 sub 0, §7.4.7.1), whose data the card discards; a TPDO
+//!   cannot map a dummy entry (CiA 301 allows them in RPDOs only), so there the Fill maps
+//!   the channel's `Fieldbus S->Mn mon`, which the card keeps at 0;
 //! * the first channel whose format is Not assigned ends the PDC;
 //! * Mdplc 16 / Mdplc 32 channels carry data for an MDPLC application: M2S with `ipa = 0` is
 //!   read from `Fieldbus M->Sn mon`; S2M whose `ipa` is `Dig Fieldbus S->Mn` sends that
@@ -151,6 +159,8 @@ pub struct Item {
     /// Whether the value is signed: always for M2S (the master's data lands sign-extended
     /// in the channel's 32-bit `mon`), for S2M as the parameter the channel sends.
     pub signed: bool,
+    /// Whether the channel is a Fill: padding, no datum (see the [module documentation](self)).
+    pub fill: bool,
 }
 
 impl Item {
@@ -164,8 +174,14 @@ impl Item {
         }
     }
 
-    /// The CiA 301 mapping entry: the channel's `mon` parameter (0x2000 + PAR, sub 1).
+    /// The CiA 301 mapping entry: the channel's `mon` parameter (0x2000 + PAR, sub 1); for a
+    /// Fill in an RPDO the dummy entry of its size (CiA 301 §7.4.7.1: the index of the
+    /// UNSIGNED16 or UNSIGNED32 data type, sub-index 0).
     pub fn mapping_entry(self, dir: Dir) -> u32 {
+        if self.fill && dir == Dir::M2S {
+            let ty: u32 = if self.bits == 32 { 0x0007 } else { 0x0006 };
+            return (ty << 16) | u32::from(self.bits);
+        }
         let mon = match dir {
             Dir::M2S => par::m2s_mon(self.channel),
             Dir::S2M => par::s2m_mon(self.channel),
@@ -197,17 +213,22 @@ pub const MAX_PDOS: u32 = 4;
 pub fn place(dir: Dir, channels: &[(Format, u16)]) -> Result<Layout, PdcFault> {
     let mut layout = Layout::default();
     let mut words = 0u32;
+    // The channel before placed an assigned datum (not a Fill, not a placeholder).
+    let mut after_datum = false;
     for (i, (f, ipa)) in channels.iter().enumerate() {
         let n = i as u16 + 1;
         if *f == Format::NotAssigned {
             break;
         }
-        if *ipa == 0 && matches!(f, Format::Count16 | Format::Count32 | Format::Eu) {
+        let placeholder = matches!(f, Format::Count16 | Format::Count32 | Format::Eu);
+        if *ipa == 0 && (placeholder || (f.is_fill() && after_datum)) {
             if words % WORDS_PER_PDO != 0 {
                 words = words.next_multiple_of(WORDS_PER_PDO);
             }
+            after_datum = false;
             continue;
         }
+        after_datum = !f.is_fill();
         let w = u32::from(f.bits()) / 16;
         if words + w > WORDS_PER_PDO * MAX_PDOS {
             return Err(match dir {
@@ -230,6 +251,7 @@ pub fn place(dir: Dir, channels: &[(Format, u16)]) -> Result<Layout, PdcFault> {
             channel: n,
             bits: f.bits(),
             signed: true,
+            fill: f.is_fill(),
         });
         words += w;
     }
@@ -372,6 +394,7 @@ mod tests {
                 channel: 4,
                 bits: 16,
                 signed: true,
+                fill: false,
             }]
         );
     }

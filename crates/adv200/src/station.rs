@@ -81,6 +81,7 @@ impl Station {
         self.widths.extend(
             pdc.m2s
                 .items()
+                .filter(|i| !i.fill)
                 .map(|i| (par::m2s_mon(i.channel), usize::from(i.bits / 8))),
         );
         self.widths.extend(

@@ -73,9 +73,9 @@ fn manual_1_3_1_pdos_fill_from_rpdo1_four_words_each_up_to_four() {
 fn manual_1_3_pdc_32_bit_items_never_straddle_pdos() {
     // Three words, then a 32-bit item that would straddle RPDO1 and RPDO2: FF34 + (4 − 1).
     let (f, frames) = faults(|d| {
-        m2s(d, 1, "Count 16", par::WORD_DECOMP_SRC);
-        m2s(d, 2, "Eu", par::RAMP_REF_1_SRC);
-        m2s(d, 3, "Fill 16", 0);
+        m2s(d, 1, "Fill 16", 0);
+        m2s(d, 2, "Count 16", par::WORD_DECOMP_SRC);
+        m2s(d, 3, "Eu", par::RAMP_REF_1_SRC);
         m2s(d, 4, "Count 32", par::COMPARE_INPUT_1_SRC);
     });
     assert_eq!(f, [0xFF37]);
@@ -128,18 +128,43 @@ fn manual_1_3_1_ipa_zero_placeholder_closes_the_pdo() {
 
 #[test]
 fn manual_1_3_1_fill_is_inserted_and_not_assigned_ends_the_pdc() {
+    // A Fill that does not follow an assigned datum is padding: a dummy entry of its size
+    // (0x0007 UNSIGNED32, 0x0006 UNSIGNED16) in the RPDO.
     let h = H::canopen(|d| {
-        m2s(d, 1, "Eu", par::RAMP_REF_1_SRC);
-        m2s(d, 2, "Fill 32", 0);
-        m2s(d, 3, "Fill 16", 0);
+        m2s(d, 1, "Fill 32", 0);
+        m2s(d, 2, "Eu", par::RAMP_REF_1_SRC);
+        m2s(d, 3, "Fill 16", 4);
         m2s(d, 4, "Count 16", par::WORD_DECOMP_SRC);
         // Channel 5 Not assigned: channel 6 is never placed.
         m2s(d, 6, "Count 16", par::WORD_DECOMP_SRC);
     });
     assert!(h.d.opt_bus_faults().is_empty());
-    assert_eq!(pdo(&h, 0x1600).1, vec![m(1, 16), m(2, 32), m(3, 16)]);
+    assert_eq!(pdo(&h, 0x1600).1, vec![0x0007_0020, m(2, 16), 0x0006_0010]);
     assert_eq!(pdo(&h, 0x1601).1, vec![m(4, 16)]);
     assert_eq!(pdo(&h, 0x1602).1, Vec::<u32>::new());
+}
+
+#[test]
+fn manual_1_3_1_example_fill_32_after_a_datum_closes_rpdo1() {
+    // The example as printed: RPDO1 of 2 words (M->S1 + M->S2), RPDO2 of 2 words (M->S4).
+    let mut h = H::canopen(|d| {
+        m2s(d, 1, "Eu", par::RAMP_REF_1_SRC);
+        m2s(d, 2, "Count 16", par::WORD_DECOMP_SRC);
+        m2s(d, 3, "Fill 32", 0);
+        m2s(d, 4, "Count 32", par::COMPARE_INPUT_1_SRC);
+    });
+    assert!(h.d.opt_bus_faults().is_empty());
+    assert_eq!(pdo(&h, 0x1600), (0x20C, vec![m(1, 16), m(2, 16)]));
+    assert_eq!(pdo(&h, 0x1601), (0x30C, vec![m(4, 32)]));
+    assert_eq!(
+        h.d.param(par::COMPARE_INPUT_1_SRC),
+        Ok(i64::from(par::m2s_mon(4)))
+    );
+    // 4 bytes each on the wire: RPDO2 with 100000 reaches M->S4 mon, no length EMCY.
+    h.send("000#010C");
+    assert_eq!(h.send("30C#A0860100"), Vec::<String>::new());
+    h.send("080#");
+    assert_eq!(h.d.param(par::m2s_mon(4)), Ok(100_000));
 }
 
 #[test]
