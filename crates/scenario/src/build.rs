@@ -139,6 +139,13 @@ impl Scenario {
                 message: format!("bus {:?} vanished while building", d.bus),
             })?;
             let port = bus.attach_node(node, port_config);
+            let rate = sim.twin(port).and_then(|t| t.controller_bit_rate());
+            if let Some(bus) = sim.bus_mut(bus_id)
+                && rate.is_some_and(|r| r != bus.bit_rate())
+            {
+                // A controller at another rate than the bus's: the bus models it.
+                let _ = bus.set_bit_rate_mismatch(port, rate);
+            }
             let node_id = sim.twin(port).and_then(|t| t.canopen_node_id());
             // Two slaves with one node-ID would answer the same SDO request and send on the
             // same COB-IDs (CiA 301 §7.3.2.1: the node-ID is unique within a network).

@@ -72,6 +72,14 @@ pub trait Twin {
         None
     }
 
+    /// The bit rate the device's CAN controller is set to, for a device that sets it from
+    /// its own parameters. A rate other than its bus's is a misconfiguration the bus
+    /// models ([`cantwin_can`] frames it cannot decode become error frames), not an error
+    /// of the scenario.
+    fn controller_bit_rate(&self) -> Option<cantwin_can::BitRate> {
+        None
+    }
+
     /// The signals the device knows, with what they take and give.
     fn signals(&self) -> Vec<SignalDescription> {
         Vec::new()
