@@ -57,6 +57,12 @@ fn real(min: f64, max: f64) -> ValueKind {
 }
 
 impl Twin for OpenDrive {
+    /// C48 in flash (manual §1.2), read at power-up: a drive set to another rate than its
+    /// bus's does not communicate, and the bus sees its error frames.
+    fn controller_bit_rate(&self) -> Option<cantwin_can::BitRate> {
+        Some(self.bit_rate())
+    }
+
     fn signals(&self) -> Vec<SignalDescription> {
         let any = real(f64::MIN, f64::MAX);
         let mut v = vec![

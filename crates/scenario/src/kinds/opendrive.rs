@@ -20,7 +20,10 @@
 //! | `software_version` | 0x0300 | read through message 2 mux 0x34 |
 //! | `physics_period_ms` | 1 | the physics step |
 //!
-//! The bus must run at the bit rate of C48 (default 1 = 500 kbit/s).
+//! The drive's controller runs at the bit rate of C48 (manual §1.2, default 1 = 500
+//! kbit/s). On a bus at another rate it is misconfigured, as a real drive would be: it
+//! decodes nothing and answers nothing, and while error-active it destroys the others'
+//! frames with error flags (the bus's bit-rate mismatch model); the build warns.
 //!
 //! Signals for scripts (`[[at]] action = "set"`, `[[expect]] signal = …`), served by the
 //! drive as a twin:
@@ -226,16 +229,16 @@ impl DeviceKind for OpenDriveKind {
                 )
             })?;
         }
-        let c48 = node.drive().saved_param(params::C48);
-        if bit_rate_of_c48(c48) != Some(bus.bit_rate) {
-            return Err(s.error(
-                "params",
-                format!(
-                    "the drive's C48 = {c48} runs at {:?}, but bus {:?} runs at {:?}",
-                    node.bit_rate(),
-                    bus.name,
-                    bus.bit_rate
-                ),
+        // A C48 other than the bus's rate is the drive's misconfiguration, not the
+        // scenario's: the build puts its controller at C48's rate (`controller_bit_rate`),
+        // where it decodes nothing and the bus sees error frames.
+        if bit_rate_of_c48(node.drive().saved_param(params::C48)) != Some(bus.bit_rate) {
+            s.warn(format!(
+                "the drive's C48 = {} runs at {:?}, but bus {:?} runs at {:?}: the drive does not communicate",
+                node.drive().saved_param(params::C48),
+                node.bit_rate(),
+                bus.name,
+                bus.bit_rate
             ));
         }
 
@@ -411,14 +414,41 @@ mod tests {
         );
         let e = error_of("params = { P99 = 1 }\n", "500k");
         assert!(e.contains("no parameter or connection P99"), "{e}");
-        let e = error_of("", "125k");
-        assert!(e.contains("C48 = 1"), "{e}");
         let e = error_of("inputs = [9]\n", "500k");
         assert!(e.contains("logic input 9"), "{e}");
         let e = error_of("load_torque = 3\n", "500k");
         assert!(e.contains("unknown key `load_torque`"), "{e}");
         // C48 = 3 is 125 kbit/s.
         let text = DEVICE.replace("500k", "125k") + "params = { C48 = 3 }\n";
-        assert!(try_build(&text).is_ok());
+        assert!(try_build(&text).unwrap().warnings.is_empty());
+    }
+
+    #[test]
+    fn manual_1_2_c48_other_than_the_bus_rate_does_not_communicate() {
+        // C48 = 1 (500 kbit/s, the default) on a 125 kbit/s bus: a misconfigured drive.
+        let text = DEVICE.replace("500k", "125k")
+            + "[[device]]\nname = \"master\"\nkind = \"generator\"\nbus = \"can0\"\nid = 0x7FF\nperiod_ms = 1000\n";
+        let mut built = try_build(&text).unwrap();
+        assert_eq!(built.warnings.len(), 1, "{:?}", built.warnings);
+        assert!(
+            built.warnings[0].contains("C48 = 1")
+                && built.warnings[0].contains("does not communicate"),
+            "{}",
+            built.warnings[0]
+        );
+        let bus = built.bus("can0").unwrap();
+        let drive = built.device("drive").unwrap().port;
+        let master = built.device("master").unwrap().port;
+        let tap = built.sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+        let start = Frame::std(440, &[0x00, 0xA8, 0x88, 0x13]).unwrap();
+        built.sim.transmit(master, start).unwrap();
+        built.sim.run_until(Instant::from_nanos(50_000_000));
+        let recorder = built.sim.bus(bus).unwrap().tap::<Recorder>(tap).unwrap();
+        // No answer on P181, error frames on the bus, nothing reached the drive.
+        assert!(recorder.frames().all(|f| f.frame.id().as_raw() != 439));
+        assert!(recorder.errors().next().is_some());
+        let node = built.sim.node::<OpenDrive>(drive).unwrap();
+        assert_eq!(node.drive().can_reference(), 0);
+        assert!(!node.drive().commands().can_start);
     }
 }
