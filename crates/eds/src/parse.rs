@@ -628,9 +628,11 @@ fn build(f: &mut Found, sections: &[RawSection]) -> Eds {
                 ..Object::default()
             }
         });
+        // CiA 306 describes the sub-objects one way or the other; both at once is an error
+        // (and `parse` refuses it), read with the sections winning.
         if obj.compact_sub_obj.is_some() {
             f.push(
-                Severity::Warning,
+                Severity::Error,
                 ParseError::at(sec.line, ParseErrorKind::CompactWithSubs(index))
                     .in_section(&sec.name),
             );

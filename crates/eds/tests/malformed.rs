@@ -38,7 +38,7 @@ fn cases() -> Vec<Case> {
         ("[OptionalObjects]\n1=0x1005\n".into(), 1, "OptionalObjects", Some("SupportedObjects"), Warning, "missing required key"),
         ("[OptionalObjects]\nSupportedObjects=1\n1=0x10000\n".into(), 3, "OptionalObjects", Some("1"), Error, "an object index"),
         ("[2000sub1]\nParameterName=x\nDataType=0x0005\nAccessType=ro\n".into(), 1, "2000sub1", None, Warning, "taken as a RECORD"),
-        ("[2000]\nParameterName=a\nObjectType=0x8\nCompactSubObj=2\nDataType=0x0005\nAccessType=ro\n\n[2000sub1]\nParameterName=b\nDataType=0x0005\nAccessType=ro\n".into(), 8, "2000sub1", None, Warning, "taken as written"),
+        ("[2000]\nParameterName=a\nObjectType=0x8\nCompactSubObj=2\nDataType=0x0005\nAccessType=ro\n\n[2000sub1]\nParameterName=b\nDataType=0x0005\nAccessType=ro\n".into(), 8, "2000sub1", None, Error, "taken as written"),
         ("[2000]\nParameterName=a\nObjectType=0x8\nCompactSubObj=2\nDataType=0x0005\nAccessType=ro\n[2000Name]\nNrOfEntries=3\n1=x\n2=y\n".into(), 8, "2000Name", Some("NrOfEntries"), Warning, "says 3, 2 entries"),
         ("[2000]\nParameterName=a\nObjectType=0x9\n[2000sub1]\nParameterName=b\nDataType=5\nAccessType=ro\n[2000sub01]\nParameterName=c\nDataType=5\nAccessType=ro\n".into(), 8, "2000sub01", None, Error, "duplicate section, first defined at line 4"),
         ("[Comments]\nLines=2\nLine1=only one\n".into(), 2, "Comments", Some("Lines"), Warning, "says 2, 1 entries"),

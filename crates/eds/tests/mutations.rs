@@ -4,14 +4,15 @@
 //! run on it without panicking.
 #![allow(clippy::unwrap_used)]
 
-use cantwin_eds::{parse, parse_bytes, render_markdown, to_od, write};
+use cantwin_eds::{load, load_bytes, parse, parse_bytes, render_markdown, to_od, write};
 use proptest::prelude::*;
 use std::path::PathBuf;
 
 fn corpus() -> Vec<Vec<u8>> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
+    let mut files: Vec<_> = [dir.clone(), dir.join("irregular")]
+        .iter()
+        .flat_map(|d| std::fs::read_dir(d).unwrap())
         .map(|e| e.unwrap().path())
         .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("eds" | "dcf")))
         .collect();
@@ -117,12 +118,27 @@ fn pipeline(bytes: &[u8]) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// Any input loads: every diagnostic names a line of the file (or none), the dictionary is
+/// built or refused without a panic, and once written the text is stable.
+fn lenient(bytes: &[u8]) -> Result<(), TestCaseError> {
+    let line_count = bytes.split(|b| *b == b'\n').count();
+    let loaded = load_bytes(bytes);
+    for i in &loaded.report.issues {
+        prop_assert!(i.line.is_none_or(|l| l >= 1 && l <= line_count), "{}", i);
+    }
+    let _ = to_od(&loaded.eds);
+    let text = write(&loaded.eds);
+    let again = write(&load(&text).eds);
+    prop_assert_eq!(&again, &text);
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
 
     #[test]
     fn mutated_corpus_never_panics_and_round_trips(
-        file in 0usize..4,
+        file in 0usize..32,
         muts in proptest::collection::vec(mutation(), 1..4),
     ) {
         let files = corpus();
@@ -131,6 +147,7 @@ proptest! {
             bytes = apply(&bytes, m);
         }
         pipeline(&bytes)?;
+        lenient(&bytes)?;
     }
 
     #[test]
@@ -143,5 +160,6 @@ proptest! {
         let mut text = String::from("[2000]\n");
         text.push_str(&lines.join("\n"));
         pipeline(text.as_bytes())?;
+        lenient(text.as_bytes())?;
     }
 }
