@@ -212,8 +212,8 @@ pub struct Adv200 {
     /// [`Node::next_deadline`] as of the end of the last call that could change it: the bus
     /// asks for it after every event; every other change of the drive sets `dirty`.
     deadline: Option<Instant>,
-    /// Where "Save all parameters" keeps the parameters across power cycles, if anywhere
-    /// ([`crate::memory`]).
+    /// Where "Save all parameters" keeps the parameters across power cycles
+    /// ([`crate::memory`]): in memory unless [`Adv200::set_memory`] gave another store.
     memory: Option<Memory>,
     /// What was wrong with the memory at the last power-up or save.
     memory_error: Option<String>,
@@ -260,7 +260,12 @@ impl Adv200 {
             bus_off_recovered: None,
             descriptions,
             deadline: None,
-            memory: None,
+            // §1.1 object table: 0x1010 is the card's; a drive given no other memory keeps
+            // what it saves in memory, for as long as the twin exists (across its power
+            // cycles), in the stack's storage.
+            memory: Some(Memory::new(Box::new(
+                cantwin_canopen::storage::MemoryStorage::new(),
+            ))),
             memory_error: None,
         }
     }

@@ -78,3 +78,17 @@ fn manual_1_5_unreadable_memory_raises_param_error_and_keeps_the_parameters() {
     assert!(h.d.drive().alarms().contains(&Alarm::ParamError));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn manual_1_1_5_store_parameters_without_a_state_directory_keeps_them_in_memory() {
+    // No memory given: 0x1010 sub 1 "save" is accepted and kept across a power cycle.
+    let mut h = H::canopen(|_| {});
+    assert_eq!(h.send("60C#4010100100000000"), ["58C#4310100101000000"]);
+    assert_eq!(h.send("60C#2B582201E8030000"), ["58C#6058220100000000"]);
+    assert_eq!(h.send("60C#2310100173617665"), ["58C#6010100100000000"]);
+    assert_eq!(h.send("60C#2B5822010A000000"), ["58C#6058220100000000"]);
+    let mut out = cantwin_can::Outbox::new();
+    cantwin_can::Node::on_power_up(&mut h.d, cantwin_can::Instant::from_nanos(h.now), &mut out);
+    assert_eq!(h.d.param(par::DIG_RAMP_REF_1), Ok(1000));
+    assert!(h.d.memory_error().is_none());
+}

@@ -28,8 +28,9 @@
 //! stays off the bus in Opt Bus Fault FF02, as the real one does until it is configured. A card
 //! whose baud rate differs from the bus's stays silent.
 //!
-//! With `--state-dir`, "Save all parameters" (0x1010 sub 1) keeps the drive parameters and
-//! the card's communication objects in `STATE_DIR/<device name>/`; at power-up the saved
+//! "Save all parameters" (0x1010 sub 1) keeps the drive parameters and the card's
+//! communication objects: without `--state-dir` in memory, across the drive's power cycles
+//! for as long as the run lasts; with it in `STATE_DIR/<device name>/`; at power-up the saved
 //! parameters take the place of those set here. A memory that cannot be read is a build
 //! warning naming the file, and the drive raises Param error (EMCY 0xFF2D, §1.5).
 
