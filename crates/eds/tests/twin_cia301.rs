@@ -24,7 +24,11 @@ fn corpus(name: &str) -> PathBuf {
 fn description(name: &str) -> (OdDescription, Option<u8>) {
     let l = load_bytes(&std::fs::read(corpus(name)).unwrap());
     // The irregular files have their errors (read past); the others have none.
-    assert!(name.starts_with("irregular/") || l.report.is_ok(), "{name}\n{}", l.report);
+    assert!(
+        name.starts_with("irregular/") || l.report.is_ok(),
+        "{name}\n{}",
+        l.report
+    );
     let node = l.eds.commissioning.as_ref().and_then(|c| c.node_id);
     (to_od(&configured(&l.eds)).unwrap(), node)
 }
@@ -277,13 +281,20 @@ fn cia301_7_4_pdo_mapping_as_the_file_allows_and_nmt() {
         .unwrap();
     // A dummy entry (0x0005, UNSIGNED8, one of the file's DEFTYPE objects) fills a byte of
     // an RPDO, never of a TPDO.
-    assert!(rig.download(0x1A00, 2, &x(0x0005_0008), Mode::Auto).is_err());
-    rig.download(0x1400, 1, &x(0x8000_0205), Mode::Auto).unwrap();
+    assert!(
+        rig.download(0x1A00, 2, &x(0x0005_0008), Mode::Auto)
+            .is_err()
+    );
+    rig.download(0x1400, 1, &x(0x8000_0205), Mode::Auto)
+        .unwrap();
     rig.download(0x1600, 0, &[0], Mode::Auto).unwrap();
-    rig.download(0x1600, 1, &x(0x0005_0008), Mode::Auto).unwrap();
-    rig.download(0x1600, 2, &x(0x6040_0010), Mode::Auto).unwrap();
+    rig.download(0x1600, 1, &x(0x0005_0008), Mode::Auto)
+        .unwrap();
+    rig.download(0x1600, 2, &x(0x6040_0010), Mode::Auto)
+        .unwrap();
     rig.download(0x1600, 0, &[2], Mode::Auto).unwrap();
-    rig.download(0x1400, 1, &x(0x0000_0205), Mode::Auto).unwrap();
+    rig.download(0x1400, 1, &x(0x0000_0205), Mode::Auto)
+        .unwrap();
     rig.download(0x1A00, 0, &[1], Mode::Auto).unwrap();
     rig.download(0x1800, 2, &[1], Mode::Auto).unwrap();
     rig.download(0x1800, 1, &x(0x0000_0185), Mode::Auto)
