@@ -57,6 +57,24 @@
 //!   24–31 set. Checked
 //!   where the value is written ([`ManualLimits`], the device's object hooks), so expedited,
 //!   segmented and block downloads are refused alike.
+//! * **Changing a valid PDO** (bit 31 of its COB-ID 0). A download of the value an entry
+//!   already holds is accepted (a configuration tool writing back a DCF); a change is
+//!   refused as CiA 301 says, the entry keeping its value
+//!   (`tests/manual_fidelity.rs`, one test per row):
+//!
+//!   | entry | CiA 301 | change refused with |
+//!   |---|---|---|
+//!   | 1400H–141CH sub 1, COB-ID (bits 0–29) | §7.5.2.35 | 0x06090030 |
+//!   | 1800H–1837H sub 1, COB-ID (bits 0–29) | §7.5.2.37 | 0x06090030 |
+//!   | 1800H–1837H sub 3, inhibit time | §7.5.2.37 | 0x06090030 |
+//!   | 1600H–161CH sub 0, number of mapped objects | §7.5.2.36 | 0x06010000 |
+//!   | 1600H–161CH sub 1–8, mapped object | §7.5.2.36 | 0x06010000 |
+//!   | 1A00H–1A37H sub 0, number of mapped objects | §7.5.2.38 | 0x06010000 |
+//!   | 1A00H–1A37H sub 1–8, mapped object | §7.5.2.38 | 0x06010000 |
+//!   | transmission type (sub 2), event timer (sub 5) | §7.5.2.35, §7.5.2.37 | not refused: they may change on a valid PDO |
+//!
+//! * **1201H sub 3** (client node-ID) takes 0, its default, as well as 1–127, so a DCF of
+//!   the defaults downloads.
 //! * **Error register.** Besides the CiA 301 bits, bit 7 (manufacturer-specific) is set
 //!   while a module error is active and bit 5 (device profile) while 0x0080 is.
 
