@@ -160,3 +160,21 @@ fn cia306_dcf_values_configure_the_node_they_were_made_for() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn cia306_eds_export_of_the_tm3_names_its_manufacturer_and_1016_sub_0_ro() {
+    let scenario = scenario_file("tm3-island.toml");
+    let (ok, out, err) = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        &scenario,
+        "--device",
+        "island",
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("VendorName=Schneider Electric\n"), "{out}");
+    let start = out.find("[1016sub0]\n").unwrap();
+    let section = out[start..].split("\n\n").next().unwrap();
+    assert!(section.contains("AccessType=ro\n"), "{section}");
+}
