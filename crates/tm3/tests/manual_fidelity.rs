@@ -49,6 +49,46 @@ fn manual_emcy_7002_follows_the_boot_up_at_power_on() {
 }
 
 #[test]
+fn manual_emcy_7002_reaches_the_bus_after_the_boot_up_despite_its_priority() {
+    use cantwin_bus::{BusConfig, PortConfig, Recorder, Simulation};
+    use cantwin_can::{BitRate, ListenOnly};
+    let mut c = Tm3Coupler::new(CouplerConfig::new(
+        NODE,
+        Island::from_references(&["TM3DI8", "TM3DQ8R"]).unwrap(),
+    ))
+    .unwrap();
+    c.fit(2, Fitted::Empty, ms(0), &mut Outbox::new()).unwrap();
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+    let tap = sim.bus_mut(bus).unwrap().add_tap(Recorder::new());
+    sim.attach(bus, c, PortConfig::default()).unwrap();
+    let master = sim.attach(bus, ListenOnly, PortConfig::default()).unwrap();
+    sim.run_until(ms(5));
+    // NMT reset communication: the module error is raised again, after the boot-up.
+    sim.transmit(master, Frame::std(0, &[0x82, NODE]).unwrap())
+        .unwrap();
+    sim.run_until(ms(10));
+    let frames: Vec<String> = sim
+        .bus(bus)
+        .unwrap()
+        .tap::<Recorder>(tap)
+        .unwrap()
+        .frames()
+        .map(|f| f.frame.to_string())
+        .collect();
+    assert_eq!(
+        frames,
+        [
+            BOOT_UP,
+            "083#0270810400004002",
+            "000#8203",
+            BOOT_UP,
+            "083#0270810400004002"
+        ]
+    );
+}
+
+#[test]
 fn manual_emcy_7003_follows_the_boot_up_after_nmt_reset_communication() {
     let mut c = running();
     let mut out = Outbox::new();
