@@ -3,25 +3,12 @@
 //! for that the file leaves out harmlessly (warnings), and what was read with a guess
 //! (notes). The values are judged by the same function [`crate::to_od`] builds from.
 
+pub use crate::judge::Severity;
 use crate::judge::judge;
 use crate::model::{Eds, Entry, ObjectList};
 use crate::value::EdsValue;
 use cantwin_canopen::od::DataType;
 use core::fmt;
-
-/// How serious an [`Issue`] is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Severity {
-    /// Something read with a guess, or left as it is; worth knowing.
-    Note,
-    /// Not what CiA 306 asks for, but harmless: readers cope and the dictionary is the one
-    /// the file evidently means.
-    Warning,
-    /// What CiA 306 does not allow, with a consequence: a value or key is ignored (the
-    /// diagnostic says how the dictionary is built instead), or, for an entry without a
-    /// data type, the file cannot become a dictionary at all.
-    Error,
-}
 
 /// One finding of [`Eds::check`].
 #[derive(Debug, Clone, PartialEq, Eq)]
