@@ -89,7 +89,7 @@ enum Command {
     /// Message 2: read or write a multiplexed parameter (by name or number; `param list`).
     #[command(
         after_help = "Examples:\n  cantwin cal --scenario scenarios/opendrive.toml param read max-frequency\n  \
-                            cantwin cal --scenario scenarios/opendrive.toml param write 0x1B 50\n  cantwin cal param list"
+                            cantwin cal --scenario scenarios/opendrive.toml param write stop-delay 5\n  cantwin cal param list"
     )]
     Param {
         #[command(subcommand)]
