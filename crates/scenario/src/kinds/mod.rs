@@ -3,9 +3,9 @@
 pub mod adv200;
 pub mod cia301;
 mod common;
-pub mod lss;
 pub mod eds;
 pub mod generator;
+pub mod lss;
 pub mod master;
 pub mod opendrive;
 pub mod tm3;
