@@ -685,6 +685,8 @@ fn cia301_7_5_2_36_a_count_above_the_entries_the_object_holds_is_0x06040042_in_a
             h.write_u32(map, 1, IN8, t),
             Err(AbortCode::UNSUPPORTED_ACCESS)
         );
+        // Writing back what the mapping holds changes nothing and is accepted.
+        assert_eq!(h.write_u8(map, 0, 1, t), Ok(()));
         h.write_u32(comm, 1, 0x8000_0000 | id, t).unwrap();
         for n in [9u8, 31, 65] {
             assert_eq!(

@@ -24,6 +24,9 @@
 //!   (types 254/255) once so the consumers start from current values. Leaving OPERATIONAL
 //!   drops pending events and buffered synchronous RPDO data (§7.3.2.2: no PDOs outside
 //!   OPERATIONAL).
+//! * **Valid PDOs** (§7.5.2.35–38): the entries that may not change while the PDO is valid
+//!   (COB-ID, inhibit time, SYNC start value, mapping) accept a download of the value they
+//!   hold, which changes nothing, so a DCF can be written back to a running device.
 //! * **RPDO length** (§7.2.2.2): fewer bytes than mapped are not processed
 //!   ([`PdoEvent::LengthError`] with 0x8210); more bytes are processed (the mapped bytes
 //!   are used, the excess ignored) and reported with 0x8220, unless the device chose
