@@ -59,7 +59,7 @@ use crate::devicenet::{DnApp, identity};
 use crate::drive::{AlarmEvent, Drive, ProfileCommands};
 use crate::ds402::State as PowerState;
 use crate::memory::Memory;
-use crate::od::{Descriptions, Personality};
+use crate::od::{CardInfo, Descriptions, Personality};
 use crate::params::{ParamDb, ParamError, def, par};
 use crate::pdc::{self, Pdc};
 use crate::station::{Station, od_i64};
@@ -73,8 +73,13 @@ pub struct Adv200Config {
     /// The bit rate of the bus the card is on; a card configured for another rate stays
     /// silent (it cannot decode the bus). `None`: not checked.
     pub bus_bit_rate: Option<u32>,
-    /// 0x1018 sub 4.
+    /// 0x1018 sub 4 (CANopen) and Identity attribute 6 (DeviceNet).
     pub serial: u32,
+    /// 0x1018 sub 1, the CiA vendor-ID ([`crate::od::VENDOR_ID`] by default: none sourced).
+    pub vendor_id: u32,
+    /// Identity attribute 1, the ODVA vendor ID ([`crate::devicenet::VENDOR_ID`] by
+    /// default: none sourced).
+    pub devicenet_vendor_id: u16,
 }
 
 impl Default for Adv200Config {
@@ -83,6 +88,8 @@ impl Default for Adv200Config {
             expedited_only: true,
             bus_bit_rate: None,
             serial: 1,
+            vendor_id: crate::od::VENDOR_ID,
+            devicenet_vendor_id: crate::devicenet::VENDOR_ID,
         }
     }
 }
@@ -570,7 +577,15 @@ impl Adv200 {
         let node = self.latched.address as u8;
         let built = self
             .descriptions
-            .get(personality, &pdc, self.config.serial)
+            .get(
+                personality,
+                &pdc,
+                CardInfo {
+                    serial: self.config.serial,
+                    vendor_id: self.config.vendor_id,
+                    expedited_only: self.config.expedited_only,
+                },
+            )
             .ok()
             .and_then(|d| {
                 let mut c = DeviceConfig::new(node);
@@ -662,7 +677,11 @@ impl Adv200 {
             ms_enable: self.latched.ms_enable,
             events: Vec::new(),
         };
-        let config = SlaveConfig::new(mac, rate, identity(self.config.serial));
+        let config = SlaveConfig::new(
+            mac,
+            rate,
+            identity(self.config.serial, self.config.devicenet_vendor_id),
+        );
         let Ok(slave) = Slave::new(config, app) else {
             return self.config_fault(0xFF04, now);
         };

@@ -59,10 +59,17 @@ pub const fn error_code(e: ParamError) -> u16 {
     }
 }
 
-/// The identity object of the card.
-pub fn identity(serial: u32) -> Identity {
+/// Identity attribute 1 by default: the manual gives no ODVA vendor ID and none could be
+/// sourced from public vendor lists or Gefran EDS files; the configuration may give one
+/// ([`crate::Adv200Config::devicenet_vendor_id`], the scenario option
+/// `devicenet_vendor_id`).
+pub const VENDOR_ID: u16 = 0;
+
+/// The Identity object (class 0x01) of the card with serial number `serial` and ODVA
+/// vendor ID `vendor`.
+pub fn identity(serial: u32, vendor: u16) -> Identity {
     Identity {
-        vendor: 0,
+        vendor,
         device_type: 0x02,
         product_code: 4,
         revision: (1, 0),

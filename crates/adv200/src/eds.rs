@@ -13,13 +13,14 @@ use cantwin_canopen::od::OdBuildError;
 use cantwin_cia402::objects as cia402;
 use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 
-use crate::od::{Personality, build};
+use crate::od::{CardInfo, Personality, build};
 use crate::params::catalog;
 use crate::pdc::Pdc;
 
 /// The EDS model of `personality` with the PDO mappings of `pdc` (CANopen).
 pub fn eds_for(personality: Personality, pdc: &Pdc) -> Result<Eds, OdBuildError> {
-    let desc = build(personality, pdc, 0)?;
+    // The card as shipped: expedited transfers only (0x1008 as it answers them).
+    let desc = build(personality, pdc, CardInfo::default())?;
     let (file, product) = match personality {
         Personality::CanOpen => ("adv200-canopen.eds", "ADV200 EXP-CAN/DN-ADV CANopen"),
         Personality::Ds402 => ("adv200-ds402.eds", "ADV200 EXP-CAN/DN-ADV DS402"),

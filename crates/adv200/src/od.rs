@@ -35,8 +35,41 @@ pub enum Personality {
     Ds402,
 }
 
-/// 0x1018 sub 1: the twin's vendor-ID (the manual gives none).
+/// 0x1018 sub 1 by default: the manual gives no vendor-ID and none could be sourced from
+/// public vendor-ID lists or Gefran EDS files, so the twin says 0 unless its configuration
+/// gives one ([`CardInfo::vendor_id`]; the scenario option `vendor_id`).
 pub const VENDOR_ID: u32 = 0x0000_0000;
+
+/// 0x1008 with the SDO limit lifted: the product's name.
+pub const DEVICE_NAME: &str = "ADV200";
+
+/// 0x1008 on the card as shipped (§1.1 item 11: expedited transfers only, at most 4 data
+/// bytes). Table 1.1.5 lists 0x1008 as readable, and an object of more than 4 bytes could
+/// only be read segmented, which the card refuses: so the card's name is one that an
+/// expedited upload carries, the product name cut to 4 bytes. The EDS states it as the
+/// object's default, so its length is the one an upload returns.
+pub const DEVICE_NAME_EXPEDITED: &str = "ADV2";
+
+/// What a card's dictionary holds besides its personality and PDC: the identity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct CardInfo {
+    /// 0x1018 sub 4.
+    pub serial: u32,
+    /// 0x1018 sub 1.
+    pub vendor_id: u32,
+    /// The card answers expedited transfers only: 0x1008 is [`DEVICE_NAME_EXPEDITED`].
+    pub expedited_only: bool,
+}
+
+impl Default for CardInfo {
+    fn default() -> Self {
+        CardInfo {
+            serial: 0,
+            vendor_id: VENDOR_ID,
+            expedited_only: true,
+        }
+    }
+}
 /// 0x1018 sub 2: product code, the card type code of PAR 534 (4).
 pub const PRODUCT_CODE: u32 = 4;
 
@@ -290,8 +323,14 @@ const fn entry(index: u16, bits: u32) -> u32 {
 pub fn build(
     personality: Personality,
     pdc: &Pdc,
-    serial: u32,
+    info: CardInfo,
 ) -> Result<OdDescription, OdBuildError> {
+    let serial = info.serial;
+    let name = if info.expedited_only {
+        DEVICE_NAME_EXPEDITED
+    } else {
+        DEVICE_NAME
+    };
     let device_type = match personality {
         Personality::CanOpen => 0,
         Personality::Ds402 => 0x192,
@@ -319,7 +358,7 @@ pub fn build(
         )
         .var(
             0x1008,
-            SubObject::const_string("Manufacturer device name", "ADV200"),
+            SubObject::const_string("Manufacturer device name", name),
         )
         .var(
             0x1009,
@@ -369,7 +408,10 @@ pub fn build(
             0x1018,
             "Identity object",
             [
-                (1, SubObject::unsigned32("Vendor-ID", Access::Ro, VENDOR_ID)),
+                (
+                    1,
+                    SubObject::unsigned32("Vendor-ID", Access::Ro, info.vendor_id),
+                ),
                 (
                     2,
                     SubObject::unsigned32("Product code", Access::Ro, PRODUCT_CODE),
@@ -423,7 +465,7 @@ struct Key {
     personality: Personality,
     /// The PDC's default mappings; DS402 has fixed ones and ignores the PDC.
     pdc: Pdc,
-    serial: u32,
+    info: CardInfo,
 }
 
 /// The descriptions drives built ([`build`]), so that drives of the same personality, PDC
@@ -443,13 +485,13 @@ impl Descriptions {
         Self::default()
     }
 
-    /// The dictionary of `personality` with the PDC layout `pdc` and serial number
-    /// `serial`, the one a drive already uses if there is one.
+    /// The dictionary of `personality` with the PDC layout `pdc` and identity `info`, the
+    /// one a drive already uses if there is one.
     pub fn get(
         &self,
         personality: Personality,
         pdc: &Pdc,
-        serial: u32,
+        info: CardInfo,
     ) -> Result<Arc<OdDescription>, OdBuildError> {
         let key = Key {
             personality,
@@ -457,7 +499,7 @@ impl Descriptions {
                 Personality::CanOpen => pdc.clone(),
                 Personality::Ds402 => Pdc::default(),
             },
-            serial,
+            info,
         };
         // A poisoned lock only means another build panicked; the list is still valid.
         let mut built = self.built.lock().unwrap_or_else(PoisonError::into_inner);
@@ -468,7 +510,7 @@ impl Descriptions {
         {
             return Ok(d);
         }
-        let d = Arc::new(build(personality, &key.pdc, serial)?);
+        let d = Arc::new(build(personality, &key.pdc, info)?);
         built.retain(|(k, d)| d.strong_count() > 0 && *k != key);
         built.push((key, Arc::downgrade(&d)));
         Ok(d)

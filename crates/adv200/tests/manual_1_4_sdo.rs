@@ -75,8 +75,6 @@ fn manual_1_1_item_11_only_expedited_transfers() {
     assert_eq!(h.send("60C#A008100000000000"), ["58C#8008100001000405"]);
     // A stray segment request.
     assert_eq!(h.send("60C#6000000000000000"), ["58C#8000000001000405"]);
-    // An upload longer than 4 bytes (0x1008 "ADV200"): 0x06070012.
-    assert_eq!(h.send("60C#4008100000000000"), ["58C#8008100012000706"]);
     // Four bytes or less go through the CiA 301 stack.
     assert_eq!(h.send("60C#4009100000000000"), ["58C#47091000312E3000"]);
 }
@@ -212,4 +210,19 @@ fn manual_1_2_fieldbus_enumerations_refuse_other_values_as_invalid() {
     // PAR 4006 (0x2FA6): 1–127 (§1.2), 200 is too high.
     assert_eq!(h.send("60C#2BA62F01C8000000"), ["58C#80A62F0131000906"]);
     assert_eq!(h.send("60C#2BA62F017F000000"), ["58C#60A62F0100000000"]);
+}
+
+#[test]
+fn manual_1_1_5_device_name_0x1008_is_read_with_one_expedited_upload() {
+    // Table 1.1.5 lists 0x1008; the card answers expedited transfers only (§1.1 item 11),
+    // so its name is at most 4 bytes: "ADV2", as the EDS states.
+    let mut h = H::canopen(|_| {});
+    assert_eq!(h.send("60C#4008100000000000"), ["58C#4308100041445632"]);
+    let eds = cantwin_adv200::eds::eds_text(cantwin_adv200::od::Personality::CanOpen).unwrap();
+    let eds = cantwin_eds::parse(&eds).unwrap();
+    let name = eds.entry(0x1008, 0).unwrap();
+    assert_eq!(
+        name.default_value.as_ref().map(|v| v.to_string()),
+        Some("ADV2".to_owned())
+    );
 }

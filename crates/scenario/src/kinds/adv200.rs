@@ -11,7 +11,9 @@
 //! | `digital_inputs` | `[]` | digital inputs 1–8 that are on |
 //! | `analog_inputs` | `[0.0, 0.0]` | analog inputs 1 and 2 in volts (±10 V) |
 //! | `expedited_only` | true | the card's SDO server refuses segmented and block transfers (§1.1 item 11); `false` lifts the limit |
-//! | `serial` | 1 | 0x1018 sub 4 |
+//! | `serial` | 1 | 0x1018 sub 4 (DeviceNet: Identity serial number) |
+//! | `vendor_id` | 0 | 0x1018 sub 1, the CiA vendor-ID: the manual gives none and no public vendor-ID list or Gefran EDS file could be found to source it |
+//! | `devicenet_vendor_id` | 0 | DeviceNet Identity attribute 1, the ODVA vendor ID (not sourced either) |
 //!
 //! Scripts read drive parameters with `[[expect]] value = { device, index = 0x2000 + PAR,
 //! sub = 1, … }` in every personality (the §1.4 SDO mapping; the bytes are the parameter's
@@ -69,7 +71,7 @@ impl DeviceKind for Adv200Kind {
     }
 
     fn summary(&self) -> &'static str {
-        "Gefran ADV200 drive with the EXP-CAN card: params by number, example, digital_inputs, analog_inputs, expedited_only"
+        "Gefran ADV200 drive with the EXP-CAN card: params by number, example, digital_inputs, analog_inputs, expedited_only, serial, vendor_id, devicenet_vendor_id"
     }
 
     fn build(
@@ -82,6 +84,9 @@ impl DeviceKind for Adv200Kind {
             expedited_only: s.get_or("expedited_only", true)?,
             bus_bit_rate: Some(bus.bit_rate.bits_per_second()),
             serial: s.get_or("serial", 1)?,
+            vendor_id: s.get_or("vendor_id", cantwin_adv200::od::VENDOR_ID)?,
+            devicenet_vendor_id: s
+                .get_or("devicenet_vendor_id", cantwin_adv200::devicenet::VENDOR_ID)?,
         };
         let mut node = Adv200::with_descriptions(config, Arc::clone(&self.descriptions));
         if s.get_or("example", false)? {
@@ -195,6 +200,41 @@ mod tests {
         // The worked example's parameters are still in effect: node 12.
         assert_eq!(node.param(par::FIELDBUS_ADDRESS), Ok(12));
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn vendor_ids_are_scenario_options_for_canopen_and_devicenet() {
+        let mut b = built(
+            &(DEVICE.to_string()
+                + "example = true\nvendor_id = 0x12345678\ndevicenet_vendor_id = 777\n"),
+        );
+        b.sim.run_until(Instant::from_nanos(10_000_000));
+        let port = b.device("drive").unwrap().port;
+        let node = b.sim.node::<Adv200>(port).unwrap();
+        assert_eq!(
+            node.object_bytes(0x1018, 1),
+            Ok(0x1234_5678u32.to_le_bytes().to_vec())
+        );
+        // Without the option: 0, and the DeviceNet identity takes its own.
+        let mut b = built_default();
+        b.sim.run_until(Instant::from_nanos(10_000_000));
+        let port = b.device("drive").unwrap().port;
+        let node = b.sim.node::<Adv200>(port).unwrap();
+        assert_eq!(node.object_bytes(0x1018, 1), Ok(vec![0, 0, 0, 0]));
+        let dnet = "params = { 4000 = \"DeviceNet\", 4004 = \"500k\", 4006 = 12 }\n";
+        for (option, vendor) in [("devicenet_vendor_id = 777\n", 777), ("", 0)] {
+            let mut b = built(&(DEVICE.to_string() + dnet + option));
+            b.sim.run_until(Instant::from_nanos(10_000_000));
+            let port = b.device("drive").unwrap().port;
+            let node = b.sim.node::<Adv200>(port).unwrap();
+            let slave = node.devicenet().unwrap();
+            assert_eq!(slave.config().identity.vendor, vendor);
+        }
+        assert!(error_of("vendor_id = \"x\"\n").contains("vendor_id"));
+    }
+
+    fn built_default() -> crate::Built {
+        built(&(DEVICE.to_string() + "example = true\n"))
     }
 
     #[test]
