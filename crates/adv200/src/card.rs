@@ -7,7 +7,9 @@
 //!   FF01–FF03 the card stays off the bus, as the real one does from the factory defaults.
 //!   PAR 4000 = DeviceNet runs the [`crate::devicenet`] personality instead (chapter 3: bit
 //!   rates 125k–500k, else FFC5; MAC ID 1–63, else FFC6; faults FFC7 bus-off, FFC9 duplicate
-//!   MAC ID, 0 polled I/O timed out or enable without polled I/O; no EMCY, §3.7.2).
+//!   MAC ID, 0 polled I/O timed out or enable without polled I/O; no EMCY, §3.7.2). The
+//!   predefined explicit connection announces body format 8/16 in its Allocate response,
+//!   so the manual's PAR 600 example reaches instance 600 on it (§3.4.1).
 //! * **SDO** (§1.1 items 10–11, §1.4): the CiA 301 stack answers every request, with the
 //!   services of a minimum-capability device: sub-index 0xFF is refused (0x06090011), and
 //!   unless [`Adv200Config::expedited_only`] is off a segmented or block request is aborted
@@ -677,11 +679,16 @@ impl Adv200 {
             ms_enable: self.latched.ms_enable,
             events: Vec::new(),
         };
-        let config = SlaveConfig::new(
+        let mut config = SlaveConfig::new(
             mac,
             rate,
             identity(self.config.serial, self.config.devicenet_vendor_id),
         );
+        // §3.4.1/§3.4.2 address the Parameter object and Drive Parameter Access by PAR as
+        // the instance (PAR 600, PAR 4000–4014: above 255), and the manual names no other
+        // body format: the predefined explicit connection announces 8/16 in the Allocate
+        // response, so its requests carry 16-bit instance IDs (DeviceNet Vol. 3 §5-5.4.2).
+        config.allocate_format = cantwin_devicenet::wire::BodyFormat::F8_16;
         let Ok(slave) = Slave::new(config, app) else {
             return self.config_fault(0xFF04, now);
         };

@@ -127,6 +127,52 @@ fn manual_3_4_2_drive_parameter_access_over_ucmm() {
 }
 
 #[test]
+fn manual_3_4_1_par_600_example_over_the_predefined_explicit_connection() {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("dnet", BitRate::R500K));
+    let mac = MacId::new(12).unwrap();
+    let pm = sim
+        .attach(
+            bus,
+            Scanner::new(ScannerConfig::new(MacId::new(0).unwrap(), 1, 2)),
+            PortConfig::default(),
+        )
+        .unwrap();
+    let pd = sim.attach(bus, drive(), PortConfig::default()).unwrap();
+    sim.run_until(at(2100));
+    let m = sim.node_mut::<Scanner>(pm).unwrap();
+    assert_eq!(m.poll_event(), Some(ScannerEvent::Online));
+    m.allocate(mac, choice::EXPLICIT).unwrap();
+    sim.run_until(at(2200));
+    let m = sim.node_mut::<Scanner>(pm).unwrap();
+    // The Allocate response announces 8/16.
+    let allocated = std::iter::from_fn(|| m.poll_event()).find_map(|e| match e {
+        ScannerEvent::Allocated { format, .. } => Some(format),
+        _ => None,
+    });
+    assert_eq!(allocated, Some(BodyFormat::F8_16));
+    // §3.4.1: Set_Attribute_Single class 0x0F instance 600 attribute 1 = 1000, then Get;
+    // PAR 4006 (instance 0xFA6) read back.
+    m.request(mac, 0x10, 0x0F, 600, &[1, 0xE8, 0x03]).unwrap();
+    m.request(mac, 0x0E, 0x0F, 600, &[1]).unwrap();
+    m.request(mac, 0x0E, 0x0F, 4006, &[1]).unwrap();
+    sim.run_until(at(2400));
+    let m = sim.node_mut::<Scanner>(pm).unwrap();
+    let mut responses = Vec::new();
+    while let Some(e) = m.poll_event() {
+        if let ScannerEvent::Response { service, data, .. } = e {
+            responses.push((service, data));
+        }
+    }
+    assert_eq!(responses.len(), 3, "{responses:?}");
+    assert_eq!(responses[0].0, 0x10);
+    assert_eq!(responses[1], (0x0E, vec![0xE8, 0x03, 0, 0]));
+    assert_eq!(responses[2], (0x0E, vec![12, 0, 0, 0]));
+    let node = sim.node::<Adv200>(pd).unwrap();
+    assert_eq!(node.param(par::DIG_RAMP_REF_1), Ok(1000));
+}
+
+#[test]
 fn manual_3_7_1_configuration_faults() {
     let cfg = |baud: &str, addr: i64| {
         let h = common::H::new(Adv200Config::default(), |d| {
