@@ -36,6 +36,17 @@
 //!   abort 0x06090030 ([`station`]).
 //! * **Invalid values**: a value an enumeration does not list is 0x06090030 (DeviceNet code
 //!   11), not "too high"; PAR 4006 takes 0 (factory: no address) to 127 (§1.2 "1 a 127").
+//! * **0x1008** on the expedited-only card is "ADV2", what one expedited upload carries
+//!   (§1.1 item 11); "ADV200" with the limit lifted ([`od`]).
+//! * **Vendor IDs** (0x1018 sub 1, DeviceNet Identity attribute 1): the manual gives none
+//!   and none could be sourced publicly; 0 unless [`Adv200Config`] gives them.
+//! * **DeviceNet body format**: the predefined explicit connection is 8/16 (§3.4.1 addresses
+//!   PAR 600 as instance 600) ([`card`]).
+//! * **CiA 402**: FAULT REACTION ACTIVE while the motor coasts after a fault; QUICK STOP
+//!   ACTIVE shown in a statusword before transition 12, at standstill too ([`ds402`]).
+//! * **EMCY** only once the boot-up has been sent, again after every reset communication;
+//!   a guarding or heartbeat loss is one EMCY, Opt Bus Fault 8130 ([`card`]).
+//! * **0x1010** "save" kept in memory unless a store is given ([`memory`]).
 //! * **LEDs**: AL on in every NMT state but Operational (the §1.6.2.1 table) and with Opt
 //!   Bus Fault; PWR/+5VC on while the card is powered ([`card`]).
 //!

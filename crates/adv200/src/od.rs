@@ -7,7 +7,10 @@
 //! entries each (a PDO carries at most 4 words), RPDO and TPDO transmission type 1
 //! (synchronous when the master says nothing). Guard time 60 ms and life time factor 3 are
 //! the defaults of §1.1.3. 0x1005 has bit 31 set as §1.1.9 prints it. TPDO COB-IDs have bit
-//! 30 set: no remote request (§1.1.7 says RTR is not supported).
+//! 30 set: no remote request (§1.1.7 says RTR is not supported); clearing it, and
+//! transmission types other than 1, 254 and 255, abort 0x06090030 ([`crate::station`]).
+//! 0x1008 is as long as one expedited upload on the expedited-only card
+//! ([`DEVICE_NAME_EXPEDITED`]).
 //!
 //! Every drive parameter PAR is the ARRAY 0x2000 + PAR with its value at sub-index 1 (§1.4),
 //! served by the drive through the dictionary's hooks ([`crate::station`]); the dictionary
