@@ -55,7 +55,8 @@ pub struct Args {
     /// Record every frame of every bus into a can-utils candump log.
     #[arg(long, value_name = "FILE")]
     candump: Option<PathBuf>,
-    /// Directory where devices keep what they store (CANopen 0x1010) between runs.
+    /// Directory where devices keep what they store (CANopen 0x1010) between runs; without
+    /// it they keep it in memory, across their power cycles, until the run ends.
     #[arg(long, value_name = "DIR")]
     state_dir: Option<PathBuf>,
     /// Run the scenario's script in virtual time instead, print each expectation's verdict
