@@ -390,7 +390,9 @@ impl DeviceKind {
         let name = device_name.unwrap_or("");
         // Device type bits 0–15: the device profile number (CiA 301 §7.5.2.1).
         let profile = device_type.map(|t| t & 0xFFFF);
-        if name.starts_with("ADV200") {
+        // The EXP-CAN card serves expedited SDO only (seed 000 §1.1, point 11): its 0x1008
+        // is the name's first four bytes, "ADV2"; a card with segmented transfer has all.
+        if name.starts_with("ADV200") || name == "ADV2" {
             return Some(match profile {
                 Some(402) => DeviceKind::adv200_ds402(),
                 _ => DeviceKind::adv200_example(),
@@ -510,6 +512,11 @@ mod tests {
             DeviceKind::identify(Some(0), Some("ADV200")).map(|k| k.name),
             Some("ADV200".to_string())
         );
+        assert_eq!(
+            DeviceKind::identify(Some(0), Some("ADV2")).map(|k| k.name),
+            Some("ADV200".to_string())
+        );
+        assert_eq!(DeviceKind::identify(Some(0), Some("ADV20")), None);
         assert_eq!(
             DeviceKind::identify(Some(0x0083_0191), Some("TM3BCCO")).map(|k| k.name),
             Some("TM3".to_string())
