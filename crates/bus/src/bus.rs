@@ -516,6 +516,12 @@ impl Bus {
             .map(|i| self.port_id(i))
     }
 
+    /// Whether `port` still has a frame to send: queued, or on the wires now.
+    pub fn transmit_pending(&self, port: PortId) -> Result<bool, BusError> {
+        let i = self.index_of(port)?;
+        Ok(self.ports[i].queue.len() > 0 || self.in_flight.is_some_and(|f| f.port == i))
+    }
+
     /// A snapshot of a port's state.
     pub fn port_status(&self, port: PortId) -> Result<PortStatus, BusError> {
         let p = &self.ports[self.index_of(port)?];

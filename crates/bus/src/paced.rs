@@ -533,6 +533,10 @@ impl ExternalPort {
             .unwrap_or_else(PoisonError::into_inner)
             .take();
         drop(sink);
+        if self.rx.is_closed() {
+            return Ok(());
+        }
+        self.let_queue_drain();
         if !self.rx.close() {
             return Ok(());
         }
@@ -547,6 +551,30 @@ impl ExternalPort {
         r?
     }
 }
+
+impl ExternalPort {
+    /// Waits, at most [`DRAIN_LIMIT`] of wall time, until the frames this port queued are on
+    /// the bus. A client that leaves right after its last frame (a tool that sends the
+    /// closing frame of an SDO transfer and exits) is a controller whose application closed
+    /// its socket: the controller still sends what it was given. Detaching at once would cut
+    /// that frame off and leave the device in the middle of the transfer. A port that cannot
+    /// send (bus-off, unpowered, disconnected) is waited for no longer than the limit.
+    fn let_queue_drain(&self) {
+        let port = self.port;
+        let until = std::time::Instant::now() + DRAIN_LIMIT;
+        while self
+            .handle
+            .with(|sim| sim.bus(port.bus).map(|b| b.transmit_pending(port)))
+            .is_ok_and(|pending| matches!(pending, Some(Ok(true))))
+            && std::time::Instant::now() < until
+        {
+            std::thread::sleep(std::time::Duration::from_micros(500));
+        }
+    }
+}
+
+/// How long a detaching external port waits for its queued frames to be sent.
+const DRAIN_LIMIT: std::time::Duration = std::time::Duration::from_secs(1);
 
 impl Drop for ExternalPort {
     fn drop(&mut self) {

@@ -320,3 +320,30 @@ fn dropping_a_port_drops_its_sink_even_after_the_simulation_was_dropped() {
         "the sink was dropped"
     );
 }
+
+#[test]
+fn an_external_port_dropped_right_after_sending_still_sends_what_it_queued() {
+    // A tool that sends the closing frame of a transfer and exits: its controller still
+    // sends what it was given, so the device does not stay in the middle of the transfer.
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R10K));
+    let paced = PacedSimulation::start(sim, PacedConfig::default());
+    let handle = paced.handle();
+    let listener = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    let leaving = handle
+        .attach_external(bus, ExternalConfig::default())
+        .unwrap();
+    // At 10 kbit/s four frames take some 40 ms of bus time: they are still queued when
+    // the port is dropped.
+    let frames: Vec<Frame> = (0..4u8).map(|n| std_frame(0x605, &[0xA1, n])).collect();
+    for f in &frames {
+        leaving.send(*f).unwrap();
+    }
+    drop(leaving);
+    let got: Vec<Frame> = (0..4)
+        .map(|_| listener.recv_timeout(PATIENCE).unwrap().unwrap().frame)
+        .collect();
+    assert_eq!(got, frames);
+}
