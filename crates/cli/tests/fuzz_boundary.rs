@@ -71,10 +71,16 @@ fn boundary_targets_leave_the_server_alive_and_its_resources_given_back() {
             assert_eq!(t["attacks"], 20, "{t}");
             continue;
         }
-        assert!(
-            t["probes"].as_u64().unwrap() > 0,
-            "{name}: the good client never got an answer"
-        );
+        // A raw frame flood puts identifiers below the good client's 0x605 on the bus; they
+        // win arbitration as on real wires, so during a short flood the client may get no
+        // turn at all. That the server answers it after the attack is checked above
+        // ("after the attack"); the other attacks leave the bus alone.
+        if !matches!(name, "net-socketcand" | "net-slcan") {
+            assert!(
+                t["probes"].as_u64().unwrap() > 0,
+                "{name}: the good client never got an answer"
+            );
+        }
         if name != "baseline" {
             assert!(t["attacks"].as_u64().unwrap() > 0, "{name}");
             assert!(
