@@ -3,7 +3,7 @@
 //! for that the file leaves out harmlessly (warnings), and what was read with a guess
 //! (notes). The values are judged by the same function [`crate::to_od`] builds from.
 
-pub use crate::judge::Severity;
+pub use crate::error::Severity;
 use crate::judge::judge;
 use crate::model::{Eds, Entry, ObjectList};
 use crate::value::EdsValue;

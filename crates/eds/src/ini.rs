@@ -1,8 +1,7 @@
 //! The INI layer of CiA 306 (basic structure): sections, `key=value` lines and comments, with the line
 //! number of everything so that later errors can point at it.
 
-use crate::check::Severity;
-use crate::error::{ParseError, ParseErrorKind};
+use crate::error::{ParseError, ParseErrorKind, Severity};
 use std::collections::HashMap;
 
 /// One `key=value` line.

@@ -2,24 +2,11 @@
 //! what it finds and [`crate::to_od`] builds the dictionary from what it keeps, so the
 //! checker and the loader never disagree about a value.
 
+use crate::error::Severity;
 use crate::model::Entry;
 use crate::value::EdsValue;
 use cantwin_canopen::od::{Access, DataType, TimeOfDay, Value};
 use core::cmp::Ordering;
-
-/// How serious a finding ([`crate::Issue`]) is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Severity {
-    /// Something read with a guess, or left as it is; worth knowing.
-    Note,
-    /// Not what CiA 306 asks for, but harmless: readers cope and the dictionary is the one
-    /// the file evidently means.
-    Warning,
-    /// What CiA 306 does not allow, with a consequence: a value or key is ignored (the
-    /// diagnostic says how the dictionary is built instead), or, for an entry without a
-    /// data type, the file cannot become a dictionary at all.
-    Error,
-}
 
 /// A finding about one key of an entry.
 pub(crate) type Finding = (Severity, &'static str, String);
