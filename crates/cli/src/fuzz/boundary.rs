@@ -35,6 +35,8 @@ const RSS_GROWTH_KIB: u64 = 64 * 1024;
 /// Descriptors still open after the attack above the level before it (the server may keep
 /// a few for its own use).
 const FD_GROWTH: usize = 8;
+/// How long after the attack descriptors may take to be given back.
+const FD_SETTLE: Duration = Duration::from_secs(3);
 
 /// The descriptor limit the server runs under (RLIMIT_NOFILE through `prlimit`, when
 /// installed).
@@ -777,7 +779,14 @@ fn attack(
             .and_then(|mut p| p.upload())
             .is_ok();
     let rss_after = rss_kib(pid);
-    let fds_after = fds(pid);
+    // A server learns that an event-stream client left only when its next write fails: give
+    // descriptors up to FD_SETTLE to come back before counting what is still held.
+    let settle_until = Instant::now() + FD_SETTLE;
+    let mut fds_after = fds(pid);
+    while fds_after > fds_before + FD_GROWTH && Instant::now() < settle_until {
+        std::thread::sleep(Duration::from_millis(100));
+        fds_after = fds(pid);
+    }
     let mut r = AttackReport {
         target: name.to_string(),
         attacks,
