@@ -254,6 +254,11 @@ struct Core<H> {
     /// The 0x1010 sub-indices, as bits, of the groups whose stored parameters could not be
     /// loaded at the last reset that loaded them.
     storage_faults: u8,
+    /// The boot-up message is queued but not yet confirmed sent: EMCYs wait behind it
+    /// (CiA 301 §7.2.7.1: EMCY is a service of PRE-OPERATIONAL and OPERATIONAL, which the
+    /// boot-up message announces; an EMCY's identifier outranks the boot-up's, so queued
+    /// together the EMCY would reach the bus first).
+    boot_up_unsent: bool,
     events: VecDeque<Event>,
     error_passive: bool,
     overrun: bool,
@@ -348,6 +353,7 @@ impl<H: OdHooks> Device<H> {
             pdo_faults: Vec::new(),
             storage: Box::new(MemoryStorage::new()),
             storage_faults: 0,
+            boot_up_unsent: false,
             events: VecDeque::new(),
             error_passive: false,
             overrun: false,
@@ -877,6 +883,7 @@ impl<H: OdHooks> Core<H> {
         // §7.3.2.2.1: the boot-up message ends initialisation; the device is then
         // pre-operational, and the boot-up counts as the first heartbeat.
         out.push(ErrorControl::boot_up(self.config.node_id).encode());
+        self.boot_up_unsent = true;
         self.enter(State::PreOperational, now);
         self.heartbeat.start(now);
         if self.error_passive {
@@ -987,7 +994,7 @@ impl<H: OdHooks> Core<H> {
     }
 
     fn send_emcys(&mut self, now: Instant, out: &mut Outbox) {
-        if self.state.allows(Service::Emcy) {
+        if self.state.allows(Service::Emcy) && !self.boot_up_unsent {
             while let Some(mut e) = self.emcy.poll(now) {
                 e.manufacturer =
                     self.hooks
@@ -1056,7 +1063,7 @@ impl<H: OdHooks> Core<H> {
                 None
             },
             self.pdo.as_ref().and_then(PdoEngine::next_deadline),
-            if self.state.allows(Service::Emcy) {
+            if self.state.allows(Service::Emcy) && !self.boot_up_unsent {
                 self.emcy.next_deadline().map(|t| t.max(self.now))
             } else {
                 None
@@ -1554,6 +1561,12 @@ impl<H: OdHooks> Node for Device<H> {
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
         self.core.now = now;
+        if self.core.boot_up_unsent
+            && *frame == ErrorControl::boot_up(self.core.config.node_id).encode()
+        {
+            // The boot-up message is on the bus: the EMCYs behind it follow.
+            self.core.boot_up_unsent = false;
+        }
         if let Some(p) = &mut self.core.pdo {
             p.on_sent(frame, now);
         }

@@ -45,6 +45,17 @@ fn ms(v: u64) -> Instant {
     Instant::from_nanos(v * 1_000_000)
 }
 
+/// Powers the device up and confirms its boot-up message as the bus would: EMCYs wait for
+/// it (CiA 301 §7.2.7.1).
+fn boot(dev: &mut Device<Units>, out: &mut Outbox) {
+    dev.on_power_up(ms(0), out);
+    let sent: Vec<Frame> = out.drain().collect();
+    for f in &sent {
+        dev.on_sent(f, ms(0), out);
+    }
+    out.clear();
+}
+
 fn frames(out: &mut Outbox) -> Vec<String> {
     out.drain().map(|f| f.to_string()).collect()
 }
@@ -53,8 +64,7 @@ fn frames(out: &mut Outbox) -> Vec<String> {
 fn cia301_7_2_7_emcy_manufacturer_bytes_come_from_the_hooks_when_sent() {
     let mut dev = device();
     let mut out = Outbox::new();
-    dev.on_power_up(ms(0), &mut out);
-    out.clear();
+    boot(&mut dev, &mut out);
     dev.emcy().raise(0x7003, [0, 0, 0, 0, 2]);
     // The status at the moment of sending, not at the raise.
     dev.hooks_mut().status = 0x8000_0020;
@@ -83,7 +93,7 @@ fn cia301_7_2_7_emcy_manufacturer_bytes_come_from_the_hooks_when_sent() {
 fn cia301_7_5_2_4_error_field_entries_come_from_the_hooks() {
     let mut dev = device();
     let mut out = Outbox::new();
-    dev.on_power_up(ms(0), &mut out);
+    boot(&mut dev, &mut out);
     dev.emcy().raise(0x7003, [0, 0, 0, 0, 2]);
     // Another module fails with the same code: one more entry and EMCY, one active error.
     assert!(dev.emcy().report(0x7003, [0, 0, 0, 0, 5]));
@@ -99,4 +109,26 @@ fn cia301_7_5_2_4_error_field_entries_come_from_the_hooks() {
     // One clear ends the code for both modules.
     assert!(dev.emcy().clear(0x7003));
     assert!(!dev.emcy().is_active(0x7003));
+}
+
+#[test]
+fn cia301_7_2_7_1_no_emcy_before_the_boot_up_message_is_on_the_bus() {
+    let mut dev = device();
+    let mut out = Outbox::new();
+    boot(&mut dev, &mut out);
+    // Error passive (EMCY 0x8120) stays active through a reset communication, which
+    // raises it again: the EMCY (0x083) outranks the boot-up (0x703), so it must wait until
+    // the boot-up message has been sent.
+    dev.on_controller_event(ControllerEvent::ErrorPassive, ms(1), &mut out);
+    out.clear();
+    dev.on_frame(&Frame::std(0x000, &[0x82, 3]).unwrap(), ms(2), &mut out);
+    dev.on_tick(ms(3), &mut out);
+    let queued: Vec<Frame> = out.drain().collect();
+    assert_eq!(queued, [Frame::std(0x703, &[0]).unwrap()]);
+    dev.on_sent(&queued[0], ms(4), &mut out);
+    dev.on_tick(ms(4), &mut out);
+    let after: Vec<Frame> = out.drain().collect();
+    assert_eq!(after.len(), 1, "{after:?}");
+    assert_eq!(after[0].id().as_raw(), 0x083);
+    assert_eq!(after[0].data_bytes()[..2], [0x20, 0x81]);
 }
