@@ -17,17 +17,23 @@ use crate::od::{CardInfo, Personality, build};
 use crate::params::catalog;
 use crate::pdc::Pdc;
 
+/// The manufacturer, CiA 306 `VendorName`.
+pub const VENDOR_NAME: &str = "Gefran";
+/// The product as the manual names it (drive and fieldbus card), CiA 306 `ProductName`
+/// without the personality.
+pub const PRODUCT_NAME: &str = "ADV200 EXP-CAN/DN-ADV";
+
 /// The EDS model of `personality` with the PDO mappings of `pdc` (CANopen).
 pub fn eds_for(personality: Personality, pdc: &Pdc) -> Result<Eds, OdBuildError> {
     // The card as shipped: expedited transfers only (0x1008 as it answers them).
     let desc = build(personality, pdc, CardInfo::default())?;
     let (file, product) = match personality {
-        Personality::CanOpen => ("adv200-canopen.eds", "ADV200 EXP-CAN/DN-ADV CANopen"),
-        Personality::Ds402 => ("adv200-ds402.eds", "ADV200 EXP-CAN/DN-ADV DS402"),
+        Personality::CanOpen => ("adv200-canopen.eds", format!("{PRODUCT_NAME} CANopen")),
+        Personality::Ds402 => ("adv200-ds402.eds", format!("{PRODUCT_NAME} DS402")),
     };
     let mut info = DeviceInfo {
-        vendor_name: Some("Gefran".to_owned()),
-        product_name: Some(product.to_owned()),
+        vendor_name: Some(VENDOR_NAME.to_owned()),
+        product_name: Some(product.clone()),
         simple_boot_up_slave: Some(true),
         simple_boot_up_master: Some(false),
         // §1.1 item 3: PDOs can be mapped dynamically.

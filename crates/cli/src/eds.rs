@@ -162,11 +162,17 @@ fn export(scenario: &Path, device: &str) -> Result<String> {
         vendor_name: Some(
             match dev.kind.as_str() {
                 "tm3" => cantwin_tm3::od::VENDOR_NAME,
+                "adv200" => cantwin_adv200::eds::VENDOR_NAME,
                 _ => "cantwin",
             }
             .into(),
         ),
-        product_name: text(0x1008, 0).or_else(|| Some(device.to_string())),
+        // The expedited-only ADV200 card's 0x1008 holds four bytes ("ADV2"): the product
+        // is named as its manual does.
+        product_name: match dev.kind.as_str() {
+            "adv200" => Some(cantwin_adv200::eds::PRODUCT_NAME.into()),
+            _ => text(0x1008, 0).or_else(|| Some(device.to_string())),
+        },
         granularity: Some(8),
         nr_of_rx_pdo: Some(count(0x1400..=0x15FF)),
         nr_of_tx_pdo: Some(count(0x1800..=0x19FF)),

@@ -178,3 +178,20 @@ fn cia306_eds_export_of_the_tm3_names_its_manufacturer_and_1016_sub_0_ro() {
     let section = out[start..].split("\n\n").next().unwrap();
     assert!(section.contains("AccessType=ro\n"), "{section}");
 }
+
+#[test]
+fn cia306_eds_export_of_the_adv200_names_its_manufacturer_and_product() {
+    let scenario = scenario_file("adv200-example.toml");
+    let (ok, out, err) = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        &scenario,
+        "--device",
+        "drive",
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("VendorName=Gefran\n"), "{out}");
+    // Not the four bytes the expedited-only card's 0x1008 holds.
+    assert!(out.contains("ProductName=ADV200 EXP-CAN/DN-ADV\n"), "{out}");
+}
