@@ -414,6 +414,20 @@ fn cia301_7_2_8_3_2_2_heartbeat_consumer_watches_several_producers() {
 }
 
 #[test]
+fn cia301_7_5_2_21_reserved_bits_of_a_consumer_entry_abort_06090030() {
+    let mut h = Harness::booted();
+    for v in [0x0100_0064u32, 0x8003_0064, 0x1003_00C8] {
+        assert_eq!(
+            h.write(ms(0), 0x1016, 1, &u32le(v)),
+            Err(AbortCode::INVALID_VALUE),
+            "{v:#010x}"
+        );
+    }
+    // A node-ID above 127 makes the entry unused (the clause's words), not invalid.
+    h.write(ms(0), 0x1016, 1, &u32le(0x0080_0064)).unwrap();
+}
+
+#[test]
 fn cia301_7_5_2_21_two_entries_for_one_node_abort_06040043() {
     let mut h = Harness::booted();
     h.write(ms(0), 0x1016, 1, &u32le(0x0003_0064)).unwrap();
