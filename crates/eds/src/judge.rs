@@ -254,6 +254,34 @@ pub(crate) fn judge(e: &Entry, needs_type: bool) -> Judged {
         low = None;
         high = None;
     }
+    // An object without a DefaultValue would start at 0 (CiA 306 §4.6.3 leaves the value
+    // open); where 0 lies outside the file's own limits the device could not even take its
+    // own value back (CiA 301 §7.2.4.3.17, 0x06090031/32), so it starts at the nearest limit.
+    let mut default = default;
+    if default.is_none() && e.default_value.is_none() {
+        let zero = match ty {
+            DataType::Real32 => Some(Value::Real32(0.0)),
+            DataType::Real64 => Some(Value::Real64(0.0)),
+            _ => Value::from_integer(ty, 0).ok(),
+        };
+        if let Some(zero) = zero {
+            let start = if low.as_ref().and_then(|l| order(&zero, l)) == Some(Ordering::Less) {
+                low.clone().map(|l| (l, "LowLimit", "below"))
+            } else if high.as_ref().and_then(|h| order(&zero, h)) == Some(Ordering::Greater) {
+                high.clone().map(|h| (h, "HighLimit", "above"))
+            } else {
+                None
+            };
+            if let Some((v, key, side)) = start {
+                findings.push((
+                    Severity::Note,
+                    "DefaultValue",
+                    format!("missing and 0 is {side} {key}; the object starts at {key} ({v})"),
+                ));
+                default = Some(Default::Value(v));
+            }
+        }
+    }
     let pv = read(
         ty,
         typed,
