@@ -120,10 +120,31 @@ fn type_bits(index: u16) -> u32 {
 /// [`apply_parameter_values`].
 pub fn to_od(eds: &Eds) -> Result<OdDescription, ConvertError> {
     let mut b = OdBuilder::new();
+    // `[DummyUsage]` says which dummy types the device supports (CiA 306 §4.5.5); a supported
+    // one is the DEFTYPE object of its type (CiA 301 §7.4.7.1), with or without its section.
+    let dummy = |index: u16| {
+        eds.dummy_usage
+            .as_ref()
+            .and_then(|d| d.get(&index).copied())
+    };
+    for index in 0x0001..=0x0007u16 {
+        let declared = eds
+            .objects
+            .get(&index)
+            .is_some_and(|o| o.object_code() == 0x5);
+        if dummy(index) == Some(true)
+            && !declared
+            && let Some(ty) = DataType::from_index(index)
+        {
+            let mut d = SubObject::unsigned32(ty.to_string(), Access::Ro, type_bits(index));
+            d.access = Access::Const;
+            b = b.var(index, d).code(ObjectCode::DefType);
+        }
+    }
     for (&index, o) in &eds.objects {
         let code = o.object_code();
         if code == 0x5 {
-            if DataType::from_index(index).is_none() {
+            if DataType::from_index(index).is_none() || dummy(index) == Some(false) {
                 continue;
             }
             let mut d =
@@ -270,6 +291,20 @@ pub fn from_od(desc: &OdDescription, mut device_info: DeviceInfo, file_info: Fil
     device_info.product_number = device_info.product_number.or_else(|| ident(2));
     device_info.revision_number = device_info.revision_number.or_else(|| ident(3));
     eds.device_info = device_info;
+    // The dummy types the device supports are its DEFTYPE objects 0x0001..=0x0007
+    // (CiA 301 §7.4.7.1), which `[DummyUsage]` lists (CiA 306 §4.5.5).
+    let dummies: BTreeMap<u16, bool> = (0x0001..=0x0007u16)
+        .map(|i| {
+            (
+                i,
+                desc.object(i)
+                    .is_some_and(|o| o.code() == ObjectCode::DefType),
+            )
+        })
+        .collect();
+    if dummies.values().any(|&on| on) {
+        eds.dummy_usage = Some(dummies);
+    }
     eds.rebuild_lists();
     eds
 }
