@@ -327,7 +327,8 @@ fn current<H: OdHooks + ?Sized>(
 /// Checks one mapping entry (CiA 301 §7.5.2.36 and §7.5.2.38) and locates its value:
 ///
 /// * a dummy entry (0x0001..=0x0007, sub-index 0) only in an RPDO of a device that supports
-///   dummy mapping, no longer than its type (otherwise 0x06040041);
+///   dummy mapping and that type (its DEFTYPE object, where the dictionary holds any), no
+///   longer than its type (otherwise 0x06040041);
 /// * the object must exist (0x06020000, or 0x06090011 for a missing sub-index);
 /// * it must be PDO-mappable, of a fixed-size type, readable for a TPDO and writable for an
 ///   RPDO (0x06040041), and the length must be 1..=its size in bits (0x06040041).
@@ -344,7 +345,19 @@ pub fn check_entry(
         let size = DataType::from_index(e.index)
             .and_then(DataType::fixed_size)
             .unwrap_or(0);
-        if dir == Direction::Tx || !dummy_mapping || e.sub != 0 || usize::from(e.bits) > size * 8 {
+        // A dictionary that holds DEFTYPE objects for dummies supports exactly those types
+        // (CiA 301 §7.4.7.1; CiA 306 §4.5.5 `[DummyUsage]`); one without any supports all.
+        let deftype = |i: u16| {
+            desc.object(i)
+                .is_some_and(|o| o.code() == crate::od::ObjectCode::DefType)
+        };
+        let supported = deftype(e.index) || !(0x0001..=0x0007).any(deftype);
+        if dir == Direction::Tx
+            || !dummy_mapping
+            || !supported
+            || e.sub != 0
+            || usize::from(e.bits) > size * 8
+        {
             return Err(AbortCode::NOT_MAPPABLE);
         }
         return Ok(None);
