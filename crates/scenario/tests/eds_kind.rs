@@ -255,3 +255,33 @@ fn missing_file_node_id_and_heartbeat_object_are_reported_by_key() {
     assert_eq!(rig.sdo_response(3), [0x43, 0x00, 0x10, 0x00, 0, 0, 0, 0]);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// CiA 306 DCF: ParameterValues in a file without `[DeviceComissioning]` are not applied, and
+/// the warning says that no section names their node (not that the file was commissioned
+/// for another one); an EDS without ParameterValues draws no warning.
+#[test]
+fn parameter_values_without_device_comissioning_are_reported_as_such() {
+    let dir = temp_dir("nocomm");
+    let eds = std::fs::read_to_string(scenarios().join("eds/example-io.eds")).unwrap();
+    let dcf = eds.replace(
+        "DefaultValue=0x0BB8\n",
+        "DefaultValue=0x0BB8\nParameterValue=250\n",
+    );
+    assert_ne!(dcf, eds);
+    std::fs::write(dir.join("io.dcf"), dcf).unwrap();
+    std::fs::write(dir.join("io.eds"), &eds).unwrap();
+    let warnings = |file: &str| {
+        let path = scenario_in(&dir, &format!("file = \"{file}\"\nnode_id = 9"));
+        Scenario::load(&path)
+            .unwrap()
+            .build(&Registry::builtin(), &BuildEnv::default())
+            .unwrap()
+            .warnings
+    };
+    let w = warnings("io.dcf");
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(w[0].contains("no [DeviceComissioning] section"), "{w:?}");
+    assert!(!w[0].contains("not commissioned for node"), "{w:?}");
+    assert!(warnings("io.eds").is_empty());
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -118,11 +118,18 @@ impl DeviceKind for EdsKind {
         let mut eds = if commissioned {
             configured(&loaded.eds)
         } else {
-            if loaded.eds.is_dcf() {
-                s.warn(format!(
+            match &loaded.eds.commissioning {
+                Some(_) => s.warn(format!(
                     "{}: the ParameterValues are not applied: the file is not commissioned for node {node_id} ([DeviceComissioning] NodeID); the device runs on the DefaultValues",
                     path.display()
-                ));
+                )),
+                // ParameterValues without [DeviceComissioning]: nothing says which node they
+                // were written for.
+                None if loaded.eds.is_dcf() => s.warn(format!(
+                    "{}: the ParameterValues are not applied: the file has no [DeviceComissioning] section, so it names no node they were written for; node {node_id} runs on the DefaultValues",
+                    path.display()
+                )),
+                None => {}
             }
             loaded.eds.clone()
         };
