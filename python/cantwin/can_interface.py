@@ -27,14 +27,28 @@ of bus time, stopping as soon as a frame for this node arrives. Bus time waits f
   answers (an SDO client, say) behave as on a fast host.
 
 Paced to the wall clock, only the first rule applies, to the handing over of frames.
+
+Periodic frames (:meth:`~can.BusABC.send_periodic`, and through it python-canopen's
+``network.sync.start(period)`` and ``pdo.start(period)``) are sent by the node itself on
+the simulation's clock, in both modes: one every `period` of bus time, however fast or slow
+the simulation runs against the wall clock. The task's ``stop()``, ``start()`` and
+``modify_data()`` act at once. Only a task with a ``modifier_callback``, which must run
+Python code for every frame, falls back to python-can's thread on the wall clock.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any, Optional, Union
+from collections.abc import Sequence
+from typing import Any, Callable, Optional, Union
 
 import can
+from can.broadcastmanager import (
+    CyclicSendTaskABC,
+    LimitedDurationCyclicSendTaskABC,
+    ModifiableCyclicTaskABC,
+    RestartableCyclicTaskABC,
+)
 
 from ._native import CantwinError, Simulation
 
@@ -51,6 +65,66 @@ def _resolve(sim: Union[Simulation, str, None]) -> Simulation:
     if isinstance(sim, Simulation):
         return sim
     raise TypeError(f"sim must be a cantwin.Simulation or a shared name, not {type(sim).__name__}")
+
+
+def _frame(msg: can.Message) -> tuple[int, bytes, bool, bool, int]:
+    if msg.is_fd:
+        raise ValueError("the simulated buses are classic CAN: no CAN FD frames")
+    if msg.is_error_frame:
+        raise ValueError("error frames cannot be sent")
+    data = b"" if msg.is_remote_frame else bytes(msg.data)
+    return (msg.arbitration_id, data, msg.is_extended_id, msg.is_remote_frame, msg.dlc)
+
+
+class CantwinCyclicSendTask(
+    LimitedDurationCyclicSendTaskABC, ModifiableCyclicTaskABC, RestartableCyclicTaskABC
+):
+    """A periodic transmission kept by the node on the simulation's clock (bus time)."""
+
+    def __init__(
+        self,
+        bus: "CantwinBus",
+        messages: Union[Sequence[can.Message], can.Message],
+        period: float,
+        duration: Optional[float],
+        autostart: bool,
+    ) -> None:
+        super().__init__(messages, period, duration)
+        self._frames = [_frame(m) for m in self.messages]
+        self._bus = bus
+        self._key: Optional[int] = None
+        if autostart:
+            self.start()
+
+    def start(self) -> None:
+        """Send from now on: the first frame now, then one per period (bus time); a
+        duration counts from now."""
+        if self._key is not None:
+            return
+        try:
+            self._key = self._bus._port.start_periodic(self._frames, self.period, self.duration)
+        except CantwinError as e:
+            raise can.CanOperationError(str(e)) from e
+
+    def stop(self) -> None:
+        """Send no more frames."""
+        key, self._key = self._key, None
+        if key is not None:
+            try:
+                self._bus._port.stop_periodic(key)
+            except CantwinError as e:
+                raise can.CanOperationError(str(e)) from e
+
+    def modify_data(self, messages: Union[Sequence[can.Message], can.Message]) -> None:
+        """Send `messages` from the next period on (python-can's rules: same identifier,
+        same count)."""
+        super().modify_data(messages)
+        self._frames = [_frame(m) for m in self.messages]
+        if self._key is not None:
+            try:
+                self._bus._port.modify_periodic(self._key, self._frames)
+            except CantwinError as e:
+                raise can.CanOperationError(str(e)) from e
 
 
 class CantwinBus(can.BusABC):
@@ -148,6 +222,22 @@ class CantwinBus(can.BusABC):
             is_rx=True,
         )
         return msg, False
+
+    def _send_periodic_internal(
+        self,
+        msgs: Union[Sequence[can.Message], can.Message],
+        period: float,
+        duration: Optional[float] = None,
+        autostart: bool = True,
+        modifier_callback: Optional[Callable[[can.Message], None]] = None,
+    ) -> CyclicSendTaskABC:
+        """Periodic frames sent by the node in bus time (module documentation); with a
+        `modifier_callback`, python-can's thread on the wall clock."""
+        if modifier_callback is not None:
+            return super()._send_periodic_internal(
+                msgs, period, duration, autostart, modifier_callback
+            )
+        return CantwinCyclicSendTask(self, msgs, period, duration, autostart)
 
     def shutdown(self) -> None:
         """Detach the node from the bus."""

@@ -17,7 +17,7 @@
 //!   simulation does not run, and no frame is handed over, until that thread waits: the
 //!   answer to a frame is never there before its sender listens for it.
 
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, PoisonError};
 
 use cantwin_bus::{
@@ -42,10 +42,26 @@ const QUEUE_DEPTH: usize = 32;
 /// How long `send` waits for room in the queue when python-can gives no timeout.
 const SEND_TIMEOUT: Duration = Duration::from_secs(1);
 
-/// The node on the bus: it buffers every frame for Python and notes the delivery.
+/// A periodic transmission (python-can's `send_periodic`) kept on the bus's clock: its
+/// frames go out every `period` of bus time, in virtual time as paced, whatever Python does
+/// meanwhile (a thread sleeping on the wall clock would send at the wrong bus-time rate).
+struct Periodic {
+    key: u64,
+    /// Sent in turn, one per period (python-can's sequence of messages).
+    frames: Vec<Frame>,
+    next_index: usize,
+    period: Duration,
+    due: Instant,
+    /// No frame goes out at or after this instant (python-can's `duration`).
+    end: Option<Instant>,
+}
+
+/// The node on the bus: it buffers every frame for Python and notes the delivery, and sends
+/// the periodic frames Python started.
 struct PyNode {
     rx: Arc<RxQueue>,
     delivery: Arc<Delivery>,
+    periodic: Vec<Periodic>,
 }
 
 impl Node for PyNode {
@@ -60,10 +76,25 @@ impl Node for PyNode {
         }
     }
 
-    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.periodic.retain(|p| p.end.is_none_or(|e| p.due < e));
+        for p in &mut self.periodic {
+            if p.due > now {
+                continue;
+            }
+            out.push(p.frames[p.next_index]);
+            p.next_index = (p.next_index + 1) % p.frames.len();
+            // A late tick (a paced bus lagging behind the wall clock) sends one frame, not a
+            // burst, and keeps the phase: the next one is due at the next multiple.
+            while p.due <= now {
+                p.due = p.due.checked_add(p.period).unwrap_or(Instant::MAX);
+            }
+        }
+        self.periodic.retain(|p| p.end.is_none_or(|e| p.due < e));
+    }
 
     fn next_deadline(&self) -> Option<Instant> {
-        None
+        self.periodic.iter().map(|p| p.due).min()
     }
 }
 
@@ -77,6 +108,7 @@ pub struct Port {
     rx: Arc<RxQueue>,
     port: PortId,
     bus: String,
+    next_key: AtomicU64,
 }
 
 pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyResult<Port> {
@@ -87,6 +119,7 @@ pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyR
     let node = PyNode {
         rx: Arc::clone(&rx),
         delivery: Arc::clone(&shared.delivery),
+        periodic: Vec::new(),
     };
     let mut core = shared.lock();
     let id = core.bus_id(bus)?;
@@ -106,7 +139,52 @@ pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyR
         rx,
         port,
         bus: bus.to_string(),
+        next_key: AtomicU64::new(1),
     })
+}
+
+/// A frame as Python gives it: identifier, data, extended, remote, DLC (of a remote frame).
+type PyOutFrame = (u32, Vec<u8>, bool, bool, Option<u8>);
+
+/// Check and build a frame from Python's fields: an 11-bit identifier unless `extended`; a
+/// remote frame sends no data and requests `dlc` bytes.
+fn make_frame(
+    arbitration_id: u32,
+    data: &[u8],
+    extended: bool,
+    remote: bool,
+    dlc: Option<u8>,
+) -> PyResult<Frame> {
+    let id: Id = if extended {
+        ExtendedId::new(arbitration_id)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?
+            .into()
+    } else {
+        let raw = u16::try_from(arbitration_id)
+            .map_err(|_| PyValueError::new_err("a standard identifier is 11 bits"))?;
+        StandardId::new(raw)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?
+            .into()
+    };
+    if remote {
+        let dlc = dlc.unwrap_or(u8::try_from(data.len()).unwrap_or(u8::MAX));
+        Frame::remote(id, dlc)
+    } else {
+        Frame::data(id, data)
+    }
+    .map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+fn make_frames(frames: Vec<PyOutFrame>) -> PyResult<Vec<Frame>> {
+    if frames.is_empty() {
+        return Err(PyValueError::new_err(
+            "a periodic task needs at least one frame",
+        ));
+    }
+    frames
+        .into_iter()
+        .map(|(id, data, extended, remote, dlc)| make_frame(id, &data, extended, remote, dlc))
+        .collect()
 }
 
 /// What `recv` hands to Python: identifier, extended, remote, DLC, data, bus time (s).
@@ -351,24 +429,7 @@ impl Port {
         dlc: Option<u8>,
         timeout: Option<f64>,
     ) -> PyResult<()> {
-        let id: Id = if extended {
-            ExtendedId::new(arbitration_id)
-                .map_err(|e| PyValueError::new_err(e.to_string()))?
-                .into()
-        } else {
-            let raw = u16::try_from(arbitration_id)
-                .map_err(|_| PyValueError::new_err("a standard identifier is 11 bits"))?;
-            StandardId::new(raw)
-                .map_err(|e| PyValueError::new_err(e.to_string()))?
-                .into()
-        };
-        let frame = if remote {
-            let dlc = dlc.unwrap_or(u8::try_from(data.len()).unwrap_or(u8::MAX));
-            Frame::remote(id, dlc)
-        } else {
-            Frame::data(id, data)
-        }
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let frame = make_frame(arbitration_id, data, extended, remote, dlc)?;
         let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
         let thread = crate::turns::thread_ident(py)?;
         let r = py.detach(|| self.transmit(frame, timeout, thread));
@@ -395,6 +456,86 @@ impl Port {
         let thread = crate::turns::thread_ident(py)?;
         py.detach(|| self.receive(timeout, wait_for_answers, thread))
             .map(|r| r.map(to_py))
+    }
+
+    /// Start sending `frames` (``(arbitration_id, data, extended, remote, dlc)`` each) in
+    /// turn, one every `period` seconds of bus time, the first now; none from `duration`
+    /// seconds on (`None`: until stopped). The node sends them on the simulation's clock, in
+    /// virtual time as paced. Returns the task's key for [`Port::modify_periodic`] and
+    /// [`Port::stop_periodic`].
+    #[pyo3(signature = (frames, period, duration=None))]
+    fn start_periodic(
+        &self,
+        py: Python<'_>,
+        frames: Vec<PyOutFrame>,
+        period: f64,
+        duration: Option<f64>,
+    ) -> PyResult<u64> {
+        let frames = make_frames(frames)?;
+        let period = secs(period)?;
+        if period == Duration::ZERO {
+            return Err(PyValueError::new_err("a period must be more than 0 s"));
+        }
+        let duration = duration.map(secs).transpose()?;
+        let key = self.next_key.fetch_add(1, Ordering::Relaxed);
+        let thread = crate::turns::thread_ident(py)?;
+        let port = self.port;
+        let r = py.detach(|| {
+            let mut core = self.shared.lock();
+            let started = core.with_sim(|sim| {
+                let now = sim.now();
+                let node = sim.node_mut::<PyNode>(port)?;
+                node.periodic.push(Periodic {
+                    key,
+                    frames,
+                    next_index: 0,
+                    period,
+                    due: now,
+                    end: duration.map(|d| now.checked_add(d).unwrap_or(Instant::MAX)),
+                });
+                Some(())
+            })?;
+            if started.is_none() {
+                return Err(closed());
+            }
+            // Frames go out from now on: bus time waits for this thread as after a send.
+            core.acted(thread, false);
+            Ok(key)
+        });
+        self.shared.lock().returned(thread);
+        self.shared.changed.notify_all();
+        r
+    }
+
+    /// Replace the frames of periodic task `key` (same count or not); the next one due goes
+    /// out at its time, starting again with the first.
+    fn modify_periodic(&self, py: Python<'_>, key: u64, frames: Vec<PyOutFrame>) -> PyResult<()> {
+        let frames = make_frames(frames)?;
+        let port = self.port;
+        py.detach(|| {
+            let mut core = self.shared.lock();
+            let found = core.with_sim(|sim| {
+                let node = sim.node_mut::<PyNode>(port)?;
+                let task = node.periodic.iter_mut().find(|p| p.key == key)?;
+                task.frames = frames;
+                task.next_index = 0;
+                Some(())
+            })?;
+            found.ok_or_else(|| err("the periodic task is not running"))
+        })
+    }
+
+    /// Stop periodic task `key`; stopping one that ended or was stopped does nothing.
+    fn stop_periodic(&self, py: Python<'_>, key: u64) -> PyResult<()> {
+        let port = self.port;
+        py.detach(|| {
+            let mut core = self.shared.lock();
+            core.with_sim(|sim| {
+                if let Some(node) = sim.node_mut::<PyNode>(port) {
+                    node.periodic.retain(|p| p.key != key);
+                }
+            })
+        })
     }
 
     /// Frames lost because the receive buffer was full.
