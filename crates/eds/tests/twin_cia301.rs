@@ -52,7 +52,13 @@ impl Rig {
         let mut dev = Device::new(Arc::new(desc), DeviceConfig::new(node)).unwrap();
         let mut out = Outbox::new();
         dev.on_power_up(Instant::ZERO, &mut out);
-        let heard = out.drain().map(|f| (Instant::ZERO, f)).collect();
+        let mut heard: Vec<(Instant, Frame)> = out.drain().map(|f| (Instant::ZERO, f)).collect();
+        // The loopback confirms the boot-up message as the bus does; the EMCYs of the reset
+        // wait for it (CiA 301 §7.2.7.1).
+        for (_, f) in heard.clone() {
+            dev.on_sent(&f, Instant::ZERO, &mut out);
+        }
+        heard.extend(out.drain().map(|f| (Instant::ZERO, f)));
         Rig {
             dev,
             node,
