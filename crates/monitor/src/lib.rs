@@ -11,6 +11,8 @@
 //!   with its meaning, and the CiA 303-3 LED states ([`NodeInfo::leds`]);
 //! * a bounded ring of decoded frames ([`FrameEntry`], decoded as `cantwin trace` does),
 //!   read through a [`Filter`] by node, service and identifier range;
+//! * the fixed trace ([`FixedTrace`]): one row per identifier with its count, cycle times,
+//!   changed bytes and last frame decoded;
 //! * the bus load and frames per second per time window ([`LoadSeries`]);
 //! * per-device live values from PDOs, where the device's [`DeviceKind`] tells how its PDOs
 //!   read.
@@ -46,6 +48,7 @@
 
 pub mod dashboard;
 pub mod filter;
+pub mod fixed_trace;
 pub mod kind;
 pub mod load;
 pub mod node;
@@ -59,6 +62,7 @@ use cantwin_report::canopen::{describe, describe_pdo};
 use cantwin_report::sdo::{Outcome, Tracker, Transfer};
 
 pub use filter::{Filter, Service};
+pub use fixed_trace::FixedTrace;
 pub use kind::{DeviceKind, LiveValue};
 pub use load::{LoadSeries, Window};
 pub use node::{EmcyEvent, Identity, Led, Leds, NodeInfo};
@@ -74,19 +78,22 @@ pub struct Config {
     pub windows: usize,
     /// Decoded frames kept; older ones are dropped and counted.
     pub ring: usize,
+    /// Identifiers the fixed trace keeps rows for (see [`FixedTrace`]).
+    pub fixed_rows: usize,
     /// PDO mappings from EDS files, to name PDO values in the frame text (see
     /// `cantwin_report::canopen::add_eds_pdos`); a node's [`DeviceKind`] names the rest.
     pub pdos: PdoDecoder,
 }
 
 impl Default for Config {
-    /// 500 kbit/s, 100 ms windows, one minute of them, 10 000 frames.
+    /// 500 kbit/s, 100 ms windows, one minute of them, 10 000 frames, 4096 identifiers.
     fn default() -> Self {
         Config {
             bit_rate: BitRate::R500K,
             window: Duration::from_millis(100),
             windows: 600,
             ring: 10_000,
+            fixed_rows: FixedTrace::DEFAULT_CAPACITY,
             pdos: PdoDecoder::new(),
         }
     }
@@ -122,6 +129,7 @@ pub struct NetworkView {
     config: Config,
     nodes: BTreeMap<u8, NodeInfo>,
     ring: VecDeque<FrameEntry>,
+    fixed: FixedTrace,
     seq: u64,
     load: LoadSeries,
     now: Instant,
@@ -179,7 +187,9 @@ impl NetworkView {
     /// An empty view.
     pub fn new(config: Config) -> NetworkView {
         let load = LoadSeries::new(config.bit_rate, config.window, config.windows);
+        let fixed = FixedTrace::new(config.fixed_rows);
         NetworkView {
+            fixed,
             config,
             nodes: BTreeMap::new(),
             ring: VecDeque::new(),
@@ -357,14 +367,16 @@ impl NetworkView {
             let generic = format!("({})", cantwin_report::canopen::emcy_meaning(emcy.code));
             text = text.replacen(&generic, &format!("({own})"), 1);
         }
-        self.ring.push_back(FrameEntry {
+        let entry = FrameEntry {
             seq: self.seq,
             at,
             frame: *frame,
             service,
             node,
             text,
-        });
+        };
+        self.fixed.record(&entry);
+        self.ring.push_back(entry);
         self.seq += 1;
         while self.ring.len() > self.config.ring.max(1) {
             self.ring.pop_front();
@@ -434,6 +446,16 @@ impl NetworkView {
     /// Frames dropped from the ring to keep it bounded.
     pub fn dropped_frames(&self) -> u64 {
         self.seq - self.ring.len() as u64
+    }
+
+    /// The fixed trace: one row per identifier seen.
+    pub fn fixed_trace(&self) -> &FixedTrace {
+        &self.fixed
+    }
+
+    /// Forget the fixed trace's rows (counts and cycle times start again).
+    pub fn clear_fixed_trace(&mut self) {
+        self.fixed.clear();
     }
 
     /// Bus load and frames per window.
