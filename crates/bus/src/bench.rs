@@ -17,6 +17,8 @@ use crate::bus::BusConfig;
 use crate::port::PortConfig;
 use crate::sim::Simulation;
 
+pub mod limit;
+
 /// The scenario's parameters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BenchConfig {
@@ -37,6 +39,35 @@ impl BenchConfig {
             nodes: 127,
             bit_rate: BitRate::R1M,
             period: Duration::from_millis(1),
+            duration,
+        }
+    }
+
+    /// `nodes` nodes at 1 Mbit/s offering `load_percent` of the bus's capacity: each node's
+    /// period is the time all `nodes` frames take back to back, stretched by
+    /// `100 / load_percent`. Every node offers at the same instants (the multiples of the
+    /// period), as devices answering a SYNC do. A load of 0 or less offers once, at 0.
+    pub fn at_load(nodes: u16, load_percent: f64, duration: Duration) -> Self {
+        let bit_rate = BitRate::R1M;
+        let bits: u64 = (0..nodes)
+            .map(|i| {
+                u64::from(
+                    MailboxNode::new(i, nodes, Duration::ZERO)
+                        .frame
+                        .bit_length(),
+                )
+            })
+            .sum();
+        let busy = bits * bit_rate.bit_time().as_nanos();
+        let period = if load_percent > 0.0 {
+            Duration::from_nanos((busy as f64 * 100.0 / load_percent).round() as u64)
+        } else {
+            duration + Duration::from_nanos(1)
+        };
+        BenchConfig {
+            nodes,
+            bit_rate,
+            period,
             duration,
         }
     }
