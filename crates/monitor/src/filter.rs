@@ -6,6 +6,7 @@ use std::fmt;
 use std::ops::RangeInclusive;
 
 use cantwin_can::Frame;
+use cantwin_canopen::lss::wire as wire_lss;
 use cantwin_canopen::wire::{self, ErrorControl, Message};
 
 /// The CANopen service of a frame, by the pre-defined connection set (CiA 301 §7.3.4).
@@ -25,13 +26,15 @@ pub enum Service {
     Sdo,
     /// NMT error control: boot-up, heartbeat, node guarding (0x700–0x77F).
     Heartbeat,
-    /// Anything else: extended frames, LSS, identifiers outside the set, malformed frames.
+    /// Layer setting services (CiA 305 §4: 0x7E5 master, 0x7E4 slave).
+    Lss,
+    /// Anything else: extended frames, identifiers outside the set, malformed frames.
     Other,
 }
 
 impl Service {
     /// Every service, in identifier order.
-    pub const ALL: [Service; 8] = [
+    pub const ALL: [Service; 9] = [
         Service::Nmt,
         Service::Sync,
         Service::Emcy,
@@ -39,6 +42,7 @@ impl Service {
         Service::Pdo,
         Service::Sdo,
         Service::Heartbeat,
+        Service::Lss,
         Service::Other,
     ];
 
@@ -52,6 +56,7 @@ impl Service {
             Service::Pdo => "pdo",
             Service::Sdo => "sdo",
             Service::Heartbeat => "hb",
+            Service::Lss => "lss",
             Service::Other => "other",
         }
     }
@@ -66,7 +71,15 @@ impl Service {
             Message::Pdo { .. } => Service::Pdo,
             Message::SdoRequest { .. } | Message::SdoResponse { .. } => Service::Sdo,
             Message::ErrorControl(_) => Service::Heartbeat,
-            Message::Malformed { .. } | Message::Other(_) => Service::Other,
+            Message::Malformed { frame, .. } | Message::Other(frame) => {
+                let id = frame.id().as_raw();
+                let lss = [wire_lss::MASTER_ID, wire_lss::SLAVE_ID].map(u32::from);
+                if !frame.is_extended() && lss.contains(&id) {
+                    Service::Lss
+                } else {
+                    Service::Other
+                }
+            }
         }
     }
 }
@@ -89,7 +102,9 @@ impl std::str::FromStr for Service {
                 .into_iter()
                 .find(|v| v.name() == s)
                 .ok_or_else(|| {
-                    format!("unknown service {s:?}: nmt, sync, emcy, time, pdo, sdo, hb, other")
+                    format!(
+                        "unknown service {s:?}: nmt, sync, emcy, time, pdo, sdo, hb, lss, other"
+                    )
                 }),
         }
     }
@@ -157,7 +172,7 @@ impl Filter {
     }
 
     /// Parse the text form: space-separated terms, each `node=N[,N…]`, `svc=NAME[,NAME…]`
-    /// (nmt, sync, emcy, time, pdo, sdo, hb, other), `id=ID` or `id=LOW-HIGH` (decimal or
+    /// (nmt, sync, emcy, time, pdo, sdo, hb, lss, other), `id=ID` or `id=LOW-HIGH` (decimal or
     /// 0x hexadecimal); a bare service name or node number is a shorthand. Terms of the
     /// same key add up.
     pub fn parse(text: &str) -> Result<Filter, String> {
@@ -237,6 +252,10 @@ mod tests {
         assert_eq!(short.services, BTreeSet::from([Service::Sdo]));
         assert_eq!(Filter::parse("id=0x705").unwrap().ids, Some(0x705..=0x705));
         assert!(Filter::parse("   ").unwrap().is_empty());
+        assert_eq!(
+            Filter::parse("svc=lss").unwrap().services,
+            BTreeSet::from([Service::Lss])
+        );
     }
 
     #[test]
@@ -279,5 +298,10 @@ mod tests {
                 .unwrap()
                 .matches_frame(&sync)
         );
+        // CiA 305 §4.2: LSS frames on 0x7E4/0x7E5 are their own service, even malformed.
+        let lss = Frame::data(cantwin_can::Id::standard(0x7E5).unwrap(), &[0x5E]).unwrap();
+        assert!(Filter::parse("lss").unwrap().matches_frame(&lss));
+        let near = Frame::data(cantwin_can::Id::standard(0x7E6).unwrap(), &[0; 8]).unwrap();
+        assert!(Filter::parse("other").unwrap().matches_frame(&near));
     }
 }

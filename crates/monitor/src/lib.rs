@@ -53,7 +53,7 @@ pub mod kind;
 pub mod load;
 pub mod node;
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
 use cantwin_can::{BitRate, Duration, Frame, Instant};
 use cantwin_canopen::master::pdo::PdoDecoder;
@@ -134,6 +134,8 @@ pub struct NetworkView {
     load: LoadSeries,
     now: Instant,
     sdo: BTreeMap<u8, Tracker>,
+    /// Nodes a guard request was sent to that have not answered yet.
+    guard_pending: BTreeSet<u8>,
 }
 
 /// The values of a PDO that `pdos` maps, named from the dictionary description.
@@ -197,6 +199,7 @@ impl NetworkView {
             load,
             now: Instant::ZERO,
             sdo: BTreeMap::new(),
+            guard_pending: BTreeSet::new(),
         }
     }
 
@@ -215,6 +218,19 @@ impl NetworkView {
         if let Some(k) = kind {
             node.kind = Some(k);
             node.kind_given = true;
+        }
+    }
+
+    /// Tell the view node `id`'s device type (0x1000) when the front end knows it (a
+    /// scenario's twin): its kind column shows the device profile until the bus says more.
+    pub fn declare_device_type(&mut self, id: u8, device_type: u32) {
+        let node = self.node_entry(id);
+        node.device_type = Some(device_type);
+        if !node.kind_given
+            && node.kind.is_none()
+            && let Some(k) = DeviceKind::identify(Some(device_type), node.device_name.as_deref())
+        {
+            node.kind = Some(k);
         }
     }
 
@@ -260,8 +276,24 @@ impl NetworkView {
         }
         let mut text = None;
         match msg {
-            Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
+            Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
+                self.guard_pending.insert(node);
+            }
+            Message::ErrorControl(ErrorControl::State {
+                node,
+                state,
+                toggle,
+            }) => {
+                // CiA 301 §7.2.8.3.2.1: the answer to a guard request; its first toggle is 0,
+                // so only the request tells it from a heartbeat then.
+                let guarded = self.guard_pending.remove(&node) || toggle;
                 let info = self.node_entry(node);
+                if state != 0 {
+                    info.guarded = guarded;
+                    text = Some(cantwin_report::canopen::error_control(
+                        node, state, toggle, guarded,
+                    ));
+                }
                 if state == 0 {
                     info.boot_ups += 1;
                     // A boot-up restarts the heartbeat: the gap before it is no period.
@@ -352,7 +384,8 @@ impl NetworkView {
             _ => {}
         }
         let mut text = match text {
-            // An EDS mapping the front end gave wins over the kind's defaults.
+            // An EDS mapping the front end gave wins over the kind's defaults (only PDO
+            // texts can be shadowed by one).
             Some(t) if describe_pdo(frame, &self.config.pdos).is_none() => t,
             _ => describe(frame, &self.config.pdos),
         };

@@ -143,6 +143,9 @@ pub struct NodeInfo {
     pub frames: u64,
     /// Values decoded from its PDOs, in the kind's field order, with when they came.
     pub values: Vec<(LiveValue, Instant)>,
+    /// Whether its state reports answer node guarding requests (CiA 301 §7.2.8.3.2.1)
+    /// rather than being heartbeats (§7.2.8.3.2.2).
+    pub guarded: bool,
 }
 
 impl NodeInfo {
@@ -166,6 +169,7 @@ impl NodeInfo {
             emcy_count: 0,
             frames: 0,
             values: Vec::new(),
+            guarded: false,
         }
     }
 
@@ -201,6 +205,29 @@ impl NodeInfo {
                 age.as_nanos() > period.as_nanos().saturating_mul(2)
             }
             _ => false,
+        }
+    }
+
+    /// What kind of device it is, for a table: the kind's name, else the device profile its
+    /// device type names (0x1000 bits 0–15, CiA 301 §7.5.2.1: 0 is a device without a
+    /// profile, a plain CiA 301 device), else nothing.
+    pub fn kind_label(&self) -> Option<String> {
+        if let Some(k) = &self.kind {
+            return Some(k.name.clone());
+        }
+        match self.device_type? & 0xFFFF {
+            0 => Some("CiA 301".to_string()),
+            profile => Some(format!("CiA {profile}")),
+        }
+    }
+
+    /// Its error control service: `node guarding` once it answered a guard request,
+    /// `heartbeat` once it sent a state report otherwise, `None` before.
+    pub fn error_control(&self) -> Option<&'static str> {
+        match (self.state, self.guarded) {
+            (None, _) => None,
+            (Some(_), true) => Some("node guarding"),
+            (Some(_), false) => Some("heartbeat"),
         }
     }
 

@@ -383,3 +383,74 @@ fn pdo_mappings_name_the_values_of_nodes_without_a_kind() {
     v.push(ms(1), &f(0x185, &[0x00]));
     assert_eq!(v.node(5).unwrap().value("Speed").unwrap().text, "-1000");
 }
+
+#[test]
+fn cia301_7_2_8_3_2_heartbeat_and_node_guarding_are_named_apart() {
+    let mut v = view();
+    // Node 5 produces heartbeats: bit 7 is 0 and no request asked for them.
+    v.push(ms(0), &f(0x705, &[0x7F]));
+    // Node 6 is guarded: the master's remote request, then its answers, toggling from 0.
+    let rtr = Frame::remote(Id::standard(0x706).unwrap(), 1).unwrap();
+    v.push(ms(10), &rtr);
+    v.push(ms(11), &f(0x706, &[0x7F]));
+    v.push(ms(110), &rtr);
+    v.push(ms(111), &f(0x706, &[0xFF]));
+    let texts: Vec<&str> = v.frames().map(|e| e.text.as_str()).collect();
+    assert_eq!(
+        texts,
+        [
+            "HEARTBEAT node 5 pre-operational",
+            "NODE GUARD request node 6",
+            "NODE GUARD response node 6 pre-operational (toggle 0)",
+            "NODE GUARD request node 6",
+            "NODE GUARD response node 6 pre-operational (toggle 1)",
+        ]
+    );
+    assert_eq!(v.node(5).unwrap().error_control(), Some("heartbeat"));
+    assert_eq!(v.node(6).unwrap().error_control(), Some("node guarding"));
+    // A guard request alone does not bring a node into the table.
+    v.push(
+        ms(200),
+        &Frame::remote(Id::standard(0x707).unwrap(), 1).unwrap(),
+    );
+    assert!(v.node(7).is_none());
+}
+
+#[test]
+fn cia305_lss_frames_are_decoded_and_filtered_as_lss() {
+    let mut v = view();
+    v.push(ms(0), &f(0x7E5, &[0x04, 0x01, 0, 0, 0, 0, 0, 0]));
+    v.push(ms(1), &f(0x7E5, &[0x5E, 0, 0, 0, 0, 0, 0, 0]));
+    v.push(ms(2), &f(0x7E4, &[0x5E, 0x0C, 0, 0, 0, 0, 0, 0]));
+    let lss = Filter::parse("svc=lss").unwrap();
+    let texts: Vec<&str> = v.filtered(&lss).map(|e| e.text.as_str()).collect();
+    assert_eq!(
+        texts,
+        [
+            "LSS master: switch state global: configuration",
+            "LSS master: inquire node-ID",
+            "LSS slave: node-ID 12",
+        ]
+    );
+}
+
+#[test]
+fn cia301_7_5_2_1_a_declared_device_type_names_the_profile_in_the_kind_column() {
+    let mut v = view();
+    v.declare(5, Some("node5".into()), None);
+    assert_eq!(v.node(5).unwrap().kind_label(), None);
+    // A plain CiA 301 device: profile 0.
+    v.declare_device_type(5, 0x0000_0000);
+    assert_eq!(v.node(5).unwrap().kind_label().as_deref(), Some("CiA 301"));
+    assert!(v.node(5).unwrap().kind.is_none());
+    // Profile 401 is a kind the monitor reads PDOs of.
+    v.declare(7, None, None);
+    v.declare_device_type(7, 0x000F_0191);
+    assert_eq!(
+        v.node(7).unwrap().kind_label().as_deref(),
+        Some("CiA 401 I/O")
+    );
+    // Another profile is named by its number.
+    v.declare_device_type(8, 0x0002_0196);
+    assert_eq!(v.node(8).unwrap().kind_label().as_deref(), Some("CiA 406"));
+}

@@ -132,6 +132,24 @@ pub fn describe_pdo(frame: &Frame, pdos: &PdoDecoder) -> Option<String> {
     })
 }
 
+/// One line for an error control state report of `node` (CiA 301 §7.2.8.3.2): a boot-up
+/// (state 0), a node guarding response (`guarded`: it answers a guard request; its bit 7 is
+/// the toggle bit) or a heartbeat (bit 7 is reserved and 0: heartbeats have no toggle).
+///
+/// Alone, a frame tells a guarding response only by a set toggle bit; a decoder that saw the
+/// guard request (the monitor, the capture report) passes `guarded` itself.
+pub fn error_control(node: u8, state: u8, toggle: bool, guarded: bool) -> String {
+    match (state, guarded) {
+        (0, _) => format!("BOOT-UP node {node}"),
+        (_, true) => format!(
+            "NODE GUARD response node {node} {} (toggle {})",
+            state_name(state),
+            u8::from(toggle)
+        ),
+        (_, false) => format!("HEARTBEAT node {node} {}", state_name(state)),
+    }
+}
+
 /// One line for a frame: the service and its decoded content (empty for frames outside
 /// the pre-defined connection set that no PDO of `pdos` claims).
 pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
@@ -173,21 +191,18 @@ pub fn describe(frame: &Frame, pdos: &PdoDecoder) -> String {
             Some(Ok(r)) => format!("SDO response from node {node}: {r}"),
             _ => format!("SDO response from node {node} (segment or malformed)"),
         },
-        Message::ErrorControl(ec) => match ec {
-            ErrorControl::GuardRequest { node } => format!("NODE GUARD request node {node}"),
-            ErrorControl::State { node, state: 0, .. } => format!("BOOT-UP node {node}"),
-            ErrorControl::State {
-                node,
-                toggle,
-                state,
-            } => format!(
-                "HEARTBEAT/GUARD node {node} {} (toggle {})",
-                state_name(state),
-                u8::from(toggle)
-            ),
-        },
-        Message::Malformed { error, .. } => format!("malformed: {error}"),
-        Message::Other(_) => String::new(),
+        Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
+            format!("NODE GUARD request node {node}")
+        }
+        Message::ErrorControl(ErrorControl::State {
+            node,
+            toggle,
+            state,
+        }) => error_control(node, state, toggle, toggle),
+        Message::Malformed { error, .. } => {
+            crate::lss::describe(frame).unwrap_or_else(|| format!("malformed: {error}"))
+        }
+        Message::Other(_) => crate::lss::describe(frame).unwrap_or_default(),
     }
 }
 
@@ -238,9 +253,16 @@ mod tests {
         let boot = Frame::data(Id::standard(0x705).unwrap(), &[0]).unwrap();
         assert_eq!(describe(&boot, &none), "BOOT-UP node 5");
         let hb = Frame::data(Id::standard(0x705).unwrap(), &[0x7F]).unwrap();
+        assert_eq!(describe(&hb, &none), "HEARTBEAT node 5 pre-operational");
+        // A set bit 7 is the guarding toggle (CiA 301 §7.2.8.3.2.1): heartbeats have none.
+        let guard = Frame::data(Id::standard(0x705).unwrap(), &[0x85]).unwrap();
         assert_eq!(
-            describe(&hb, &none),
-            "HEARTBEAT/GUARD node 5 pre-operational (toggle 0)"
+            describe(&guard, &none),
+            "NODE GUARD response node 5 operational (toggle 1)"
+        );
+        assert_eq!(
+            error_control(5, 0x05, false, true),
+            "NODE GUARD response node 5 operational (toggle 0)"
         );
     }
 }

@@ -90,6 +90,18 @@ fn explicit(data: &[u8], request: bool) -> String {
     }
 }
 
+/// The MAC ID a DeviceNet frame's identifier carries (DeviceNet spec. vol. 3 §2-2.2: groups
+/// 1 and 3 name the source MAC ID; group 2 names the slave's, source or destination by the
+/// message ID); `None` for group 4 and invalid identifiers.
+pub fn node_of(frame: &Frame) -> Option<u8> {
+    match DnId::decode(frame.id()) {
+        Ok(DnId::Group1 { mac, .. } | DnId::Group2 { mac, .. } | DnId::Group3 { mac, .. }) => {
+            Some(mac.get())
+        }
+        Ok(DnId::Group4 { .. }) | Err(_) => None,
+    }
+}
+
 /// One line for a DeviceNet frame.
 pub fn describe(frame: &Frame) -> String {
     let d = frame.data_bytes();

@@ -131,6 +131,19 @@ fn percent(v: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// A row's text, with how often it repeated and when first and last: `… × 101, first
+/// 0.500 s, last 10.500 s`.
+fn with_repeats(report: &Report, text: &str, repeats: u64, first: u64, last: u64) -> String {
+    if repeats <= 1 {
+        return text.to_string();
+    }
+    format!(
+        "{text} × {repeats}, first {} s, last {} s",
+        rel(report, first),
+        rel(report, last)
+    )
+}
+
 /// Renders a report as one self-contained HTML page.
 pub fn render_html(report: &Report) -> String {
     let mut o = String::new();
@@ -163,7 +176,7 @@ pub fn render_html(report: &Report) -> String {
                 escape(&a.channel),
                 escape(a.kind.name()),
                 a.node.map(|n| n.to_string()).unwrap_or_default(),
-                escape(&a.text)
+                escape(&with_repeats(report, &a.text, a.repeats, a.t_ns, a.last_ns))
             );
         }
         o.push_str("</tbody></table>\n");
@@ -240,7 +253,7 @@ pub fn render_html(report: &Report) -> String {
             escape(&r.channel),
             r.kind.name(),
             r.node.map(|n| n.to_string()).unwrap_or_default(),
-            escape(&r.text)
+            escape(&with_repeats(report, &r.text, r.repeats, r.t_ns, r.last_ns))
         );
     }
     o.push_str("</tbody></table>\n<script>");

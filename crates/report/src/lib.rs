@@ -34,6 +34,7 @@
 pub mod canopen;
 pub mod devicenet;
 mod html;
+pub mod lss;
 pub mod sdo;
 
 use std::collections::{BTreeMap, HashMap};
@@ -257,6 +258,11 @@ pub struct Row {
     pub node: Option<u8>,
     /// What happened.
     pub text: String,
+    /// How many times it happened in a row: identical EMCYs of a node, one after the other,
+    /// make one row (1 for every other row).
+    pub repeats: u64,
+    /// Capture time of the last repeat (`t_ns` when there is one).
+    pub last_ns: u64,
 }
 
 /// What kind of anomaly.
@@ -306,6 +312,10 @@ pub struct Anomaly {
     pub node: Option<u8>,
     /// Details.
     pub text: String,
+    /// How many times it happened in a row (identical EMCYs of a node make one anomaly).
+    pub repeats: u64,
+    /// Capture time of the last repeat (`t_ns` when there is one).
+    pub last_ns: u64,
 }
 
 /// The analysis of a capture.
@@ -340,6 +350,20 @@ struct NodeHb {
     /// An NMT reset addressed to the node since its last message.
     reset_pending: bool,
     heard: bool,
+    /// A node guarding remote request is waiting for its answer (CiA 301 §7.2.8.3.2.1).
+    guard_pending: bool,
+}
+
+/// The EMCYs of one node that repeat the same message, collapsed into one timeline row and
+/// one anomaly.
+#[derive(Debug)]
+struct EmcyRun {
+    /// Code, error register and manufacturer bytes.
+    emcy: (u16, u8, [u8; 5]),
+    /// Its row in the timeline, if the timeline had room.
+    row: Option<usize>,
+    /// Its anomaly (none for an error reset).
+    anomaly: Option<usize>,
 }
 
 /// The most bins of [`Options::window_ns`] (or 100 ms) a channel's load is counted in
@@ -365,6 +389,7 @@ pub struct Analysis<'o> {
     ids: HashMap<(usize, Id), IdStats>,
     sdo: HashMap<(usize, u8), sdo::Tracker>,
     hb: BTreeMap<(String, u8), NodeHb>,
+    emcy: HashMap<(usize, u8), EmcyRun>,
     transfers: Vec<sdo::Transfer>,
     transfers_total: u64,
     rows: Vec<Row>,
@@ -421,6 +446,7 @@ impl<'o> Analysis<'o> {
             ids: HashMap::new(),
             sdo: HashMap::new(),
             hb: BTreeMap::new(),
+            emcy: HashMap::new(),
             transfers: Vec::new(),
             transfers_total: 0,
             rows: Vec::new(),
@@ -480,6 +506,8 @@ impl<'o> Analysis<'o> {
             kind,
             node,
             text,
+            repeats: 1,
+            last_ns: t_ns,
         });
     }
 
@@ -490,7 +518,44 @@ impl<'o> Analysis<'o> {
             kind,
             node,
             text,
+            repeats: 1,
+            last_ns: t_ns,
         });
+    }
+
+    /// An EMCY of `node`: the same message as the node's previous EMCY only counts as a
+    /// repeat of its row and anomaly; any other starts a new run.
+    fn emergency(&mut self, t: u64, ch: &str, node: u8, emcy: wire::Emcy, text: String) {
+        let key = (self.channel_index(ch), node);
+        let same = (emcy.code, emcy.register, emcy.manufacturer);
+        if let Some(run) = self.emcy.get(&key)
+            && run.emcy == same
+        {
+            if let Some(r) = run.row.and_then(|i| self.rows.get_mut(i)) {
+                r.repeats += 1;
+                r.last_ns = t;
+            }
+            if let Some(a) = run.anomaly.and_then(|i| self.anomalies.get_mut(i)) {
+                a.repeats += 1;
+                a.last_ns = t;
+            }
+            return;
+        }
+        let anomaly = (emcy.code != 0).then(|| {
+            self.anomaly(t, ch, AnomalyKind::Emergency, Some(node), text.clone());
+            self.anomalies.len() - 1
+        });
+        let before = self.rows.len();
+        self.row(t, ch, Kind::Emcy, Some(node), text);
+        let row = (self.rows.len() > before).then_some(before);
+        self.emcy.insert(
+            key,
+            EmcyRun {
+                emcy: same,
+                row,
+                anomaly,
+            },
+        );
     }
 
     /// Adds one record.
@@ -649,10 +714,7 @@ impl<'o> Analysis<'o> {
             Message::Sync(_) => self.channel(ch).syncs += 1,
             Message::Emcy { node, emcy } => {
                 let text = canopen::describe(f, &self.opts.pdos);
-                if emcy.code != 0 {
-                    self.anomaly(t, ch, AnomalyKind::Emergency, Some(node), text.clone());
-                }
-                self.row(t, ch, Kind::Emcy, Some(node), text);
+                self.emergency(t, ch, node, emcy, text);
             }
             Message::Time(_) => {
                 let text = canopen::describe(f, &self.opts.pdos);
@@ -687,21 +749,39 @@ impl<'o> Analysis<'o> {
                     self.sdo_done(done);
                 }
             }
-            Message::ErrorControl(ErrorControl::State { node, state, .. }) => {
-                self.error_control(t, ch, node, state);
+            Message::ErrorControl(ErrorControl::State {
+                node,
+                state,
+                toggle,
+            }) => {
+                self.error_control(t, ch, node, state, toggle);
             }
-            Message::ErrorControl(ErrorControl::GuardRequest { .. }) => {}
+            Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
+                self.hb
+                    .entry((ch.to_string(), node))
+                    .or_default()
+                    .guard_pending = true;
+            }
             Message::Malformed { error, .. } => {
-                self.row(t, ch, Kind::Other, None, format!("{f}: malformed: {error}"));
+                let text = lss::describe(f).unwrap_or_else(|| format!("{f}: malformed: {error}"));
+                self.row(t, ch, Kind::Other, None, text);
             }
-            Message::Other(_) => {}
+            // LSS (CiA 305) is outside the pre-defined connection set but on every
+            // CANopen network that configures node-IDs.
+            Message::Other(_) => {
+                if let Some(text) = lss::describe(f) {
+                    self.row(t, ch, Kind::Other, None, text);
+                }
+            }
         }
     }
 
-    /// Boot-up and heartbeat (CiA 301 §7.2.8.3.2): a row on every change of state, not on
-    /// every heartbeat.
-    fn error_control(&mut self, t: u64, ch: &str, node: u8, state: u8) {
+    /// Boot-up, heartbeat and node guarding (CiA 301 §7.2.8.3.2): a row on every change of
+    /// state, not on every message. An answer to a guard request, or one with the toggle bit
+    /// set, is node guarding; heartbeats have no toggle bit.
+    fn error_control(&mut self, t: u64, ch: &str, node: u8, state: u8, toggle: bool) {
         let hb = self.hb.entry((ch.to_string(), node)).or_default();
+        let guarded = std::mem::take(&mut hb.guard_pending) || toggle;
         let changed = hb.state != Some(state);
         let unexpected = state == 0 && hb.heard && !hb.reset_pending;
         hb.state = Some(state);
@@ -727,7 +807,12 @@ impl<'o> Analysis<'o> {
                 );
             }
         } else if changed {
-            let text = format!("node {node} heartbeat: {}", canopen::state_name(state));
+            let service = if guarded {
+                "node guarding"
+            } else {
+                "heartbeat"
+            };
+            let text = format!("node {node} {service}: {}", canopen::state_name(state));
             self.row(t, ch, Kind::Heartbeat, Some(node), text);
         }
     }
@@ -737,7 +822,7 @@ impl<'o> Analysis<'o> {
             return;
         }
         let text = devicenet::describe(f);
-        self.row(t, ch, Kind::DeviceNet, None, text);
+        self.row(t, ch, Kind::DeviceNet, devicenet::node_of(f), text);
     }
 
     fn cal(&mut self, t: u64, ch: &str, f: &Frame) {
@@ -855,6 +940,8 @@ impl<'o> Analysis<'o> {
                             gap / 1_000_000,
                             median / 1_000_000
                         ),
+                        repeats: 1,
+                        last_ns: t,
                     });
                 }
             }
@@ -871,6 +958,8 @@ impl<'o> Analysis<'o> {
                         (end - last) / 1_000_000,
                         median / 1_000_000
                     ),
+                    repeats: 1,
+                    last_ns: last,
                 });
             }
         }

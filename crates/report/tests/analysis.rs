@@ -363,8 +363,9 @@ fn window_widens_so_long_captures_keep_at_most_2000_windows() {
 
 #[test]
 fn timeline_is_capped_with_a_note() {
+    // Distinct EMCYs (identical ones in a row collapse into one row).
     let records: Vec<_> = (0..10)
-        .map(|i| rec(i, 0x085, &[0, 0, 0, 0, 0, 0, 0, 0]))
+        .map(|i| rec(i, 0x085, &[0, 0, 0, i as u8, 0, 0, 0, 0]))
         .collect();
     let opts = Options {
         max_timeline: 4,
