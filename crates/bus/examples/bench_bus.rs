@@ -1,7 +1,7 @@
 //! The `cantwin bench bus` scenario on its own: `cargo run --release -p cantwin-bus --example
 //! bench_bus [seconds]`.
 
-use cantwin_bus::bench::saturated_bus;
+use cantwin_bus::bench::{BenchConfig, limit, saturated_bus};
 use cantwin_can::Duration;
 
 fn main() {
@@ -22,4 +22,10 @@ fn main() {
     println!("ns / delivered frame  {:.0}", r.ns_per_frame());
     println!("offers / dropped      {} / {}", r.offers, r.dropped_offers);
     println!("bus load              {:.2} %", r.bus_load_percent);
+    let l = limit::run(BenchConfig::saturated(Duration::from_secs(secs)));
+    println!(
+        "fixed limit           {:.1} ns / frame; bus / limit {:.1}",
+        l.ns_per_frame(),
+        r.ns_per_frame() / l.ns_per_frame().max(1e-9)
+    );
 }

@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use cantwin_bus::bench::{BenchConfig, run as run_bus_bench};
+use cantwin_bus::bench::limit::{LimitReport, run as run_limit};
+use cantwin_bus::bench::{BenchConfig, BenchReport as BusReport, run as run_bus_bench};
 use cantwin_can::Duration;
 use indicatif::ProgressBar;
 
@@ -169,29 +170,102 @@ fn print_table(name: &str, table: &str) -> Result<()> {
     Ok(())
 }
 
+/// Node counts and offered loads of the growth tables.
+const GROWTH_NODES: [u16; 4] = [8, 32, 64, 127];
+const GROWTH_LOADS: [f64; 3] = [25.0, 50.0, 100.0];
+
+/// The bus and its fixed limit ([`cantwin_bus::bench::limit`]) on the same scenario, each
+/// the best of `n` trials run in turn, so that a burst of load from other processes disturbs
+/// one trial of each rather than every trial of one.
+fn bus_and_limit(
+    config: BenchConfig,
+    n: usize,
+    label: &str,
+    spinner: &ProgressBar,
+    mut each: impl FnMut(usize, &BusReport, &LimitReport),
+) -> Result<(trials::Trials<BusReport>, trials::Trials<LimitReport>)> {
+    let mut buses = Vec::with_capacity(n);
+    let mut limits = Vec::with_capacity(n);
+    for i in 1..=n {
+        spinner.set_message(format!("{label}: trial {i}/{n}"));
+        let bus = run_bus_bench(config);
+        let limit = run_limit(config);
+        if (bus.delivered, bus.received) != (limit.delivered, limit.received) {
+            bail!(
+                "{label}: the limit delivered {} frames to {} receivers, the bus {} to {}: the \
+                 limit no longer follows the bus's schedule",
+                limit.delivered,
+                limit.received,
+                bus.delivered,
+                bus.received
+            );
+        }
+        each(i, &bus, &limit);
+        buses.push(bus);
+        limits.push(limit);
+    }
+    Ok((
+        trials::Trials::new(label, buses)?,
+        trials::Trials::new(&format!("{label}, limit"), limits)?,
+    ))
+}
+
+/// The growth table: wall ns per delivered frame of the bus (and of its limit, and their
+/// ratio) for every node count and offered load, best of `n` trials each.
+fn bus_growth(args: &Args, n: usize, spinner: &ProgressBar) -> Result<String> {
+    let duration = seconds(args, 20.0);
+    let mut table = format!(
+        "| nodes | offered load | bus load | frames | **bus ns per frame** | limit ns per frame | bus / limit |\n\
+         |---|---|---|---|---|---|---|\n"
+    );
+    for nodes in GROWTH_NODES {
+        for load in GROWTH_LOADS {
+            let config = BenchConfig::at_load(nodes, load, duration);
+            let label = format!("bench bus: {nodes} nodes at {load:.0} %");
+            let (bus, limit) = bus_and_limit(config, n, &label, spinner, |_, _, _| {})?;
+            let (b, l) = (bus.best(), limit.best());
+            table.push_str(&format!(
+                "| {nodes} | {load:.0} % | {:.1} % | {} | **{:.0}** | {:.1} | {:.1} |\n",
+                b.bus_load_percent,
+                b.delivered,
+                b.ns_per_frame(),
+                l.ns_per_frame(),
+                b.ns_per_frame() / l.ns_per_frame().max(1e-9),
+            ));
+        }
+    }
+    Ok(table)
+}
+
 fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
     let config = BenchConfig::saturated(seconds(args, 60.0));
     let n = args.trials;
+    let load = load_average();
     eprintln!(
-        "bench bus: {} nodes, {}, one offer per node every {}, {} of bus time, {} …",
+        "bench bus: {} nodes, {}, one offer per node every {}, {} of bus time, {}, each \
+         beside its fixed limit …",
         config.nodes,
         config.bit_rate,
         config.period,
         config.duration,
         trials_count(n)
     );
-    let trials = trials::run("bench bus", n, spinner, |i| {
-        let r = run_bus_bench(config);
+    let (trials, limits) = bus_and_limit(config, n, "bench bus", spinner, |i, r, l| {
         spinner.suspend(|| {
             eprintln!(
-                "  trial {i}/{n}: real-time factor {:.0}",
-                r.real_time_factor()
+                "  trial {i}/{n}: real-time factor {:.0}, {:.0} ns per frame, limit {:.1} ns",
+                r.real_time_factor(),
+                r.ns_per_frame(),
+                l.ns_per_frame()
             );
         });
-        Ok(r)
     })?;
     let (r, median) = (trials.best(), trials.median());
+    let (l, l_median) = (limits.best(), limits.median());
     let rtf = r.real_time_factor();
+    let ratio = r.ns_per_frame() / l.ns_per_frame().max(1e-9);
+    let median_ratio = median.ns_per_frame() / l_median.ns_per_frame().max(1e-9);
+    let growth = bus_growth(args, n, spinner)?;
     let table = format!(
         "| figure | {header} |\n|---|---|\n\
          | bus time simulated | {bus:.1} s |\n\
@@ -200,9 +274,14 @@ fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
          | delivered frames | {delivered} |\n\
          | delivered frames per wall second | {fps} |\n\
          | wall ns per delivered frame | {ns} |\n\
+         | wall ns per delivered frame, fixed limit (same run) | {limit_ns} |\n\
+         | **bus / fixed limit** (best trials) | **{ratio:.1}×** (medians {median_ratio:.1}×; {v} of 3×) |\n\
          | frames received by filtering nodes | {received} |\n\
          | offers / dropped into a full mailbox | {offers} / {dropped} |\n\
-         | bus load | {load:.1} % |",
+         | bus load | {load_pct:.1} % |\n\
+         | machine load (1, 5, 15 min) at the start | {load} |\n\n\
+         Wall ns per delivered frame by node count and offered load ({growth_s} of bus time \
+         each, best of {trials}; the limit in the same run):\n\n{growth}",
         header = trials_header(n),
         bus = r.bus_time.as_secs_f64(),
         wall = trials::best_median(
@@ -220,10 +299,15 @@ fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
             ""
         ),
         ns = trials::best_median(r.ns_per_frame(), median.ns_per_frame(), 0, ""),
+        limit_ns = trials::best_median(l.ns_per_frame(), l_median.ns_per_frame(), 1, ""),
+        v = verdict(ratio, 3.0, false),
         received = r.received,
         offers = r.offers,
         dropped = r.dropped_offers,
-        load = r.bus_load_percent,
+        load_pct = r.bus_load_percent,
+        growth_s = seconds(args, 20.0),
+        trials = trials_count(n),
+        growth = growth.trim_end(),
     );
     print_table("bus", &table)?;
     let verdict = if rtf >= 1000.0 {
@@ -235,7 +319,8 @@ fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
     };
     if !crate::output::json() {
         println!(
-            "real-time factor {rtf:.0} (best of {}; median {:.0}): {verdict}",
+            "real-time factor {rtf:.0} (best of {}; median {:.0}): {verdict}; {ratio:.1}× the \
+             fixed limit",
             trials_count(n),
             median.real_time_factor()
         );
@@ -245,8 +330,13 @@ fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
             "## bus — saturated 1 Mbit/s bus\n\n\
              {} nodes at {}, each offering an 8-byte frame with its own id every {} into a \
              single transmit mailbox (an offer into a full mailbox is dropped and counted), \
-             filters accepting 4 other nodes' ids, {} of bus time. {} Floor: real-time factor \
-             ≥ 300 (foundation: ≥ 100); aim 1000.\n\n{table}\n\n\
+             filters accepting 4 other nodes' ids, {} of bus time. The fixed limit \
+             (`cantwin_bus::bench::limit`, criterion: `cargo bench -p cantwin-bus --bench \
+             limit`) runs the same schedule with the least work a delivered frame needs: \
+             pre-built frames, the winner from a sorted array of pending identifiers, \
+             precomputed lengths and identifier→receiver bitsets, no counters; each trial \
+             checks it delivers exactly the bus's frames to the same receivers. {} Floors: \
+             within 3× of the fixed limit; real-time factor ≥ 300, aim 1000.\n\n{table}\n\n\
              Measured {} on {}.\nReproduce: `cargo run --release --bin cantwin -- bench bus --write`",
             config.nodes,
             config.bit_rate,
@@ -264,6 +354,18 @@ fn bench_bus(args: &Args, spinner: &ProgressBar) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The machine's load averages now (`/proc/loadavg`), for the record beside wall-time
+/// figures measured on a shared machine; `unknown` where the system does not say.
+pub fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|s| {
+            let v: Vec<&str> = s.split_whitespace().take(3).collect();
+            (v.len() == 3).then(|| v.join(", "))
+        })
+        .unwrap_or_else(|| "unknown".to_string())
 }
 
 /// The value column's header of a table of figures measured over `n` trials.

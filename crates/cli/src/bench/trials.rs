@@ -10,6 +10,7 @@ use std::time::Duration;
 
 use anyhow::{Result, bail};
 use cantwin_bus::bench::BenchReport;
+use cantwin_bus::bench::limit::LimitReport;
 use indicatif::ProgressBar;
 
 /// One trial's report.
@@ -44,6 +45,26 @@ impl Trial for BenchReport {
             ("frames received", self.received),
             ("offers", self.offers),
             ("dropped offers", self.dropped_offers),
+        ]
+    }
+}
+
+impl Trial for LimitReport {
+    fn wall(&self) -> Duration {
+        self.wall_time
+    }
+
+    fn with_wall(&self, wall: Duration) -> Self {
+        LimitReport {
+            wall_time: wall,
+            ..*self
+        }
+    }
+
+    fn counts(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("delivered frames", self.delivered),
+            ("frames received", self.received),
         ]
     }
 }
