@@ -259,6 +259,13 @@ struct Core<H> {
     /// boot-up message announces; an EMCY's identifier outranks the boot-up's, so queued
     /// together the EMCY would reach the bus first).
     boot_up_unsent: bool,
+    /// The last frame of an SDO answer that the bus has not confirmed yet. EMCYs raised
+    /// while the request was served (an object write that reports an error) wait for it:
+    /// a device serves the request, answers it and produces the EMCY in its next cycle
+    /// (CiA 301 §7.2.7: the EMCY is produced once, after the event; §7.2.4.3: the answer
+    /// belongs to the request), so a master sees the answer first. Queued together, the
+    /// EMCY's lower identifier would win arbitration.
+    sdo_answer_unsent: Option<Frame>,
     events: VecDeque<Event>,
     error_passive: bool,
     overrun: bool,
@@ -354,6 +361,7 @@ impl<H: OdHooks> Device<H> {
             storage: Box::new(MemoryStorage::new()),
             storage_faults: 0,
             boot_up_unsent: false,
+            sdo_answer_unsent: None,
             events: VecDeque::new(),
             error_passive: false,
             overrun: false,
@@ -884,6 +892,7 @@ impl<H: OdHooks> Core<H> {
         // pre-operational, and the boot-up counts as the first heartbeat.
         out.push(ErrorControl::boot_up(self.config.node_id).encode());
         self.boot_up_unsent = true;
+        self.sdo_answer_unsent = None;
         self.enter(State::PreOperational, now);
         self.heartbeat.start(now);
         if self.error_passive {
@@ -909,6 +918,8 @@ impl<H: OdHooks> Core<H> {
     /// A communication error: 0x1029 sub 1. The EMCY reporting the error goes out before
     /// the state changes, so that a master learns why the device stopped.
     fn communication_error(&mut self, now: Instant, out: &mut Outbox) {
+        // After bus-off nothing queued before it is confirmed; the EMCY must not wait.
+        self.sdo_answer_unsent = None;
         self.send_emcys(now, out);
         if let Some(to) = self.reaction.apply(self.state) {
             self.enter(to, now);
@@ -993,8 +1004,14 @@ impl<H: OdHooks> Core<H> {
         self.send_emcys(now, out);
     }
 
+    /// Whether EMCYs may go out now: in a state that allows them, behind the boot-up
+    /// message and behind the answer to the SDO request being served.
+    fn emcy_may_send(&self) -> bool {
+        self.state.allows(Service::Emcy) && !self.boot_up_unsent && self.sdo_answer_unsent.is_none()
+    }
+
     fn send_emcys(&mut self, now: Instant, out: &mut Outbox) {
-        if self.state.allows(Service::Emcy) && !self.boot_up_unsent {
+        if self.emcy_may_send() {
             while let Some(mut e) = self.emcy.poll(now) {
                 e.manufacturer =
                     self.hooks
@@ -1063,7 +1080,7 @@ impl<H: OdHooks> Core<H> {
                 None
             },
             self.pdo.as_ref().and_then(PdoEngine::next_deadline),
-            if self.state.allows(Service::Emcy) && !self.boot_up_unsent {
+            if self.emcy_may_send() {
                 self.emcy.next_deadline().map(|t| t.max(self.now))
             } else {
                 None
@@ -1532,11 +1549,15 @@ impl<H: OdHooks> Node for Device<H> {
         }
         if !self.core.on_frame(frame, now, out) && self.core.state.allows(Service::Sdo) {
             let mut handled = false;
+            let queued = out.len();
             for s in &mut self.sdo {
                 if s.on_frame(frame, now, &mut self.core, out) {
                     handled = true;
                     break;
                 }
+            }
+            if handled && out.len() > queued {
+                self.core.sdo_answer_unsent = out.frames().last().copied();
             }
             if !handled
                 && self.core.state == State::Operational
@@ -1567,6 +1588,9 @@ impl<H: OdHooks> Node for Device<H> {
         {
             // The boot-up message is on the bus: the EMCYs behind it follow.
             self.core.boot_up_unsent = false;
+        }
+        if self.core.sdo_answer_unsent.as_ref() == Some(frame) {
+            self.core.sdo_answer_unsent = None;
         }
         if let Some(p) = &mut self.core.pdo {
             p.on_sent(frame, now);

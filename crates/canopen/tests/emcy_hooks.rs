@@ -132,3 +132,28 @@ fn cia301_7_2_7_1_no_emcy_before_the_boot_up_message_is_on_the_bus() {
     assert_eq!(after[0].id().as_raw(), 0x083);
     assert_eq!(after[0].data_bytes()[..2], [0x20, 0x81]);
 }
+
+#[test]
+fn cia301_7_2_7_an_emcy_raised_by_an_sdo_write_follows_the_sdo_answer() {
+    let mut dev = device();
+    let mut out = Outbox::new();
+    boot(&mut dev, &mut out);
+    out.clear();
+    // Expedited download of 0x1017 (the application raises an error in reaction to the
+    // write, in the same instant): the answer 0x583 goes out, the EMCY (0x083, whose
+    // identifier would win arbitration) waits until the answer is on the bus.
+    let request = Frame::std(0x603, &[0x2B, 0x17, 0x10, 0x00, 0xE8, 0x03, 0, 0]).unwrap();
+    dev.on_frame(&request, ms(2), &mut out);
+    dev.emcy().raise(0xFF00, [0; 5]);
+    dev.on_tick(ms(2), &mut out);
+    let queued: Vec<Frame> = out.drain().collect();
+    assert_eq!(queued.len(), 1, "{queued:?}");
+    assert_eq!(queued[0].id().as_raw(), 0x583);
+    assert_eq!(queued[0].data_bytes()[0], 0x60);
+    assert_eq!(dev.next_deadline().filter(|d| *d <= ms(2)), None, "nothing due until the answer is sent");
+    dev.on_sent(&queued[0], ms(3), &mut out);
+    let after: Vec<Frame> = out.drain().collect();
+    assert_eq!(after.len(), 1, "{after:?}");
+    assert_eq!(after[0].id().as_raw(), 0x083);
+    assert_eq!(after[0].data_bytes()[..2], [0x00, 0xFF]);
+}

@@ -635,8 +635,8 @@ mod tests {
         }
     }
 
-    /// Writing a code to 0x2001 raises it: SDO download response (CiA 301 §7.2.4.3.3), then
-    /// EMCY on 0x80 + node-ID with the code, error register bit 0 and five zero bytes
+    /// Writing a code to 0x2001 raises it: SDO download response (CiA 301 §7.2.4.3.3), then,
+    /// once the response is on the bus, EMCY on 0x80 + node-ID with the code, error register bit 0 and five zero bytes
     /// (§7.2.7.3.1); writing 0 sends the error reset EMCY 0x0000 with register 0.
     #[test]
     fn emcy_trigger_object_raises_and_clears_the_code() {
@@ -650,16 +650,16 @@ mod tests {
             .map(|(id, d, _)| (id, d))
             .collect();
         let sdo_ok = (0x585, vec![0x60, 0x01, 0x20, 0x00, 0, 0, 0, 0]);
-        // The EMCY is queued in the same instant as the SDO response and wins arbitration
-        // with its lower identifier.
+        // The EMCY follows the answer to the write that raised it, although its lower
+        // identifier would win arbitration were both queued together.
         assert_eq!(
             frames,
             vec![
                 (0x705, vec![0x00]),
-                (0x085, vec![0x00, 0x50, 0x01, 0, 0, 0, 0, 0]),
                 sdo_ok.clone(),
-                (0x085, vec![0; 8]),
+                (0x085, vec![0x00, 0x50, 0x01, 0, 0, 0, 0, 0]),
                 sdo_ok,
+                (0x085, vec![0; 8]),
             ]
         );
     }

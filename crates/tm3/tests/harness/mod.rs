@@ -35,18 +35,16 @@ pub fn coupler(refs: &[&str]) -> Tm3Coupler {
     c
 }
 
-/// The frames of `out` as `ID#DATA` strings, emptied, as the bus sends them: a boot-up
-/// message among them is reported sent at `t` ([`Node::on_sent`]), and what the coupler
-/// queues on that (the EMCYs held behind it) follows.
+/// The frames of `out` as `ID#DATA` strings, emptied, as the bus sends them: each is
+/// reported sent at `t` ([`Node::on_sent`]), and what the coupler queues on that (the
+/// EMCYs held behind the boot-up message or an SDO answer) follows.
 pub fn acked(c: &mut Tm3Coupler, t: Instant, out: &mut Outbox) -> Vec<String> {
     let mut sent = Vec::new();
     while !out.is_empty() {
         let frames: Vec<Frame> = out.drain().collect();
         for f in frames {
             sent.push(f.to_string());
-            if f.id().as_raw() == 0x700 + u32::from(NODE) && f.data_bytes() == [0] {
-                c.on_sent(&f, t, out);
-            }
+            c.on_sent(&f, t, out);
         }
     }
     sent
@@ -137,7 +135,9 @@ pub fn write(c: &mut Tm3Coupler, t: Instant, index: u16, sub: u8, data: &[u8]) -
 fn sdo(c: &mut Tm3Coupler, t: Instant, req: [u8; 8]) -> [u8; 8] {
     let mut out = Outbox::new();
     c.on_frame(&Frame::std(0x603, &req).unwrap(), t, &mut out);
-    answer(&out)
+    let a = answer(&out);
+    acked(c, t, &mut out);
+    a
 }
 
 /// The server's SDO answer (0x583, always 8 bytes: CiA 301 §7.2.4.3) among `out`'s frames.
