@@ -60,6 +60,14 @@ cargo fmt --all -- --check
 step "cargo clippy (all targets, all features, warnings are errors)"
 cargo clippy --workspace --all-targets --all-features -- -D warnings
 
+# Vector SIL Kit 5.0.3 (libSilKit.so, sil-kit-registry, sil-kit-system-controller) from the
+# silkit-py wheel on PyPI, for crates/silkit's tests; without network (status 2) those tests
+# say so and skip.
+step "fetching SIL Kit for the SIL Kit tests"
+silkit_status=0
+scripts/fetch-silkit.sh || silkit_status=$?
+[ "$silkit_status" -eq 0 ] || [ "$silkit_status" -eq 2 ]
+
 step "cargo test"
 cargo test --workspace
 
