@@ -141,10 +141,19 @@ fn export(scenario: &Path, device: &str) -> Result<String> {
         )
     })?;
     let od = twin_dictionary(&built.sim, dev.port).with_context(|| {
-        format!(
-            "{device:?} ({}) is not a CANopen device, or its card is not in a CANopen personality",
-            dev.kind
-        )
+        if built.sim.twin(dev.port).is_some_and(|t| t.lss_slave()) {
+            format!(
+                "{device:?} ({}) has no node-ID yet and waits for an LSS master (CiA 305): its \
+                 dictionary exists once it has one; export from a copy of the scenario that \
+                 gives it a node-ID (the EDS names its identifiers by $NODEID either way)",
+                dev.kind
+            )
+        } else {
+            format!(
+                "{device:?} ({}) is not a CANopen device, or its card is not in a CANopen personality",
+                dev.kind
+            )
+        }
     })?;
     let desc = od.description();
     let count = |range: std::ops::RangeInclusive<u16>| {
@@ -179,7 +188,7 @@ fn export(scenario: &Path, device: &str) -> Result<String> {
         simple_boot_up_slave: Some(true),
         simple_boot_up_master: Some(false),
         group_messaging: Some(false),
-        lss_supported: Some(false),
+        lss_supported: Some(built.sim.twin(dev.port).is_some_and(|t| t.lss_slave())),
         dynamic_channels_supported: Some(0),
         ..Default::default()
     };

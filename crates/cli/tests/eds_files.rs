@@ -195,3 +195,31 @@ fn cia306_eds_export_of_the_adv200_names_its_manufacturer_and_product() {
     // Not the four bytes the expedited-only card's 0x1008 holds.
     assert!(out.contains("ProductName=ADV200 EXP-CAN/DN-ADV\n"), "{out}");
 }
+
+/// An LSS slave's EDS says so (CiA 306 §4.6.1 `LSS_Supported`, CiA 305); one that has no
+/// node-ID yet has no dictionary to export, and the error says why and what to do.
+#[test]
+fn cia306_eds_export_of_an_lss_slave_states_lss_supported() {
+    let dir = temp_dir("eds-lss");
+    let scenario = dir.join("s.toml");
+    let device = |node_id: &str, lss: bool| {
+        format!(
+            "[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n[[device]]\nname = \"dev\"\nkind = \"cia301\"\nbus = \"can0\"\nnode_id = {node_id}\nlss = {lss}\n"
+        )
+    };
+    let export = |text: String| {
+        std::fs::write(&scenario, text).unwrap();
+        let s = scenario.to_str().unwrap();
+        cantwin(&["eds", "export", "--scenario", s, "--device", "dev"])
+    };
+    let (ok, out, err) = export(device("5", true));
+    assert!(ok, "{err}");
+    assert!(out.contains("\nLSS_Supported=1\n"), "{out}");
+    let (ok, out, err) = export(device("5", false));
+    assert!(ok, "{err}");
+    assert!(out.contains("\nLSS_Supported=0\n"), "{out}");
+    let (ok, _, err) = export(device("\"unconfigured\"", true));
+    assert!(!ok);
+    assert!(err.contains("has no node-ID yet and waits for an LSS master"), "{err}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

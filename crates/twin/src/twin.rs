@@ -72,6 +72,12 @@ pub trait Twin {
         None
     }
 
+    /// Whether the device is a CiA 305 LSS slave (answers the layer setting services on
+    /// 0x7E5/0x7E4), which its EDS states as `LSS_Supported` (CiA 306 §4.6.1).
+    fn lss_slave(&self) -> bool {
+        false
+    }
+
     /// The bit rate the device's CAN controller is set to, for a device that sets it from
     /// its own parameters. A rate other than its bus's is a misconfiguration the bus
     /// models ([`cantwin_can`] frames it cannot decode become error frames), not an error

@@ -296,6 +296,10 @@ impl<D: Commissionable> Twin for LssNode<D> {
         self.device.as_ref()?.dictionary_heap_bytes()
     }
 
+    fn lss_slave(&self) -> bool {
+        true
+    }
+
     fn canopen_node_id(&self) -> Option<u8> {
         self.device.as_ref()?.canopen_node_id()
     }
