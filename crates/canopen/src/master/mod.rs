@@ -7,6 +7,8 @@
 //!   different nodes run concurrently, transfers to the same node queue), the NMT master
 //!   services and the producers, and reports everything as timestamped [`MasterEvent`]s;
 //! * [`pdo`]: reading and writing another node's PDO parameters and decoding its PDOs;
+//! * [`cia402`]: a CiA 402 drive master (power states, modes, profile moves, homing,
+//!   cyclic set-points on SYNC) over a [`Master`];
 //! * [`drive()`]: a loop that runs a [`Master`] over any [`Port`] with a clock.
 //!
 //! ```
@@ -25,6 +27,7 @@
 //! # Ok::<(), cantwin_canopen::master::MasterError>(())
 //! ```
 
+pub mod cia402;
 pub mod drive;
 pub mod pdo;
 pub mod sdo_client;
