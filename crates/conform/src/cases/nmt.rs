@@ -1,0 +1,302 @@
+//! Area 7: NMT (CiA 301 §7.3.2): states and transitions, boot-up after each reset, which
+//! services answer in which state, what each reset restores.
+
+use cantwin_can::{Duration, Frame, Instant};
+use cantwin_canopen::wire::NmtCs;
+
+use super::{Case, access, eds_entry, m};
+use crate::ctx::{Ctx, Finding, Outcome, fail};
+use crate::report::Area::Nmt as A;
+
+pub(super) fn cases() -> Vec<Case> {
+    vec![
+        m(
+            "nmt.boot-up-reset-communication",
+            A,
+            "CiA 301 §7.3.2.2.2, §7.2.8.3.2.4",
+            "reset communication ends with a boot-up message (0x700 + node-ID, 0x00)",
+            boot_reset_comm,
+        ),
+        m(
+            "nmt.boot-up-reset-node",
+            A,
+            "CiA 301 §7.3.2.2.2, §7.2.8.3.2.4",
+            "reset node ends with a boot-up message",
+            boot_reset_node,
+        ),
+        m(
+            "nmt.broadcast",
+            A,
+            "CiA 301 §7.2.8.3.1",
+            "an NMT command to node-ID 0 addresses the device",
+            broadcast,
+        ),
+        m(
+            "nmt.states",
+            A,
+            "CiA 301 §7.3.2.2, §7.2.8.3.2",
+            "start, stop and enter pre-operational move the state the error control reports (5, 4, 127)",
+            states,
+        ),
+        m(
+            "nmt.sdo-stopped",
+            A,
+            "CiA 301 §7.3.2.2.3 table 40",
+            "no SDO answer in STOPPED; SDO again in PRE-OPERATIONAL",
+            sdo_stopped,
+        ),
+        m(
+            "nmt.pdo-operational-only",
+            A,
+            "CiA 301 §7.3.2.2.3 table 40",
+            "a TPDO with an event timer is sent in OPERATIONAL only",
+            pdo_operational_only,
+        ),
+        m(
+            "nmt.reset-communication-restores",
+            A,
+            "CiA 301 §7.3.2.2.2",
+            "reset communication sets the communication area back to its power-on values",
+            reset_comm_restores,
+        ),
+        m(
+            "nmt.reset-node-restores",
+            A,
+            "CiA 301 §7.3.2.2.2",
+            "reset node sets the communication area back to its power-on values",
+            reset_node_restores,
+        ),
+    ]
+}
+
+fn boot(ctx: &mut Ctx<'_>, cs: NmtCs, what: &str) -> Outcome {
+    let sent = ctx.now();
+    match ctx.reset(cs)? {
+        Some(t) => Ok(format!(
+            "boot-up {} ms after {what}",
+            t.saturating_duration_since(sent).as_millis()
+        )),
+        None => Err(fail(format!(
+            "no boot-up message within {} ms of {what}",
+            ctx.options.boot_timeout.as_millis()
+        ))),
+    }
+}
+
+fn boot_reset_comm(ctx: &mut Ctx<'_>) -> Outcome {
+    boot(ctx, NmtCs::ResetCommunication, "reset communication")
+}
+
+fn boot_reset_node(ctx: &mut Ctx<'_>) -> Outcome {
+    boot(ctx, NmtCs::ResetNode, "reset node")
+}
+
+fn broadcast(ctx: &mut Ctx<'_>) -> Outcome {
+    let nmt = cantwin_can::Id::standard(0).map_err(|e| fail(e.to_string()))?;
+    ctx.send(Frame::data_array(nmt, [NmtCs::ResetCommunication as u8, 0]))?;
+    let ec = ctx.ec_id();
+    let within = ctx.options.boot_timeout;
+    match ctx.wait_for(within, |f| f.id() == ec && f.data_bytes() == [0])? {
+        Some(_) => Ok("boot-up after a broadcast reset communication".into()),
+        None => Err(fail("no boot-up after reset communication to node-ID 0")),
+    }
+}
+
+/// Has the device report its state: by heartbeat (0x1017 = 50 ms) or by node guarding.
+/// Returns the original heartbeat time to restore.
+pub(crate) fn state_reporting(ctx: &mut Ctx<'_>) -> Result<Option<Vec<u8>>, Finding> {
+    if eds_entry(ctx, 0x1017, 0).is_some_and(|e| access(e).writable())
+        && let Ok(orig) = ctx.upload(0x1017, 0)?
+    {
+        ctx.write(
+            0x1017,
+            0,
+            &50u16.to_le_bytes(),
+            "the heartbeat producer time",
+        )?;
+        return Ok(Some(orig));
+    }
+    Ok(None)
+}
+
+/// The state the device reports next: its next heartbeat, or its answer to a guarding
+/// request.
+pub(crate) fn reported_state(ctx: &mut Ctx<'_>, heartbeat: bool) -> Result<Option<u8>, Finding> {
+    let ec = ctx.ec_id();
+    if !heartbeat {
+        ctx.send(Frame::remote(ec, 1).map_err(|e| fail(e.to_string()))?)?;
+    }
+    let within = if heartbeat {
+        Duration::from_millis(200)
+    } else {
+        ctx.options.sdo_timeout
+    };
+    // A heartbeat already queued before the command may still report the old state:
+    // take the second one.
+    if heartbeat {
+        ctx.wait_for(within, |f| f.id() == ec && !f.is_remote())?;
+    }
+    Ok(ctx
+        .wait_for(within, |f| f.id() == ec && !f.is_remote() && f.len() == 1)?
+        .map(|(_, f)| f.data_bytes()[0] & 0x7F))
+}
+
+fn states(ctx: &mut Ctx<'_>) -> Outcome {
+    ctx.fresh()?;
+    let orig = state_reporting(ctx)?;
+    let heartbeat = orig.is_some();
+    if !heartbeat && !ctx.eds.objects.contains_key(&0x100C) {
+        return Err(Finding::NotApplicable(
+            "neither heartbeat nor node guarding to report the state".into(),
+        ));
+    }
+    let mut seen = Vec::new();
+    for (cs, want, name) in [
+        (NmtCs::Start, 0x05u8, "OPERATIONAL"),
+        (NmtCs::Stop, 0x04, "STOPPED"),
+        (NmtCs::Start, 0x05, "OPERATIONAL"),
+        (NmtCs::EnterPreOperational, 0x7F, "PRE-OPERATIONAL"),
+        (NmtCs::Stop, 0x04, "STOPPED"),
+        (NmtCs::EnterPreOperational, 0x7F, "PRE-OPERATIONAL"),
+    ] {
+        ctx.nmt(cs)?;
+        match reported_state(ctx, heartbeat)? {
+            Some(s) if s == want => seen.push(name),
+            Some(s) => {
+                return Err(fail(format!(
+                    "after {cs:?} the device reports state {s}, expected {want} ({name})"
+                )));
+            }
+            None => return Err(fail(format!("no state report after {cs:?}"))),
+        }
+    }
+    if let Some(o) = orig {
+        ctx.write(0x1017, 0, &o, "the heartbeat producer time")?;
+    }
+    Ok(seen.join(" → "))
+}
+
+fn sdo_stopped(ctx: &mut Ctx<'_>) -> Outcome {
+    ctx.nmt(NmtCs::Stop)?;
+    ctx.idle(Duration::from_millis(20))?;
+    let answered = ctx.sdo_raw([0x40, 0x00, 0x10, 0, 0, 0, 0, 0])?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(20))?;
+    if let Some(b) = answered {
+        return Err(fail(format!(
+            "the device answered an SDO request in STOPPED: {b:02X?}"
+        )));
+    }
+    super::recovered(ctx, "STOPPED")?;
+    Ok("silent in STOPPED, served in PRE-OPERATIONAL".into())
+}
+
+/// The first TPDO of the file with a mapping: (communication index, COB-ID).
+pub(crate) fn first_tpdo(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u32)>, Finding> {
+    for k in 0..512u16 {
+        let comm = 0x1800 + k;
+        if !ctx.eds.objects.contains_key(&comm) || !ctx.eds.objects.contains_key(&(0x1A00 + k)) {
+            continue;
+        }
+        let cob = ctx.read_u32(comm, 1, "the TPDO COB-ID")?;
+        let n = ctx.read_u32(0x1A00 + k, 0, "the number of mapped objects")?;
+        if cob & 0x8000_0000 == 0 && n > 0 {
+            return Ok(Some((comm, cob)));
+        }
+    }
+    Ok(None)
+}
+
+fn count_pdo(ctx: &mut Ctx<'_>, cob: u32, during: Duration) -> Result<usize, Finding> {
+    let id = cob & 0x7FF;
+    Ok(ctx
+        .collect(during, |f| {
+            f.id().as_raw() == id && !f.is_remote() && !f.is_extended()
+        })?
+        .len())
+}
+
+fn pdo_operational_only(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, cob)) = first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
+        return Err(Finding::NotApplicable(format!(
+            "0x{comm:04X} has no writable event timer (sub 5)"
+        )));
+    }
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let et = ctx
+        .upload(comm, 5)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+    ctx.write(comm, 2, &[0xFF], "the transmission type")?;
+    ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
+    let pre = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    ctx.nmt(NmtCs::Start)?;
+    let op = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    ctx.nmt(NmtCs::Stop)?;
+    ctx.idle(Duration::from_millis(10))?;
+    let stopped = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 5, &et, "the event timer")?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    if pre != 0 || stopped != 0 || op == 0 {
+        return Err(fail(format!(
+            "TPDO 0x{:03X} in 300 ms: {pre} in PRE-OPERATIONAL, {op} in OPERATIONAL, {stopped} in STOPPED",
+            cob & 0x7FF
+        )));
+    }
+    Ok(format!(
+        "TPDO 0x{:03X}: {op} frames in 300 ms of OPERATIONAL, none otherwise",
+        cob & 0x7FF
+    ))
+}
+
+fn restores(ctx: &mut Ctx<'_>, cs: NmtCs, what: &str) -> Outcome {
+    if !eds_entry(ctx, 0x1017, 0).is_some_and(|e| access(e).writable()) {
+        return Err(Finding::NotApplicable(
+            "no writable heartbeat producer time to change".into(),
+        ));
+    }
+    let before = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
+    let changed = if before == 777 { 778u16 } else { 777 };
+    ctx.write(
+        0x1017,
+        0,
+        &changed.to_le_bytes(),
+        "the heartbeat producer time",
+    )?;
+    let t0: Instant = ctx.now();
+    if ctx.reset(cs)?.is_none() {
+        return Err(fail(format!("no boot-up after {what}")));
+    }
+    let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
+    if after != before {
+        ctx.write(
+            0x1017,
+            0,
+            &(before as u16).to_le_bytes(),
+            "the heartbeat producer time",
+        )?;
+        return Err(fail(format!(
+            "0x1017 was {before}, set to {changed}; after {what} it reads {after}, not its power-on value"
+        )));
+    }
+    Ok(format!(
+        "0x1017 back to {before} ms {} ms after {what}",
+        ctx.now().saturating_duration_since(t0).as_millis()
+    ))
+}
+
+fn reset_comm_restores(ctx: &mut Ctx<'_>) -> Outcome {
+    restores(ctx, NmtCs::ResetCommunication, "reset communication")
+}
+
+fn reset_node_restores(ctx: &mut Ctx<'_>) -> Outcome {
+    restores(ctx, NmtCs::ResetNode, "reset node")
+}

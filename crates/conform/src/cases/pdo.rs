@@ -1,0 +1,403 @@
+//! Area 4: PDOs (CiA 301 §7.2.2, §7.5.2.35–38): communication and mapping parameters,
+//! the procedure for changing a mapping, COB-ID rules, transmission types, the event
+//! timer, the inhibit time and RPDO length errors.
+
+use cantwin_can::{Duration, Frame, Id};
+use cantwin_canopen::wire::NmtCs;
+
+use super::{Case, a, access, eds_entry, m, within};
+use crate::ctx::{Ctx, Finding, Outcome, fail, not_supported};
+use crate::report::Area::Pdo as A;
+
+pub(super) fn cases() -> Vec<Case> {
+    vec![
+        m(
+            "pdo.cob-ids",
+            A,
+            "CiA 301 §7.5.2.35, §7.5.2.36, §7.3.5",
+            "every valid PDO uses an 11-bit COB-ID outside the restricted ones",
+            cob_ids,
+        ),
+        m(
+            "pdo.mapping-procedure",
+            A,
+            "CiA 301 §7.5.2.37, §7.5.2.38",
+            "a valid PDO's mapping cannot change; invalid, sub 0 = 0, entries, sub 0 = n, valid succeeds",
+            mapping_procedure,
+        ),
+        m(
+            "pdo.cob-id-change-valid",
+            A,
+            "CiA 301 §7.5.2.36",
+            "bits 0–29 of a valid PDO's COB-ID cannot change",
+            cob_id_change_valid,
+        ),
+        m(
+            "pdo.transmission-sync",
+            A,
+            "CiA 301 §7.2.2.2, §7.5.2.36 table 71",
+            "transmission types 1 and 2 send the TPDO at every and every second SYNC",
+            transmission_sync,
+        ),
+        m(
+            "pdo.event-timer",
+            A,
+            "CiA 301 §7.5.2.36 (sub 5)",
+            "transmission type 255 with a 50 ms event timer sends every 50 ms",
+            event_timer,
+        ),
+        m(
+            "pdo.inhibit-time",
+            A,
+            "CiA 301 §7.5.2.36 (sub 3)",
+            "an inhibit time of 100 ms spaces the TPDO at least 100 ms apart",
+            inhibit_time,
+        ),
+        a(
+            "pdo.rpdo-length",
+            A,
+            "CiA 301 §7.2.2.2, §7.2.7.1 table 26",
+            "an RPDO shorter than its mapping raises EMCY 0x8210",
+            rpdo_length,
+        ),
+    ]
+}
+
+/// CAN-IDs CiA 301 reserves (§7.3.5 table 36): no PDO may use them.
+fn restricted(id: u32) -> bool {
+    matches!(id, 0x000 | 0x001..=0x07F | 0x101..=0x180 | 0x581..=0x5FF | 0x601..=0x67F | 0x6E0..=0x6FF | 0x701..=0x77F | 0x780..=0x7FF)
+}
+
+/// The PDOs of the file: (communication index, mapping index).
+fn pdos(ctx: &Ctx<'_>, tx: bool) -> Vec<(u16, u16)> {
+    let base = if tx { 0x1800 } else { 0x1400 };
+    (0..512u16)
+        .map(|k| (base + k, base + 0x200 + k))
+        .filter(|(c, _)| ctx.eds.objects.contains_key(c))
+        .collect()
+}
+
+fn cob_ids(ctx: &mut Ctx<'_>) -> Outcome {
+    let mut bad = Vec::new();
+    let mut valid = 0;
+    let all: Vec<(u16, u16)> = pdos(ctx, false)
+        .into_iter()
+        .chain(pdos(ctx, true))
+        .collect();
+    for (comm, _) in all {
+        let cob = ctx.read_u32(comm, 1, "a PDO COB-ID")?;
+        if cob & 0x8000_0000 != 0 {
+            continue;
+        }
+        valid += 1;
+        if cob & 0x2000_0000 == 0 && (cob & 0x1FFF_F800 != 0 || restricted(cob & 0x7FF)) {
+            bad.push(format!("0x{comm:04X} sub 1 = 0x{cob:08X}"));
+        }
+        ctx.upload(comm, 2)?
+            .map_err(|a| fail(format!("0x{comm:04X} sub 2 (transmission type): {a}")))?;
+    }
+    if bad.is_empty() {
+        Ok(format!("{valid} valid PDOs"))
+    } else {
+        Err(fail(format!(
+            "restricted or malformed COB-IDs: {}",
+            bad.join(", ")
+        )))
+    }
+}
+
+/// A valid PDO whose mapping the file says is writable: (comm, mapping, COB-ID, entries).
+fn dynamic_pdo(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u16, u32, Vec<Vec<u8>>)>, Finding> {
+    let all: Vec<(u16, u16)> = pdos(ctx, true)
+        .into_iter()
+        .chain(pdos(ctx, false))
+        .collect();
+    for (comm, map) in all {
+        if !eds_entry(ctx, map, 0).is_some_and(|e| access(e).writable())
+            || !eds_entry(ctx, comm, 1).is_some_and(|e| access(e).writable())
+        {
+            continue;
+        }
+        let cob = ctx.read_u32(comm, 1, "a PDO COB-ID")?;
+        let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+        if cob & 0x8000_0000 != 0 || n == 0 {
+            continue;
+        }
+        let mut list = Vec::new();
+        for s in 1..=u8::try_from(n).unwrap_or(0) {
+            list.push(
+                ctx.upload(map, s)?
+                    .map_err(|a| fail(format!("reading 0x{map:04X} sub {s}: {a}")))?,
+            );
+        }
+        return Ok(Some((comm, map, cob, list)));
+    }
+    Ok(None)
+}
+
+fn mapping_procedure(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, map, cob, list)) = dynamic_pdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid PDO with a writable mapping".into(),
+        ));
+    };
+    let n = u8::try_from(list.len()).unwrap_or(0);
+    if ctx.download(map, 0, &[0])?.is_ok() {
+        ctx.write(map, 0, &[n], "the number of mapped objects")?;
+        return Err(fail(format!(
+            "0x{map:04X} sub 0 = 0 accepted while the PDO is valid (0x{comm:04X} sub 1 = 0x{cob:08X})"
+        )));
+    }
+    ctx.write(
+        comm,
+        1,
+        &(cob | 0x8000_0000).to_le_bytes(),
+        "the COB-ID with bit 31 set",
+    )?;
+    ctx.write(map, 0, &[0], "sub 0 = 0 of the invalid PDO")?;
+    for (i, e) in list.iter().enumerate() {
+        ctx.write(map, u8::try_from(i + 1).unwrap_or(1), e, "a mapping entry")?;
+    }
+    ctx.write(map, 0, &[n], "the number of mapped objects")?;
+    ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
+    let back = ctx.read_u32(map, 0, "the number of mapped objects")?;
+    if back != u32::from(n) {
+        return Err(fail(format!(
+            "0x{map:04X} sub 0 reads {back} after the procedure, written {n}"
+        )));
+    }
+    Ok(format!(
+        "0x{map:04X}: {n} entries remapped; refused while valid"
+    ))
+}
+
+fn cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, _, cob, _)) = dynamic_pdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid PDO with a writable COB-ID".into(),
+        ));
+    };
+    let other = (cob & !0x7FF) | (((cob & 0x7FF) + 1) & 0x7FF);
+    match ctx.download(comm, 1, &other.to_le_bytes())? {
+        Err(a) => Ok(format!("0x{comm:04X} sub 1 = 0x{other:08X} refused: {a}")),
+        Ok(()) => {
+            ctx.write(comm, 1, &(other | 0x8000_0000).to_le_bytes(), "the COB-ID")?;
+            ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID")?;
+            Err(fail(format!(
+                "0x{comm:04X} sub 1 changed from 0x{cob:08X} to 0x{other:08X} while valid"
+            )))
+        }
+    }
+}
+
+fn sync_id(ctx: &mut Ctx<'_>) -> Result<Id, Finding> {
+    let cob = match ctx.upload(0x1005, 0)? {
+        Ok(d) => super::u32_of(&d) & 0x7FF,
+        Err(_) => 0x80,
+    };
+    Id::standard(u16::try_from(cob).unwrap_or(0x80)).map_err(|e| fail(e.to_string()))
+}
+
+fn is_pdo(f: &Frame, cob: u32) -> bool {
+    f.id().as_raw() == cob & 0x7FF && !f.is_remote()
+}
+
+fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
+    }
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let sync = sync_id(ctx)?;
+    let mut notes = Vec::new();
+    for (ty, syncs, want) in [(1u8, 6usize, 6usize), (2, 6, 3)] {
+        ctx.write(comm, 2, &[ty], "the transmission type")?;
+        ctx.nmt(NmtCs::Start)?;
+        ctx.idle(Duration::from_millis(30))?;
+        let mut got = 0;
+        for _ in 0..syncs {
+            ctx.send(Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?)?;
+            got += ctx
+                .collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
+                .len();
+        }
+        ctx.nmt(NmtCs::EnterPreOperational)?;
+        ctx.idle(Duration::from_millis(10))?;
+        if got != want {
+            ctx.write(comm, 2, &tt, "the transmission type")?;
+            return Err(fail(format!(
+                "type {ty}: {got} TPDOs after {syncs} SYNCs, expected {want}"
+            )));
+        }
+        notes.push(format!("type {ty}: {got} after {syncs} SYNCs"));
+    }
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    Ok(notes.join(", "))
+}
+
+fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(format!(
+            "0x{comm:04X} has no writable event timer"
+        )));
+    }
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let et = ctx
+        .upload(comm, 5)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+    ctx.write(comm, 2, &[0xFF], "the transmission type")?;
+    ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
+    ctx.nmt(NmtCs::Start)?;
+    ctx.wait_for(Duration::from_millis(100), |f| is_pdo(f, cob))?;
+    let frames = ctx.collect(Duration::from_millis(525), |f| is_pdo(f, cob))?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 5, &et, "the event timer")?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    if !(9..=11).contains(&frames.len()) {
+        return Err(fail(format!(
+            "{} TPDOs in 525 ms with a 50 ms event timer",
+            frames.len()
+        )));
+    }
+    for w in frames.windows(2) {
+        let d = w[1].0.saturating_duration_since(w[0].0);
+        if !within(ctx, d, Duration::from_millis(50)) {
+            return Err(fail(format!(
+                "a TPDO interval of {} µs, event timer 50 ms",
+                d.as_micros()
+            )));
+        }
+    }
+    Ok(format!(
+        "{} TPDOs, intervals within tolerance",
+        frames.len()
+    ))
+}
+
+fn inhibit_time(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if !eds_entry(ctx, comm, 3).is_some_and(|e| access(e).writable())
+        || !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable())
+    {
+        return Err(not_supported(format!(
+            "0x{comm:04X} has no writable inhibit time and event timer"
+        )));
+    }
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let it = ctx
+        .upload(comm, 3)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 3: {a}")))?;
+    let et = ctx
+        .upload(comm, 5)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+    // The inhibit time changes only while the PDO is invalid (§7.5.2.36).
+    ctx.write(
+        comm,
+        1,
+        &(cob | 0x8000_0000).to_le_bytes(),
+        "the COB-ID with bit 31 set",
+    )?;
+    ctx.write(comm, 3, &1000u16.to_le_bytes(), "the inhibit time (100 ms)")?;
+    ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
+    ctx.write(comm, 2, &[0xFF], "the transmission type")?;
+    ctx.write(comm, 5, &20u16.to_le_bytes(), "the event timer")?;
+    ctx.nmt(NmtCs::Start)?;
+    let frames = ctx.collect(Duration::from_millis(650), |f| is_pdo(f, cob))?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 5, &et, "the event timer")?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    ctx.write(
+        comm,
+        1,
+        &(cob | 0x8000_0000).to_le_bytes(),
+        "the COB-ID with bit 31 set",
+    )?;
+    ctx.write(comm, 3, &it, "the inhibit time")?;
+    ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
+    if frames.len() < 3 {
+        return Err(fail(format!(
+            "{} TPDOs in 650 ms (event timer 20 ms, inhibit 100 ms)",
+            frames.len()
+        )));
+    }
+    let min = Duration::from_millis(100).saturating_sub(ctx.options.slack);
+    for w in frames.windows(2) {
+        let d = w[1].0.saturating_duration_since(w[0].0);
+        if d < min {
+            return Err(fail(format!(
+                "two TPDOs {} µs apart, inhibit time 100 ms",
+                d.as_micros()
+            )));
+        }
+    }
+    Ok(format!("{} TPDOs at least 100 ms apart", frames.len()))
+}
+
+fn rpdo_length(ctx: &mut Ctx<'_>) -> Outcome {
+    let mut found = None;
+    for (comm, map) in pdos(ctx, false) {
+        let cob = ctx.read_u32(comm, 1, "an RPDO COB-ID")?;
+        let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+        if cob & 0x8000_0000 != 0 || cob & 0x2000_0000 != 0 || n == 0 {
+            continue;
+        }
+        let mut bits = 0u32;
+        for s in 1..=u8::try_from(n).unwrap_or(0) {
+            bits += ctx.read_u32(map, s, "a mapping entry")? & 0xFF;
+        }
+        if bits >= 8 {
+            found = Some((cob & 0x7FF, bits.div_ceil(8)));
+            break;
+        }
+    }
+    let Some((cob, len)) = found else {
+        return Err(Finding::NotApplicable(
+            "no valid RPDO with a mapping".into(),
+        ));
+    };
+    let emcy = match ctx.upload(0x1014, 0)? {
+        Ok(d) if super::u32_of(&d) & 0x8000_0000 == 0 => super::u32_of(&d) & 0x7FF,
+        _ => return Err(Finding::NotApplicable("the device produces no EMCY".into())),
+    };
+    let id = Id::standard(u16::try_from(cob).unwrap_or(0)).map_err(|e| fail(e.to_string()))?;
+    ctx.nmt(NmtCs::Start)?;
+    ctx.idle(Duration::from_millis(20))?;
+    let short = vec![0u8; usize::try_from(len - 1).unwrap_or(0)];
+    ctx.send(Frame::data(id, &short).map_err(|e| fail(e.to_string()))?)?;
+    let got = ctx.wait_for(Duration::from_millis(200), |f| {
+        f.id().as_raw() == emcy && f.len() == 8 && f.data_bytes()[..2] == [0x10, 0x82]
+    })?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(20))?;
+    match got {
+        Some(_) => Ok(format!(
+            "RPDO 0x{cob:03X} with {} of {len} bytes: EMCY 0x8210",
+            len - 1
+        )),
+        None => Err(fail(format!(
+            "RPDO 0x{cob:03X} with {} of {len} bytes: no EMCY 0x8210 within 200 ms",
+            len - 1
+        ))),
+    }
+}

@@ -1,0 +1,885 @@
+//! Area 2: the SDO server (CiA 301 §7.2.4): the transfer protocols in both directions and
+//! the aborts the server must give, each followed by a check that it serves again.
+
+use cantwin_can::Duration;
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::master::Mode;
+use cantwin_canopen::sdo::crc::Crc16;
+
+use super::{
+    Case, abort_of, absent_index, access, data_type, entries, hex, le, m, recovered, writable,
+};
+use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail, fail_abort};
+use crate::report::Area::Sdo as A;
+
+pub(super) fn cases() -> Vec<Case> {
+    vec![
+        m(
+            "sdo.expedited-upload",
+            A,
+            "CiA 301 §7.2.4.3.6",
+            "expedited upload of 0x1000: scs 2, e = 1, s = 1, the multiplexer echoed",
+            expedited_upload,
+        ),
+        m(
+            "sdo.expedited-download",
+            A,
+            "CiA 301 §7.2.4.3.3",
+            "expedited download of a writable entry with its own value",
+            expedited_download,
+        ),
+        m(
+            "sdo.segmented-upload",
+            A,
+            "CiA 301 §7.2.4.3.5, §7.2.4.3.7",
+            "segmented upload of an entry longer than 4 bytes: size indicated, toggle alternating",
+            segmented_upload,
+        ),
+        m(
+            "sdo.segmented-download",
+            A,
+            "CiA 301 §7.2.4.3.3, §7.2.4.3.4",
+            "segmented download with size indication",
+            segmented_download,
+        ),
+        m(
+            "sdo.segmented-download-no-size",
+            A,
+            "CiA 301 §7.2.4.3.3 (s = 0)",
+            "segmented download without size indication",
+            segmented_download_no_size,
+        ),
+        m(
+            "sdo.block-upload",
+            A,
+            "CiA 301 §7.2.4.3.12–16",
+            "block upload with block sizes 1 and 127, CRC on and off",
+            block_upload,
+        ),
+        m(
+            "sdo.block-download",
+            A,
+            "CiA 301 §7.2.4.3.9–11",
+            "block download, CRC on and off",
+            block_download,
+        ),
+        m(
+            "sdo.abort-no-object",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "an absent object is refused with 0x06020000",
+            abort_no_object,
+        ),
+        m(
+            "sdo.abort-no-sub",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "an absent sub-index is refused with 0x06090011",
+            abort_no_sub,
+        ),
+        m(
+            "sdo.abort-read-only",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "a write to a read-only entry is refused with 0x06010002",
+            abort_read_only,
+        ),
+        m(
+            "sdo.abort-write-only",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "a read of a write-only entry is refused with 0x06010001",
+            abort_write_only,
+        ),
+        m(
+            "sdo.abort-length-high",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "a write longer than the entry is refused with 0x06070012 (or 0x06070010)",
+            abort_length_high,
+        ),
+        m(
+            "sdo.abort-length-low",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "a write shorter than the entry is refused with 0x06070013 (or 0x06070010)",
+            abort_length_low,
+        ),
+        m(
+            "sdo.abort-value-high",
+            A,
+            "CiA 301 §7.2.4.3.17, CiA 306 §4.6.3 HighLimit",
+            "a value above the file's HighLimit is refused with 0x06090031 (or 0x06090030)",
+            abort_value_high,
+        ),
+        m(
+            "sdo.abort-value-low",
+            A,
+            "CiA 301 §7.2.4.3.17, CiA 306 §4.6.3 LowLimit",
+            "a value below the file's LowLimit is refused with 0x06090032 (or 0x06090030)",
+            abort_value_low,
+        ),
+        m(
+            "sdo.abort-toggle",
+            A,
+            "CiA 301 §7.2.4.3.4, §7.2.4.3.17",
+            "a download segment with the wrong toggle bit is refused with 0x05030000",
+            abort_toggle,
+        ),
+        m(
+            "sdo.abort-invalid-ccs",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "an unknown command specifier is refused with 0x05040001",
+            abort_invalid_ccs,
+        ),
+        m(
+            "sdo.abort-block-size",
+            A,
+            "CiA 301 §7.2.4.3.12",
+            "a block upload asking for 0 or 128 segments is refused with 0x05040002",
+            abort_block_size,
+        ),
+        m(
+            "sdo.abort-sequence",
+            A,
+            "CiA 301 §7.2.4.3.10",
+            "a block segment with sequence number 0 is refused (0x05040003) or not acknowledged",
+            abort_sequence,
+        ),
+        m(
+            "sdo.abort-crc",
+            A,
+            "CiA 301 §7.2.4.3.11",
+            "a block download with a wrong CRC is refused with 0x05040004",
+            abort_crc,
+        ),
+        m(
+            "sdo.abort-timeout",
+            A,
+            "CiA 301 §7.2.4.3.17",
+            "a segmented download left unfinished is aborted with 0x05040000",
+            abort_timeout,
+        ),
+    ]
+}
+
+fn mux_bytes(index: u16, sub: u8) -> [u8; 3] {
+    let i = index.to_le_bytes();
+    [i[0], i[1], sub]
+}
+
+fn req(cmd: u8, index: u16, sub: u8, data: [u8; 4]) -> [u8; 8] {
+    let m = mux_bytes(index, sub);
+    [cmd, m[0], m[1], m[2], data[0], data[1], data[2], data[3]]
+}
+
+/// A refusal of a segmented transfer: expedited-only unless the profile claims segmented
+/// transfers (CiA 306 cannot say; without a profile this is not a failure).
+fn segmented_refused(ctx: &Ctx<'_>, what: &str, code: AbortCode) -> Finding {
+    if code == AbortCode::INVALID_COMMAND && ctx.profile.sdo.segmented != Some(true) {
+        Finding::NotSupported {
+            why: format!(
+                "expedited-only: the server answers a segmented {what} with {}",
+                hex(code)
+            ),
+            abort: Some(code),
+        }
+    } else {
+        fail_abort(format!("segmented {what} refused"), code)
+    }
+}
+
+/// A refusal of a block transfer: not supported unless the profile claims it.
+fn block_refused(ctx: &Ctx<'_>, what: &str, a: Aborted) -> Finding {
+    if a.by_server
+        && [AbortCode::INVALID_COMMAND, AbortCode::UNSUPPORTED_ACCESS].contains(&a.code)
+        && ctx.profile.sdo.block != Some(true)
+    {
+        Finding::NotSupported {
+            why: format!(
+                "no block transfer: the server answers a block {what} with {}",
+                hex(a.code)
+            ),
+            abort: Some(a.code),
+        }
+    } else {
+        fail_abort(format!("block {what}"), a.code)
+    }
+}
+
+fn expedited_upload(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some(b) = ctx.sdo_raw(req(0x40, 0x1000, 0, [0; 4]))? else {
+        return Err(fail("no answer to an upload of 0x1000"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(fail_abort("upload of 0x1000", code));
+    }
+    if b[0] & 0xE0 != 0x40 || b[1..4] != mux_bytes(0x1000, 0) {
+        return Err(fail(format!(
+            "answer {b:02X?} is not an initiate upload response for 0x1000"
+        )));
+    }
+    if b[0] & 0x02 == 0 {
+        return Err(fail(format!("a 4-byte entry not sent expedited: {b:02X?}")));
+    }
+    let n = if b[0] & 0x01 != 0 {
+        4 - usize::from((b[0] >> 2) & 3)
+    } else {
+        4
+    };
+    if n != 4 {
+        return Err(fail(format!("0x1000 (UNSIGNED32) uploaded with {n} bytes")));
+    }
+    Ok(format!(
+        "device type 0x{:08X}",
+        u32::from_le_bytes([b[4], b[5], b[6], b[7]])
+    ))
+}
+
+fn expedited_download(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=4)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of 1 to 4 bytes".into(),
+        ));
+    };
+    let n = u8::try_from(4 - size).unwrap_or(0);
+    let mut d = [0u8; 4];
+    d[..size].copy_from_slice(&value);
+    let Some(b) = ctx.sdo_raw(req(0x23 | (n << 2), index, sub, d))? else {
+        return Err(fail("no answer to an expedited download"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(fail_abort(
+            format!("writing 0x{index:04X} sub {sub} with its own value"),
+            code,
+        ));
+    }
+    if b[0] != 0x60 || b[1..4] != mux_bytes(index, sub) {
+        return Err(fail(format!(
+            "answer {b:02X?} is not an initiate download response"
+        )));
+    }
+    Ok(format!("0x{index:04X} sub {sub} written with {value:02X?}"))
+}
+
+/// A readable entry longer than 4 bytes, from the EDS scan or by reading.
+fn long_entry(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u8, Vec<u8>)>, Finding> {
+    if let Some(scan) = &ctx.scan
+        && let Some((i, s, Ok(d))) = scan
+            .iter()
+            .filter(|(_, _, r)| r.as_ref().is_ok_and(|d| d.len() > 4 && d.len() <= 4096))
+            .max_by_key(|(_, _, r)| r.as_ref().map(|d| d.len().min(64)).unwrap_or(0))
+    {
+        return Ok(Some((*i, *s, d.clone())));
+    }
+    let candidates: Vec<(u16, u8)> = entries(ctx)
+        .into_iter()
+        .filter(|(_, _, e)| {
+            access(e).readable()
+                && data_type(e).is_none_or(|d| d.fixed_size().is_none_or(|s| s > 4))
+        })
+        .map(|(i, s, _)| (i, s))
+        .collect();
+    for (i, s) in candidates {
+        if let Ok(d) = ctx.upload(i, s)?
+            && d.len() > 4
+            && d.len() <= 4096
+        {
+            return Ok(Some((i, s, d)));
+        }
+    }
+    Ok(None)
+}
+
+fn segmented_upload(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, want)) = long_entry(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no readable entry longer than 4 bytes".into(),
+        ));
+    };
+    let Some(b) = ctx.sdo_raw(req(0x40, index, sub, [0; 4]))? else {
+        return Err(fail("no answer to the initiate"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "upload", code));
+    }
+    if b[0] & 0xE3 != 0x41 {
+        return Err(fail(format!(
+            "a {}-byte entry: the initiate answer {b:02X?} is not segmented with size",
+            want.len()
+        )));
+    }
+    let size = u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize;
+    let mut got = Vec::new();
+    let mut toggle = 0u8;
+    loop {
+        let Some(s) = ctx.sdo_raw([0x60 | (toggle << 4), 0, 0, 0, 0, 0, 0, 0])? else {
+            return Err(fail("no answer to an upload segment request"));
+        };
+        if let Some(code) = abort_of(&s) {
+            return Err(fail_abort("during the segments", code));
+        }
+        if s[0] & 0xE0 != 0 || (s[0] >> 4) & 1 != toggle {
+            return Err(fail(format!(
+                "segment {s:02X?}: expected scs 0 with toggle {toggle}"
+            )));
+        }
+        let n = usize::from((s[0] >> 1) & 7);
+        got.extend_from_slice(&s[1..8 - n]);
+        if s[0] & 1 != 0 {
+            break;
+        }
+        if got.len() > size + 7 {
+            return Err(fail("more data than the indicated size"));
+        }
+        toggle ^= 1;
+    }
+    if got.len() != size || got != want {
+        return Err(fail(format!(
+            "{} bytes uploaded, size {size}, and they differ from a normal read",
+            got.len()
+        )));
+    }
+    recovered(ctx, "a segmented upload")?;
+    Ok(format!(
+        "0x{index:04X} sub {sub}: {size} bytes in {} segments",
+        size.div_ceil(7)
+    ))
+}
+
+fn segmented_download(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=8)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
+    let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
+        return Err(fail("no answer to a segmented initiate"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "download", code));
+    }
+    if b[0] != 0x60 {
+        return Err(fail(format!(
+            "answer {b:02X?} to the initiate is not scs 3"
+        )));
+    }
+    let n = u8::try_from(7 - size).unwrap_or(0);
+    let mut seg = [0u8; 8];
+    seg[0] = (n << 1) | 1;
+    seg[1..1 + size].copy_from_slice(&value);
+    let Some(b) = ctx.sdo_raw(seg)? else {
+        return Err(fail("no answer to the segment"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(fail_abort("the segment", code));
+    }
+    if b[0] != 0x20 {
+        return Err(fail(format!(
+            "answer {b:02X?} to segment 0 is not scs 1 with toggle 0"
+        )));
+    }
+    recovered(ctx, "a segmented download")?;
+    Ok(format!(
+        "0x{index:04X} sub {sub}: {size} bytes in one segment"
+    ))
+}
+
+fn segmented_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=8)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    let Some(b) = ctx.sdo_raw(req(0x20, index, sub, [0; 4]))? else {
+        return Err(fail("no answer to a segmented initiate without size"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "download without size", code));
+    }
+    if b[0] != 0x60 {
+        return Err(fail(format!(
+            "answer {b:02X?} to the initiate is not scs 3"
+        )));
+    }
+    let n = u8::try_from(7 - size).unwrap_or(0);
+    let mut seg = [0u8; 8];
+    seg[0] = (n << 1) | 1;
+    seg[1..1 + size].copy_from_slice(&value);
+    match ctx.sdo_raw(seg)? {
+        Some(b) if b[0] == 0x20 => {}
+        Some(b) => return Err(fail(format!("answer {b:02X?} to the segment"))),
+        None => return Err(fail("no answer to the segment")),
+    }
+    recovered(ctx, "a segmented download without size")?;
+    Ok(format!("0x{index:04X} sub {sub} written"))
+}
+
+fn block_upload(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, want)) = long_entry(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no readable entry longer than 4 bytes".into(),
+        ));
+    };
+    for (blksize, crc) in [(127u8, true), (1, false), (1, true), (127, false)] {
+        match ctx.upload_mode(index, sub, Mode::Block { blksize }, crc)? {
+            Ok(d) if d == want => {}
+            Ok(d) => {
+                return Err(fail(format!(
+                    "block size {blksize}, CRC {crc}: {} bytes, a normal read gave {}",
+                    d.len(),
+                    want.len()
+                )));
+            }
+            Err(a) => {
+                return Err(block_refused(
+                    ctx,
+                    &format!("upload (block size {blksize}, CRC {crc})"),
+                    a,
+                ));
+            }
+        }
+    }
+    recovered(ctx, "block uploads")?;
+    Ok(format!(
+        "0x{index:04X} sub {sub}: {} bytes with block sizes 1 and 127",
+        want.len()
+    ))
+}
+
+fn block_download(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, _, value)) = writable(ctx, 1..=8)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    for crc in [true, false] {
+        if let Err(a) = ctx.download_mode(index, sub, &value, Mode::Block { blksize: 127 }, crc)? {
+            return Err(block_refused(ctx, &format!("download (CRC {crc})"), a));
+        }
+    }
+    recovered(ctx, "block downloads")?;
+    Ok(format!(
+        "0x{index:04X} sub {sub} written with its own value"
+    ))
+}
+
+/// Sends `request` and expects an abort with one of `codes`, then a server that serves.
+fn expect_abort(ctx: &mut Ctx<'_>, request: [u8; 8], codes: &[AbortCode], what: &str) -> Outcome {
+    let Some(b) = ctx.sdo_raw(request)? else {
+        return Err(fail(format!("{what}: no answer")));
+    };
+    let Some(code) = abort_of(&b) else {
+        return Err(fail(format!("{what}: answered {b:02X?}, not an abort")));
+    };
+    if !codes.contains(&code) {
+        let want: Vec<String> = codes.iter().map(|c| hex(*c)).collect();
+        return Err(fail_abort(
+            format!("{what}: expected {}", want.join(" or ")),
+            code,
+        ));
+    }
+    if b[1..4] != request[1..4] {
+        return Err(fail(format!(
+            "{what}: the abort names another object: {b:02X?}"
+        )));
+    }
+    recovered(ctx, what)?;
+    Ok(format!("{what}: {}", hex(code)))
+}
+
+fn abort_no_object(ctx: &mut Ctx<'_>) -> Outcome {
+    let index = absent_index(ctx);
+    expect_abort(
+        ctx,
+        req(0x40, index, 0, [0; 4]),
+        &[AbortCode::NO_OBJECT],
+        &format!("upload of absent 0x{index:04X}"),
+    )
+}
+
+fn abort_no_sub(ctx: &mut Ctx<'_>) -> Outcome {
+    let highest = ctx
+        .eds
+        .objects
+        .get(&0x1018)
+        .and_then(|o| o.subs.keys().max().copied())
+        .unwrap_or(4);
+    let sub = highest.saturating_add(1).max(5);
+    expect_abort(
+        ctx,
+        req(0x40, 0x1018, sub, [0; 4]),
+        &[AbortCode::NO_SUB_INDEX],
+        &format!("upload of 0x1018 sub {sub}"),
+    )
+}
+
+fn abort_read_only(ctx: &mut Ctx<'_>) -> Outcome {
+    expect_abort(
+        ctx,
+        req(0x23, 0x1000, 0, [0; 4]),
+        &[AbortCode::READ_ONLY],
+        "download to 0x1000",
+    )
+}
+
+fn abort_write_only(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub)) = entries(ctx)
+        .into_iter()
+        .find(|(_, _, e)| !access(e).readable())
+        .map(|(i, s, _)| (i, s))
+    else {
+        return Err(Finding::NotApplicable(
+            "the file has no write-only entry".into(),
+        ));
+    };
+    expect_abort(
+        ctx,
+        req(0x40, index, sub, [0; 4]),
+        &[AbortCode::WRITE_ONLY],
+        &format!("upload of write-only 0x{index:04X} sub {sub}"),
+    )
+}
+
+fn abort_length_high(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, _)) = writable(ctx, 1..=3)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry shorter than 4 bytes".into(),
+        ));
+    };
+    expect_abort(
+        ctx,
+        req(0x23, index, sub, [0; 4]),
+        &[AbortCode::LENGTH_TOO_HIGH, AbortCode::TYPE_MISMATCH],
+        &format!("4 bytes to the {size}-byte 0x{index:04X} sub {sub}"),
+    )
+}
+
+fn abort_length_low(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, _)) = writable(ctx, 2..=4)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of 2 to 4 bytes".into(),
+        ));
+    };
+    expect_abort(
+        ctx,
+        req(0x2F, index, sub, [0; 4]),
+        &[AbortCode::LENGTH_TOO_LOW, AbortCode::TYPE_MISMATCH],
+        &format!("1 byte to the {size}-byte 0x{index:04X} sub {sub}"),
+    )
+}
+
+/// A writable integer entry with a limit the type's range leaves room beyond: (index,
+/// sub, size, the value one past the limit).
+fn beyond_limit(ctx: &Ctx<'_>, high: bool) -> Option<(u16, u8, usize, i128)> {
+    for (index, sub, e) in entries(ctx) {
+        if !access(&e).writable() || (0x1010..=0x1011).contains(&index) {
+            continue;
+        }
+        let Some(dt) = data_type(&e) else { continue };
+        let Some(size) = dt.fixed_size().filter(|s| *s <= 4) else {
+            continue;
+        };
+        if matches!(
+            dt,
+            cantwin_canopen::od::DataType::Real32 | cantwin_canopen::od::DataType::Boolean
+        ) {
+            continue;
+        }
+        let limit = if high { &e.high_limit } else { &e.low_limit };
+        let Some(l) = limit.as_ref().and_then(|v| v.evaluate(ctx.node)) else {
+            continue;
+        };
+        let bits = 8 * size as u32;
+        let (min, max) = if dt.is_signed() {
+            (-(1i128 << (bits - 1)), (1i128 << (bits - 1)) - 1)
+        } else {
+            (0, (1i128 << bits) - 1)
+        };
+        let v = if high { l + 1 } else { l - 1 };
+        if (min..=max).contains(&v) {
+            return Some((index, sub, size, v));
+        }
+    }
+    None
+}
+
+fn abort_value(ctx: &mut Ctx<'_>, high: bool) -> Outcome {
+    let Some((index, sub, size, v)) = beyond_limit(ctx, high) else {
+        return Err(Finding::NotApplicable(format!(
+            "no writable integer entry with a {} limit inside its type's range",
+            if high { "high" } else { "low" }
+        )));
+    };
+    let mut d = [0u8; 4];
+    d[..size].copy_from_slice(&le(v, size));
+    let n = u8::try_from(4 - size).unwrap_or(0);
+    let code = if high {
+        AbortCode::VALUE_TOO_HIGH
+    } else {
+        AbortCode::VALUE_TOO_LOW
+    };
+    expect_abort(
+        ctx,
+        req(0x23 | (n << 2), index, sub, d),
+        &[code, AbortCode::INVALID_VALUE],
+        &format!("{v} to 0x{index:04X} sub {sub}"),
+    )
+}
+
+fn abort_value_high(ctx: &mut Ctx<'_>) -> Outcome {
+    abort_value(ctx, true)
+}
+
+fn abort_value_low(ctx: &mut Ctx<'_>) -> Outcome {
+    abort_value(ctx, false)
+}
+
+fn abort_toggle(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=7)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
+    let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
+        return Err(fail("no answer to a segmented initiate"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "download", code));
+    }
+    let n = u8::try_from(7 - size).unwrap_or(0);
+    let mut seg = [0u8; 8];
+    // The first segment carries toggle 0; this one carries 1.
+    seg[0] = 0x10 | (n << 1) | 1;
+    seg[1..1 + size].copy_from_slice(&value);
+    let Some(b) = ctx.sdo_raw(seg)? else {
+        return Err(fail("no answer to the segment with the wrong toggle bit"));
+    };
+    match abort_of(&b) {
+        Some(AbortCode::TOGGLE_BIT_NOT_ALTERNATED) => {}
+        Some(code) => return Err(fail_abort("expected 0x05030000", code)),
+        None => {
+            return Err(fail(format!(
+                "the segment with toggle 1 first was accepted: {b:02X?}"
+            )));
+        }
+    }
+    recovered(ctx, "a toggle error")?;
+    Ok(format!("0x{index:04X} sub {sub}: 0x05030000"))
+}
+
+fn abort_invalid_ccs(ctx: &mut Ctx<'_>) -> Outcome {
+    expect_abort(
+        ctx,
+        req(0xE0, 0x1000, 0, [0; 4]),
+        &[AbortCode::INVALID_COMMAND],
+        "command specifier 7",
+    )
+}
+
+fn abort_block_size(ctx: &mut Ctx<'_>) -> Outcome {
+    let mut notes = Vec::new();
+    for blksize in [0u8, 128] {
+        let Some(b) = ctx.sdo_raw(req(0xA0, 0x1000, 0, [blksize, 0, 0, 0]))? else {
+            return Err(fail(format!(
+                "no answer to a block upload initiate with block size {blksize}"
+            )));
+        };
+        match abort_of(&b) {
+            Some(AbortCode::INVALID_BLOCK_SIZE) => notes.push(format!("{blksize}: 0x05040002")),
+            Some(code) => {
+                return Err(block_refused(
+                    ctx,
+                    &format!("upload with block size {blksize}"),
+                    Aborted {
+                        code,
+                        by_server: true,
+                    },
+                ));
+            }
+            None => {
+                ctx.sdo_raw(req(
+                    0x80,
+                    0x1000,
+                    0,
+                    AbortCode::INVALID_BLOCK_SIZE.to_u32().to_le_bytes(),
+                ))?;
+                return Err(fail(format!("block size {blksize} accepted: {b:02X?}")));
+            }
+        }
+    }
+    recovered(ctx, "invalid block sizes")?;
+    Ok(notes.join(", "))
+}
+
+/// Starts a block download of `value` to `index`/`sub`; the server's answer.
+fn block_initiate(
+    ctx: &mut Ctx<'_>,
+    index: u16,
+    sub: u8,
+    len: usize,
+    crc: bool,
+) -> Result<[u8; 8], Finding> {
+    let s = u32::try_from(len).unwrap_or(0).to_le_bytes();
+    let cmd = 0xC2 | if crc { 0x04 } else { 0 };
+    match ctx.sdo_raw(req(cmd, index, sub, s))? {
+        Some(b) => {
+            if let Some(code) = abort_of(&b) {
+                return Err(block_refused(
+                    ctx,
+                    "download",
+                    Aborted {
+                        code,
+                        by_server: true,
+                    },
+                ));
+            }
+            if b[0] & 0xE3 != 0xA0 {
+                return Err(fail(format!(
+                    "answer {b:02X?} to a block download initiate"
+                )));
+            }
+            Ok(b)
+        }
+        None => Err(fail("no answer to a block download initiate")),
+    }
+}
+
+fn abort_sequence(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=7)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    block_initiate(ctx, index, sub, size, false)?;
+    let mut seg = [0u8; 8];
+    seg[0] = 0x80; // last segment, sequence number 0
+    seg[1..1 + size].copy_from_slice(&value);
+    let timeout = ctx.options.sdo_timeout;
+    ctx.send(cantwin_can::Frame::data_array(ctx.sdo_rx(), seg))?;
+    let note = match ctx.sdo_answer(timeout)? {
+        Some(b) if abort_of(&b) == Some(AbortCode::INVALID_SEQUENCE_NUMBER) => {
+            "0x05040003".to_string()
+        }
+        Some(b) if b[0] == 0xA2 && b[1] == 0 => {
+            // Not acknowledged: the server asks for the block again. End it.
+            ctx.sdo_raw(req(
+                0x80,
+                index,
+                sub,
+                AbortCode::INVALID_SEQUENCE_NUMBER.to_u32().to_le_bytes(),
+            ))?;
+            "acknowledged with ackseq 0 (the segment discarded)".to_string()
+        }
+        Some(b) => {
+            if abort_of(&b).is_none() {
+                ctx.sdo_raw(req(
+                    0x80,
+                    index,
+                    sub,
+                    AbortCode::GENERAL_ERROR.to_u32().to_le_bytes(),
+                ))?;
+            }
+            return Err(fail(format!(
+                "a segment with sequence number 0 was answered {b:02X?}"
+            )));
+        }
+        None => {
+            ctx.sdo_raw(req(
+                0x80,
+                index,
+                sub,
+                AbortCode::GENERAL_ERROR.to_u32().to_le_bytes(),
+            ))?;
+            return Err(fail(
+                "no answer to a block segment with sequence number 0 marked last",
+            ));
+        }
+    };
+    recovered(ctx, "an invalid sequence number")?;
+    Ok(note)
+}
+
+fn abort_crc(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, value)) = writable(ctx, 1..=7)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    let b = block_initiate(ctx, index, sub, size, true)?;
+    if b[0] & 0x04 == 0 {
+        ctx.sdo_raw(req(
+            0x80,
+            index,
+            sub,
+            AbortCode::GENERAL_ERROR.to_u32().to_le_bytes(),
+        ))?;
+        return Err(Finding::NotApplicable(
+            "the server does not offer the block CRC (sc = 0)".into(),
+        ));
+    }
+    let mut seg = [0u8; 8];
+    seg[0] = 0x81;
+    seg[1..1 + size].copy_from_slice(&value);
+    let Some(ack) = ctx.sdo_raw(seg)? else {
+        return Err(fail("no acknowledgement of the block"));
+    };
+    if ack[0] != 0xA2 || ack[1] != 1 {
+        return Err(fail(format!(
+            "block acknowledgement {ack:02X?}, expected ackseq 1"
+        )));
+    }
+    let wrong = Crc16::of(&value) ^ 0xFFFF;
+    let n = u8::try_from(7 - size).unwrap_or(0);
+    let w = wrong.to_le_bytes();
+    let end = [0xC1 | (n << 2), w[0], w[1], 0, 0, 0, 0, 0];
+    let Some(b) = ctx.sdo_raw(end)? else {
+        return Err(fail("no answer to the end with a wrong CRC"));
+    };
+    match abort_of(&b) {
+        Some(AbortCode::CRC_ERROR) => {}
+        Some(code) => return Err(fail_abort("expected 0x05040004", code)),
+        None => return Err(fail(format!("a wrong CRC was accepted: {b:02X?}"))),
+    }
+    recovered(ctx, "a CRC error")?;
+    Ok(format!("0x{index:04X} sub {sub}: 0x05040004"))
+}
+
+fn abort_timeout(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, size, _)) = writable(ctx, 1..=7)? else {
+        return Err(Finding::NotApplicable(
+            "no writable entry of fixed size".into(),
+        ));
+    };
+    let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
+    let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
+        return Err(fail("no answer to a segmented initiate"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "download", code));
+    }
+    // CiA 301 leaves the server's timeout to the device: wait up to 10 s for it.
+    let started = ctx.now();
+    let Some(b) = ctx.sdo_answer(Duration::from_secs(10))? else {
+        ctx.sdo_raw(req(
+            0x80,
+            index,
+            sub,
+            AbortCode::TIMEOUT.to_u32().to_le_bytes(),
+        ))?;
+        return Err(fail(
+            "the server did not time out an unfinished segmented download within 10 s",
+        ));
+    };
+    let after = ctx.now().saturating_duration_since(started);
+    match abort_of(&b) {
+        Some(AbortCode::TIMEOUT) => {}
+        Some(code) => return Err(fail_abort("expected 0x05040000", code)),
+        None => return Err(fail(format!("unexpected answer {b:02X?}"))),
+    }
+    recovered(ctx, "a timeout")?;
+    Ok(format!("0x05040000 after {} ms", after.as_millis()))
+}

@@ -1,0 +1,301 @@
+//! Area 5: SYNC, EMCY and TIME (CiA 301 §7.2.5–7.2.7, §7.5.2.2–7.5.2.22).
+
+use cantwin_can::{Duration, Frame, Id};
+use cantwin_canopen::AbortCode;
+
+use super::{Case, access, eds_entry, m, u32_of, within};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, not_supported};
+use crate::report::Area::SyncEmcyTime as A;
+
+pub(super) fn cases() -> Vec<Case> {
+    vec![
+        m(
+            "sync.cob-id",
+            A,
+            "CiA 301 §7.5.2.5",
+            "0x1005 holds an 11-bit COB-ID (0x80 by default) with bit 29 clear",
+            sync_cob_id,
+        ),
+        m(
+            "sync.producer",
+            A,
+            "CiA 301 §7.2.5, §7.5.2.5, §7.5.2.6",
+            "with bit 30 of 0x1005 set and 0x1006 = 20 ms, SYNC every 20 ms",
+            sync_producer,
+        ),
+        m(
+            "sync.counter",
+            A,
+            "CiA 301 §7.2.5.2, §7.5.2.22",
+            "with 0x1019 = 3 the SYNC carries a counter running 1, 2, 3, 1 …",
+            sync_counter,
+        ),
+        m(
+            "emcy.cob-id",
+            A,
+            "CiA 301 §7.5.2.20, §7.5.2.2",
+            "0x1014 is valid with an 11-bit COB-ID; 0x1001 reads one byte",
+            emcy_cob_id,
+        ),
+        m(
+            "emcy.history",
+            A,
+            "CiA 301 §7.5.2.3",
+            "0x1003 sub 0 = 0 clears the history; any other value is refused with 0x06090030",
+            emcy_history,
+        ),
+        m(
+            "emcy.after-boot-up",
+            A,
+            "CiA 301 §7.2.7.1, §7.2.8.3.2.4",
+            "no EMCY precedes the boot-up message after a reset",
+            emcy_after_boot,
+        ),
+        m(
+            "time.cob-id",
+            A,
+            "CiA 301 §7.2.6, §7.5.2.16",
+            "0x1012 holds an 11-bit COB-ID; a TIME message leaves the device serving",
+            time_cob_id,
+        ),
+    ]
+}
+
+fn sync_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC (0x1005 not in the file)"));
+    }
+    let v = ctx.read_u32(0x1005, 0, "the COB-ID SYNC")?;
+    if v & 0x2000_0000 != 0 || v & 0x1FFF_F800 != 0 {
+        return Err(fail(format!(
+            "0x1005 = 0x{v:08X}: not an 11-bit identifier"
+        )));
+    }
+    Ok(format!(
+        "0x1005 = 0x{v:08X}{}",
+        if v & 0x4000_0000 != 0 {
+            " (producer)"
+        } else {
+            ""
+        }
+    ))
+}
+
+/// Starts the SYNC producer with `period_us`; the original 0x1005 and 0x1006.
+fn producer_on(ctx: &mut Ctx<'_>, period_us: u32) -> Result<(u32, Vec<u8>), Finding> {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC (0x1005 not in the file)"));
+    }
+    if !eds_entry(ctx, 0x1006, 0).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(
+            "no writable communication cycle period (0x1006): SYNC consumer only",
+        ));
+    }
+    let cob = ctx.read_u32(0x1005, 0, "the COB-ID SYNC")?;
+    let period = ctx
+        .upload(0x1006, 0)?
+        .map_err(|a| fail(format!("reading 0x1006: {a}")))?;
+    ctx.write(
+        0x1006,
+        0,
+        &period_us.to_le_bytes(),
+        "the communication cycle period",
+    )?;
+    match ctx.download(0x1005, 0, &(cob | 0x4000_0000).to_le_bytes())? {
+        Ok(()) => Ok((cob, period)),
+        Err(a) => {
+            ctx.write(0x1006, 0, &period, "the communication cycle period")?;
+            Err(Finding::NotSupported {
+                why: format!("0x1005 bit 30 refused ({a}): SYNC consumer only"),
+                abort: Some(a.code),
+            })
+        }
+    }
+}
+
+fn producer_off(ctx: &mut Ctx<'_>, cob: u32, period: &[u8]) -> Result<(), Finding> {
+    ctx.write(
+        0x1005,
+        0,
+        &(cob & !0x4000_0000).to_le_bytes(),
+        "the COB-ID SYNC",
+    )?;
+    ctx.write(0x1006, 0, period, "the communication cycle period")
+}
+
+fn sync_producer(ctx: &mut Ctx<'_>) -> Outcome {
+    let (cob, period) = producer_on(ctx, 20_000)?;
+    let id = cob & 0x7FF;
+    let frames = ctx.collect(Duration::from_millis(205), |f| {
+        f.id().as_raw() == id && !f.is_remote()
+    })?;
+    producer_off(ctx, cob, &period)?;
+    if !(9..=11).contains(&frames.len()) {
+        return Err(fail(format!(
+            "{} SYNC frames in 205 ms at 20 ms",
+            frames.len()
+        )));
+    }
+    for w in frames.windows(2) {
+        let d = w[1].0.saturating_duration_since(w[0].0);
+        if !within(ctx, d, Duration::from_millis(20)) {
+            return Err(fail(format!(
+                "a SYNC interval of {} µs, period 20 ms",
+                d.as_micros()
+            )));
+        }
+    }
+    Ok(format!(
+        "{} SYNC frames, intervals within tolerance",
+        frames.len()
+    ))
+}
+
+fn sync_counter(ctx: &mut Ctx<'_>) -> Outcome {
+    if !eds_entry(ctx, 0x1019, 0).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(
+            "no synchronous counter overflow value (0x1019)",
+        ));
+    }
+    // 0x1019 changes only while the producer is off (0x1006 = 0, §7.5.2.22).
+    let overflow = ctx
+        .upload(0x1019, 0)?
+        .map_err(|a| fail(format!("reading 0x1019: {a}")))?;
+    let period = ctx
+        .upload(0x1006, 0)?
+        .map_err(|a| fail(format!("reading 0x1006: {a}")))?;
+    ctx.write(
+        0x1006,
+        0,
+        &0u32.to_le_bytes(),
+        "the communication cycle period",
+    )?;
+    ctx.write(0x1019, 0, &[3], "the synchronous counter overflow value")?;
+    ctx.write(0x1006, 0, &period, "the communication cycle period")?;
+    let (cob, period) = producer_on(ctx, 20_000)?;
+    let id = cob & 0x7FF;
+    let frames = ctx.collect(Duration::from_millis(150), |f| {
+        f.id().as_raw() == id && !f.is_remote()
+    })?;
+    producer_off(ctx, cob, &period)?;
+    let p = ctx.upload(0x1006, 0)?.unwrap_or_default();
+    ctx.write(
+        0x1006,
+        0,
+        &0u32.to_le_bytes(),
+        "the communication cycle period",
+    )?;
+    ctx.write(
+        0x1019,
+        0,
+        &overflow,
+        "the synchronous counter overflow value",
+    )?;
+    ctx.write(0x1006, 0, &p, "the communication cycle period")?;
+    let counters: Vec<u8> = frames
+        .iter()
+        .map(|(_, f)| f.data_bytes().first().copied().unwrap_or(0))
+        .collect();
+    if frames.iter().any(|(_, f)| f.len() != 1) || counters.len() < 4 {
+        return Err(fail(format!(
+            "SYNC frames {:?}: expected one counter byte each",
+            frames
+                .iter()
+                .map(|(_, f)| f.to_string())
+                .collect::<Vec<_>>()
+        )));
+    }
+    let ok = counters
+        .windows(2)
+        .all(|w| w[1] == if w[0] >= 3 { 1 } else { w[0] + 1 })
+        && counters.iter().all(|c| (1..=3).contains(c));
+    if !ok {
+        return Err(fail(format!("counters {counters:?} with overflow value 3")));
+    }
+    Ok(format!("counters {counters:?}"))
+}
+
+fn emcy_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
+    let reg = ctx
+        .upload(0x1001, 0)?
+        .map_err(|a| fail(format!("reading 0x1001: {a}")))?;
+    if reg.len() != 1 {
+        return Err(fail(format!("0x1001 reads {} bytes, not 1", reg.len())));
+    }
+    if ctx.profile.features.emcy == Some(false) {
+        return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
+    }
+    let v = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+    if v & 0x2000_0000 != 0 || v & 0x1FFF_F800 != 0 {
+        return Err(fail(format!(
+            "0x1014 = 0x{v:08X}: not an 11-bit identifier"
+        )));
+    }
+    Ok(format!(
+        "0x1014 = 0x{v:08X}, error register 0x{:02X}",
+        reg[0]
+    ))
+}
+
+fn emcy_history(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.error_history == Some(false) {
+        return Err(not_supported(
+            "no pre-defined error field (0x1003 not in the file)",
+        ));
+    }
+    let n = ctx.read_u32(0x1003, 0, "the number of errors")?;
+    ctx.write(0x1003, 0, &[0], "0 to 0x1003 sub 0")?;
+    let after = ctx.read_u32(0x1003, 0, "the number of errors")?;
+    if after != 0 {
+        return Err(fail(format!("0x1003 sub 0 reads {after} after writing 0")));
+    }
+    match ctx.download(0x1003, 0, &[1])? {
+        Err(a) if a.code == AbortCode::INVALID_VALUE => {
+            Ok(format!("{n} entries cleared; 1 refused with 0x06090030"))
+        }
+        Err(a) => Err(fail_abort(
+            "writing 1 to 0x1003 sub 0: expected 0x06090030",
+            a.code,
+        )),
+        Ok(()) => Err(fail("writing 1 to 0x1003 sub 0 was accepted")),
+    }
+}
+
+fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
+    let emcy = ctx
+        .upload(0x1014, 0)?
+        .map(|d| u32_of(&d) & 0x7FF)
+        .unwrap_or(u32::from(ctx.emcy_id().as_raw()));
+    ctx.nmt(cantwin_canopen::wire::NmtCs::ResetCommunication)?;
+    let ec = ctx.ec_id();
+    let within = ctx.options.boot_timeout;
+    let first = ctx.wait_for(within, |f| f.id() == ec || f.id().as_raw() == emcy)?;
+    match first {
+        Some((_, f)) if f.id() == ec => Ok("the boot-up message comes first".into()),
+        Some((_, f)) => Err(fail(format!("EMCY {f} before the boot-up message"))),
+        None => Err(fail("no boot-up message after reset communication")),
+    }
+}
+
+fn time_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.time == Some(false) {
+        return Err(not_supported("no TIME (0x1012 not in the file)"));
+    }
+    let v = ctx.read_u32(0x1012, 0, "the COB-ID TIME")?;
+    if v & 0x2000_0000 != 0 || v & 0x1FFF_F800 != 0 {
+        return Err(fail(format!(
+            "0x1012 = 0x{v:08X}: not an 11-bit identifier"
+        )));
+    }
+    if v & 0x8000_0000 != 0 {
+        let id = Id::standard(u16::try_from(v & 0x7FF).unwrap_or(0x100))
+            .map_err(|e| fail(e.to_string()))?;
+        // TIME_OF_DAY: milliseconds after midnight (28 bits) and days since 1984.
+        ctx.send(
+            Frame::data(id, &[0x00, 0x5C, 0x26, 0x05, 0x10, 0x3A])
+                .map_err(|e| fail(e.to_string()))?,
+        )?;
+        super::recovered(ctx, "a TIME message")?;
+    }
+    Ok(format!("0x1012 = 0x{v:08X}"))
+}

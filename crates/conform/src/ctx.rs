@@ -1,0 +1,417 @@
+//! What a case works with: the transport, wrapped so that every frame sent and seen is
+//! logged for the report, with SDO transfers through [`SdoClient`], raw SDO exchanges for
+//! the malformed requests a client never sends, and NMT commands.
+
+use cantwin_can::{Duration, Frame, Id, Instant, Outbox};
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::master::{Mode, SdoClient, SdoEvent};
+use cantwin_canopen::wire::NmtCs;
+use cantwin_eds::Eds;
+
+use crate::Options;
+use crate::profile::Profile;
+use crate::report::{Direction, LoggedFrame, MAX_LOGGED_FRAMES};
+use crate::transport::{Transport, TransportError};
+
+/// Why a case did not pass.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Finding {
+    /// The device is wrong; `abort` is the code it answered with, if that was the fault.
+    Fail {
+        why: String,
+        abort: Option<AbortCode>,
+    },
+    /// The optional feature is not offered; `abort` is the code the device refused it
+    /// with, if it did.
+    NotSupported {
+        why: String,
+        abort: Option<AbortCode>,
+    },
+    /// Nothing to check on this device.
+    NotApplicable(String),
+    /// The transport failed: the run ends.
+    Transport(TransportError),
+}
+
+impl From<TransportError> for Finding {
+    fn from(e: TransportError) -> Self {
+        Finding::Transport(e)
+    }
+}
+
+/// A failure with this reason.
+pub(crate) fn fail(why: impl Into<String>) -> Finding {
+    Finding::Fail {
+        why: why.into(),
+        abort: None,
+    }
+}
+
+/// A failure because the device answered with abort `code`.
+pub(crate) fn fail_abort(why: impl Into<String>, code: AbortCode) -> Finding {
+    Finding::Fail {
+        why: format!("{}: abort 0x{:08X}", why.into(), code.to_u32()),
+        abort: Some(code),
+    }
+}
+
+/// The optional feature is not offered.
+pub(crate) fn not_supported(why: impl Into<String>) -> Finding {
+    Finding::NotSupported {
+        why: why.into(),
+        abort: None,
+    }
+}
+
+/// What a case returns: a note on success, or why not.
+pub(crate) type Outcome = Result<String, Finding>;
+
+/// An SDO transfer that did not complete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Aborted {
+    pub code: AbortCode,
+    /// The server sent the abort (else the client gave up: a timeout or a protocol error).
+    pub by_server: bool,
+}
+
+impl std::fmt::Display for Aborted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let who = if self.by_server { "server" } else { "client" };
+        write!(f, "abort 0x{:08X} ({who})", self.code.to_u32())
+    }
+}
+
+/// The case context.
+pub(crate) struct Ctx<'a> {
+    t: &'a mut dyn Transport,
+    pub node: u8,
+    pub eds: &'a Eds,
+    pub profile: &'a Profile,
+    pub options: &'a Options,
+    start: Instant,
+    log: Vec<LoggedFrame>,
+    omitted: u64,
+    /// Every entry of the file as first read by the EDS area (read once: a real device
+    /// answers hundreds of uploads slowly).
+    pub scan: Option<Vec<(u16, u8, Result<Vec<u8>, Aborted>)>>,
+}
+
+fn id16(base: u16, node: u8) -> Id {
+    Id::standard(base + u16::from(node)).unwrap_or(Id::Standard(cantwin_can::StandardId::MAX))
+}
+
+impl<'a> Ctx<'a> {
+    pub fn new(
+        t: &'a mut dyn Transport,
+        node: u8,
+        eds: &'a Eds,
+        profile: &'a Profile,
+        options: &'a Options,
+    ) -> Self {
+        let start = t.now();
+        Ctx {
+            t,
+            node,
+            eds,
+            profile,
+            options,
+            start,
+            log: Vec::new(),
+            omitted: 0,
+            scan: None,
+        }
+    }
+
+    pub fn describe(&self) -> String {
+        self.t.describe()
+    }
+
+    pub fn now(&self) -> Instant {
+        self.t.now()
+    }
+
+    /// Microseconds since the run started.
+    pub fn rel_us(&self, t: Instant) -> u64 {
+        t.saturating_duration_since(self.start).as_micros()
+    }
+
+    /// The log of the case that just ended.
+    pub fn take_log(&mut self) -> (Vec<LoggedFrame>, u64) {
+        (
+            std::mem::take(&mut self.log),
+            std::mem::replace(&mut self.omitted, 0),
+        )
+    }
+
+    fn record(&mut self, t: Instant, dir: Direction, frame: &Frame) {
+        if self.log.len() >= MAX_LOGGED_FRAMES {
+            self.omitted += 1;
+        } else {
+            let t_us = self.rel_us(t);
+            self.log.push(LoggedFrame {
+                t_us,
+                dir,
+                frame: frame.to_string(),
+            });
+        }
+    }
+
+    /// Sends `frame`, logged as stimulus.
+    pub fn send(&mut self, frame: Frame) -> Result<(), Finding> {
+        let now = self.t.now();
+        self.record(now, Direction::Stimulus, &frame);
+        self.t.send(frame)?;
+        Ok(())
+    }
+
+    /// The next frame until `deadline`, logged as response.
+    pub fn recv(&mut self, deadline: Instant) -> Result<Option<(Instant, Frame)>, Finding> {
+        let got = self.t.recv(deadline)?;
+        if let Some((t, f)) = &got {
+            self.record(*t, Direction::Response, f);
+        }
+        Ok(got)
+    }
+
+    /// The first frame within `within` that `pred` accepts (others are logged and passed).
+    pub fn wait_for(
+        &mut self,
+        within: Duration,
+        mut pred: impl FnMut(&Frame) -> bool,
+    ) -> Result<Option<(Instant, Frame)>, Finding> {
+        let deadline = self.t.now() + within;
+        while let Some((t, f)) = self.recv(deadline)? {
+            if pred(&f) {
+                return Ok(Some((t, f)));
+            }
+        }
+        Ok(None)
+    }
+
+    /// Every frame `pred` accepts during the next `during`.
+    pub fn collect(
+        &mut self,
+        during: Duration,
+        mut pred: impl FnMut(&Frame) -> bool,
+    ) -> Result<Vec<(Instant, Frame)>, Finding> {
+        let deadline = self.t.now() + during;
+        let mut out = Vec::new();
+        while let Some((t, f)) = self.recv(deadline)? {
+            if pred(&f) {
+                out.push((t, f));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Lets `d` pass, logging what the bus carries.
+    pub fn idle(&mut self, d: Duration) -> Result<(), Finding> {
+        self.collect(d, |_| false).map(|_| ())
+    }
+
+    /// The device's SDO request COB-ID (0x600 + node-ID, CiA 301 §7.3.4).
+    pub fn sdo_rx(&self) -> Id {
+        id16(cantwin_canopen::wire::SDO_RX_BASE, self.node)
+    }
+
+    /// The device's SDO response COB-ID (0x580 + node-ID).
+    pub fn sdo_tx(&self) -> Id {
+        id16(cantwin_canopen::wire::SDO_TX_BASE, self.node)
+    }
+
+    /// The error-control COB-ID (0x700 + node-ID).
+    pub fn ec_id(&self) -> Id {
+        id16(cantwin_canopen::wire::ERROR_CONTROL_BASE, self.node)
+    }
+
+    /// The default EMCY COB-ID (0x080 + node-ID).
+    pub fn emcy_id(&self) -> Id {
+        id16(cantwin_canopen::wire::EMCY_BASE, self.node)
+    }
+
+    /// Sends one raw SDO request and returns the server's answer, if one comes within the
+    /// SDO timeout.
+    pub fn sdo_raw(&mut self, req: [u8; 8]) -> Result<Option<[u8; 8]>, Finding> {
+        let timeout = self.options.sdo_timeout;
+        self.send(Frame::data_array(self.sdo_rx(), req))?;
+        self.sdo_answer(timeout)
+    }
+
+    /// The next SDO response within `within`.
+    pub fn sdo_answer(&mut self, within: Duration) -> Result<Option<[u8; 8]>, Finding> {
+        let tx = self.sdo_tx();
+        let got = self.wait_for(within, |f| f.id() == tx && !f.is_remote())?;
+        Ok(got.map(|(_, f)| {
+            let mut b = [0u8; 8];
+            let d = f.data_bytes();
+            b[..d.len().min(8)].copy_from_slice(&d[..d.len().min(8)]);
+            b
+        }))
+    }
+
+    fn client(&self) -> Result<SdoClient, Finding> {
+        let mut c = SdoClient::for_node(self.node).map_err(|e| fail(e.to_string()))?;
+        c.config_mut().timeout = self.options.sdo_timeout;
+        // The conformance cases choose the protocol themselves: no silent fallback.
+        c.config_mut().fallback = false;
+        Ok(c)
+    }
+
+    /// Runs `client`'s transfer to its end.
+    fn drive(
+        &mut self,
+        client: &mut SdoClient,
+        mut out: Outbox,
+    ) -> Result<Result<Vec<u8>, Aborted>, Finding> {
+        let rx = client.rx_id();
+        // Every transfer ends at the client's timeout at the latest; the bound only guards
+        // against a transport whose clock does not move.
+        for _ in 0..1_000_000 {
+            for f in out.drain().collect::<Vec<_>>() {
+                self.send(f)?;
+            }
+            while let Some(e) = client.poll_event() {
+                match e {
+                    SdoEvent::Completed { data, .. } => return Ok(Ok(data)),
+                    SdoEvent::Aborted {
+                        code, by_server, ..
+                    } => {
+                        // A client-side abort frame is already queued: send it.
+                        for f in out.drain().collect::<Vec<_>>() {
+                            self.send(f)?;
+                        }
+                        return Ok(Err(Aborted { code, by_server }));
+                    }
+                    SdoEvent::Progress { .. } | SdoEvent::FellBack { .. } => {}
+                }
+            }
+            let Some(deadline) = client.next_deadline() else {
+                return Err(fail("the SDO client stopped without an outcome"));
+            };
+            match self.recv(deadline)? {
+                Some((t, f)) => {
+                    if f.id() == rx {
+                        client.on_frame(&f, t, &mut out);
+                    }
+                }
+                None => {
+                    let now = self.t.now();
+                    client.on_tick(now, &mut out);
+                }
+            }
+        }
+        Err(fail("the SDO transfer did not end"))
+    }
+
+    /// Reads `index`/`sub` with `mode`.
+    pub fn upload_mode(
+        &mut self,
+        index: u16,
+        sub: u8,
+        mode: Mode,
+        crc: bool,
+    ) -> Result<Result<Vec<u8>, Aborted>, Finding> {
+        let mut c = self.client()?;
+        c.config_mut().crc = crc;
+        let mut out = Outbox::new();
+        let now = self.t.now();
+        c.start_upload(index, sub, mode, now, &mut out)
+            .map_err(|e| fail(e.to_string()))?;
+        self.drive(&mut c, out)
+    }
+
+    /// Writes `data` to `index`/`sub` with `mode`.
+    pub fn download_mode(
+        &mut self,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+        mode: Mode,
+        crc: bool,
+    ) -> Result<Result<(), Aborted>, Finding> {
+        let mut c = self.client()?;
+        c.config_mut().crc = crc;
+        let mut out = Outbox::new();
+        let now = self.t.now();
+        c.start_download(index, sub, data.to_vec(), mode, now, &mut out)
+            .map_err(|e| fail(e.to_string()))?;
+        Ok(self.drive(&mut c, out)?.map(|_| ()))
+    }
+
+    /// Reads with the normal protocol (the server chooses expedited or segmented).
+    pub fn upload(&mut self, index: u16, sub: u8) -> Result<Result<Vec<u8>, Aborted>, Finding> {
+        self.upload_mode(index, sub, Mode::Segmented, false)
+    }
+
+    /// Writes expedited (1–4 bytes) or segmented.
+    pub fn download(
+        &mut self,
+        index: u16,
+        sub: u8,
+        data: &[u8],
+    ) -> Result<Result<(), Aborted>, Finding> {
+        let mode = if (1..=4).contains(&data.len()) {
+            Mode::Expedited
+        } else {
+            Mode::Segmented
+        };
+        self.download_mode(index, sub, data, mode, false)
+    }
+
+    /// Reads an unsigned value of up to 4 bytes; a failure names `what`.
+    pub fn read_u32(&mut self, index: u16, sub: u8, what: &str) -> Result<u32, Finding> {
+        match self.upload(index, sub)? {
+            Ok(d) if !d.is_empty() && d.len() <= 4 => {
+                let mut b = [0u8; 4];
+                b[..d.len()].copy_from_slice(&d);
+                Ok(u32::from_le_bytes(b))
+            }
+            Ok(d) => Err(fail(format!(
+                "{what} (0x{index:04X} sub {sub}) read {} bytes, expected 1 to 4",
+                d.len()
+            ))),
+            Err(a) => Err(Finding::Fail {
+                why: format!("reading {what} (0x{index:04X} sub {sub}): {a}"),
+                abort: Some(a.code),
+            }),
+        }
+    }
+
+    /// Writes `data`, failing the case (naming `what`) if the device refuses.
+    pub fn write(&mut self, index: u16, sub: u8, data: &[u8], what: &str) -> Result<(), Finding> {
+        match self.download(index, sub, data)? {
+            Ok(()) => Ok(()),
+            Err(a) => Err(Finding::Fail {
+                why: format!("writing {what} (0x{index:04X} sub {sub}): {a}"),
+                abort: Some(a.code),
+            }),
+        }
+    }
+
+    /// Sends the NMT command `cs` to the device (CiA 301 §7.2.8.3.1).
+    pub fn nmt(&mut self, cs: NmtCs) -> Result<(), Finding> {
+        let f = Frame::data_array(id16(0, 0), [cs as u8, self.node]);
+        self.send(f)
+    }
+
+    /// Sends NMT `cs` and waits for the boot-up message (CiA 301 §7.2.8.3.2.4).
+    pub fn reset(&mut self, cs: NmtCs) -> Result<Option<Instant>, Finding> {
+        self.nmt(cs)?;
+        let ec = self.ec_id();
+        let within = self.options.boot_timeout;
+        let got = self.wait_for(within, |f| {
+            f.id() == ec && !f.is_remote() && f.data_bytes() == [0]
+        })?;
+        Ok(got.map(|(t, _)| t))
+    }
+
+    /// Resets communication and waits for the boot-up; the case fails without one.
+    pub fn fresh(&mut self) -> Result<(), Finding> {
+        match self.reset(NmtCs::ResetCommunication)? {
+            Some(_) => Ok(()),
+            None => Err(fail(
+                "no boot-up message after NMT reset communication (CiA 301 §7.2.8.3.2.4)",
+            )),
+        }
+    }
+}

@@ -1,0 +1,224 @@
+//! The device profile: the optional features a device claims and the deviations from
+//! CiA 301 its manual prescribes.
+//!
+//! Most features follow from the EDS ([`Profile::from_eds`]: an object present means the
+//! service is offered). What CiA 306 cannot express comes from a profile file
+//! ([`ProfileFile`], TOML), which overrides the EDS: whether the SDO server offers the
+//! segmented and block protocols (a device that knows expedited transfers only answers a
+//! segmented initiate with 0x05040001), whether PDOs answer RTR, and the deviations.
+//!
+//! ```toml
+//! [sdo]
+//! segmented = false
+//!
+//! [[deviation]]
+//! case = "sdo.segmented-download"
+//! section = "ADV200 CANopen manual §1.1 item 11"
+//! behaviour = "expedited transfers only"
+//! abort = 0x05040001
+//! ```
+//!
+//! A deviation names the case it excuses: when that case fails the way the deviation says
+//! (with its abort code, if one is given), the case is reported as a deviation with the
+//! manual's section; when it passes, the listed deviation was not observed and the case
+//! fails; a failure the profile does not list fails.
+
+use serde::{Deserialize, Serialize};
+
+use cantwin_eds::Eds;
+
+/// A profile file that cannot be read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ProfileError {
+    /// Not valid TOML, or keys of the wrong type.
+    #[error("{0}")]
+    Syntax(String),
+    /// A deviation that names no case of the catalogue.
+    #[error("deviation names the case {0:?}, which does not exist")]
+    UnknownCase(String),
+}
+
+/// A deviation the device's manual prescribes.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Deviation {
+    /// The case it excuses (as [`crate::CaseInfo::id`]).
+    pub case: String,
+    /// The manual's section that prescribes it.
+    pub section: String,
+    /// What the device does instead.
+    pub behaviour: String,
+    /// The abort code the device answers with, where the deviation is an abort.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub abort: Option<u32>,
+}
+
+/// SDO protocols beyond expedited (CiA 306 has no key for them).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SdoFeatures {
+    /// Segmented transfer (CiA 301 §7.2.4.3.3–7).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub segmented: Option<bool>,
+    /// Block transfer (CiA 301 §7.2.4.3.9–16).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub block: Option<bool>,
+}
+
+/// Services the device offers. `None`: not known, the case finds out and reports an
+/// absent optional service as not supported.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Features {
+    /// Heartbeat producer, 0x1017 (CiA 301 §7.2.8.3.2.2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heartbeat_producer: Option<bool>,
+    /// Heartbeat consumer, 0x1016.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heartbeat_consumer: Option<bool>,
+    /// Node guarding and life guarding, 0x100C/0x100D (§7.2.8.3.2.1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub node_guarding: Option<bool>,
+    /// SYNC consumer, 0x1005 (§7.2.5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sync: Option<bool>,
+    /// EMCY producer, 0x1014 (§7.2.7).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emcy: Option<bool>,
+    /// EMCY inhibit time, 0x1015.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emcy_inhibit: Option<bool>,
+    /// Pre-defined error field, 0x1003.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_history: Option<bool>,
+    /// TIME consumer or producer, 0x1012 (§7.2.6).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time: Option<bool>,
+    /// Store parameters, 0x1010 (§7.5.2.13).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub store: Option<bool>,
+    /// Restore default parameters, 0x1011 (§7.5.2.14).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub restore: Option<bool>,
+    /// TPDOs answer a remote frame (RTR, §7.2.2.2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pdo_rtr: Option<bool>,
+}
+
+/// A profile as written in a file: every key optional, each overrides what the EDS says.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileFile {
+    /// The device the profile describes (for the reader).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<String>,
+    /// SDO protocols.
+    #[serde(default)]
+    pub sdo: SdoFeatures,
+    /// Services.
+    #[serde(default)]
+    pub features: Features,
+    /// The manual's deviations.
+    #[serde(default, rename = "deviation", skip_serializing_if = "Vec::is_empty")]
+    pub deviations: Vec<Deviation>,
+}
+
+impl ProfileFile {
+    /// Reads a profile file; deviations must name cases of the catalogue.
+    pub fn parse(text: &str) -> Result<ProfileFile, ProfileError> {
+        let file: ProfileFile =
+            toml::from_str(text).map_err(|e| ProfileError::Syntax(e.to_string()))?;
+        for d in &file.deviations {
+            if !crate::catalogue().iter().any(|c| c.id == d.case) {
+                return Err(ProfileError::UnknownCase(d.case.clone()));
+            }
+        }
+        Ok(file)
+    }
+
+    /// The file's text (what `cantwin eds export` writes beside an EDS).
+    pub fn to_toml(&self) -> String {
+        let body = toml::to_string(self).unwrap_or_default();
+        let mut out = String::from(
+            "# cantwin conform device profile: optional features the device claims beyond\n\
+             # its EDS, and the deviations from CiA 301 its manual prescribes.\n\n",
+        );
+        out.push_str(&body);
+        out
+    }
+}
+
+/// The features a run assumes and the deviations it accepts.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Profile {
+    /// Where it came from ("EDS", or "EDS + FILE").
+    pub source: String,
+    /// SDO protocols.
+    pub sdo: SdoFeatures,
+    /// Services.
+    pub features: Features,
+    /// Deviations.
+    pub deviations: Vec<Deviation>,
+}
+
+fn has(eds: &Eds, index: u16) -> Option<bool> {
+    Some(eds.objects.contains_key(&index))
+}
+
+impl Profile {
+    /// What the EDS says: each service whose object the file lists is claimed, each other
+    /// one is not. Segmented and block SDO stay unknown (CiA 306 has no key for them).
+    pub fn from_eds(eds: &Eds) -> Profile {
+        Profile {
+            source: "EDS".into(),
+            sdo: SdoFeatures::default(),
+            features: Features {
+                heartbeat_producer: has(eds, 0x1017),
+                heartbeat_consumer: has(eds, 0x1016),
+                node_guarding: Some(
+                    eds.objects.contains_key(&0x100C) && eds.objects.contains_key(&0x100D),
+                ),
+                sync: has(eds, 0x1005),
+                emcy: has(eds, 0x1014),
+                emcy_inhibit: has(eds, 0x1015),
+                error_history: has(eds, 0x1003),
+                time: has(eds, 0x1012),
+                store: has(eds, 0x1010),
+                restore: has(eds, 0x1011),
+                pdo_rtr: None,
+            },
+            deviations: Vec::new(),
+        }
+    }
+
+    /// This profile with every key `file` sets taken from it; `name` describes the file.
+    pub fn with_file(mut self, file: &ProfileFile, name: &str) -> Profile {
+        fn take(a: &mut Option<bool>, b: Option<bool>) {
+            if b.is_some() {
+                *a = b;
+            }
+        }
+        take(&mut self.sdo.segmented, file.sdo.segmented);
+        take(&mut self.sdo.block, file.sdo.block);
+        let (f, o) = (&mut self.features, &file.features);
+        take(&mut f.heartbeat_producer, o.heartbeat_producer);
+        take(&mut f.heartbeat_consumer, o.heartbeat_consumer);
+        take(&mut f.node_guarding, o.node_guarding);
+        take(&mut f.sync, o.sync);
+        take(&mut f.emcy, o.emcy);
+        take(&mut f.emcy_inhibit, o.emcy_inhibit);
+        take(&mut f.error_history, o.error_history);
+        take(&mut f.time, o.time);
+        take(&mut f.store, o.store);
+        take(&mut f.restore, o.restore);
+        take(&mut f.pdo_rtr, o.pdo_rtr);
+        self.deviations.extend(file.deviations.iter().cloned());
+        self.source = format!("{} + {name}", self.source);
+        self
+    }
+
+    /// The deviation listed for case `id`.
+    pub fn deviation(&self, id: &str) -> Option<&Deviation> {
+        self.deviations.iter().find(|d| d.case == id)
+    }
+}

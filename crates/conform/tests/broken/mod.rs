@@ -1,0 +1,519 @@
+//! Deliberately broken CiA 301 devices: a [`Device`] with the communication objects, PDOs,
+//! storage and a few application objects, behind a [`Broken`] node that gives it exactly
+//! one [`Fault`]: it alters what reaches the device or what the device sends, and nothing
+//! else. Without a fault the node passes every frame through untouched, so the unbroken
+//! device and each broken one differ in that one behaviour only.
+#![allow(dead_code, clippy::unwrap_used)]
+
+use std::sync::Arc;
+
+use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
+use cantwin_can::{BitRate, ControllerEvent, Frame, Id, Instant, Node, Outbox};
+use cantwin_canopen::ObjectAccess;
+use cantwin_canopen::device::{Device, DeviceConfig};
+use cantwin_canopen::nmt::State;
+use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
+use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
+use cantwin_canopen::pdo::PdoObjects;
+use cantwin_eds::{DeviceInfo, Eds, FileInfo};
+
+/// The one fault of a broken device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fault {
+    /// Answers SDO requests in STOPPED (with abort 0x08000022), where CiA 301 §7.3.2.2.3
+    /// (table 87) allows no SDO at all.
+    SdoInStopped,
+    /// Does not check the toggle bit of segmented transfers (§7.2.4.3.4, §7.2.4.3.7): every
+    /// download segment and upload segment request is taken as if its toggle bit were the
+    /// expected one, so a wrong toggle is never aborted with 0x05030000.
+    ToggleIgnored,
+    /// Sends no boot-up message after NMT reset communication (§7.2.8.3.2.1 requires one
+    /// after every pass through INITIALISING).
+    NoBootUpAfterResetCommunication,
+    /// Accepts a write to a PDO mapping parameter while the PDO is valid, where §7.5.2.35 –
+    /// §7.5.2.38 require the PDO to be made invalid first (abort otherwise).
+    MappingChangeOnValidPdo,
+    /// Sends a block upload CRC that is not the CRC of the data (§7.2.4.3.16).
+    WrongBlockUploadCrc,
+    /// Produces its heartbeat at twice the period 0x1017 sets (§7.2.8.3.2.2): every other
+    /// heartbeat is left out.
+    HeartbeatAtTwiceThePeriod,
+    /// Accepts a new CAN-ID in 0x1014 while the EMCY is valid (bit 31 = 0), which
+    /// §7.5.2.17 forbids.
+    EmcyCobIdChangeWhileValid,
+    /// Stores (0x1010) whatever is written, where §7.5.2.13 requires the signature "save"
+    /// and an abort 0x08000020 for anything else.
+    StoreWithoutSignature,
+}
+
+impl Fault {
+    /// Every fault.
+    pub const ALL: [Fault; 8] = [
+        Fault::SdoInStopped,
+        Fault::ToggleIgnored,
+        Fault::NoBootUpAfterResetCommunication,
+        Fault::MappingChangeOnValidPdo,
+        Fault::WrongBlockUploadCrc,
+        Fault::HeartbeatAtTwiceThePeriod,
+        Fault::EmcyCobIdChangeWhileValid,
+        Fault::StoreWithoutSignature,
+    ];
+}
+
+/// The node-ID of every device built here.
+pub const NODE_ID: u8 = 5;
+
+/// An UNSIGNED8 with limits 0–100, for the value range aborts.
+pub const SET_POINT_INDEX: u16 = 0x2002;
+/// A DOMAIN of [`DOMAIN_SIZE`] bytes, for segmented and block transfers.
+pub const DOMAIN_INDEX: u16 = 0x2000;
+/// The DOMAIN's size: several block-upload sub-blocks of 127 segments.
+pub const DOMAIN_SIZE: usize = 2000;
+/// An ARRAY of 8 UNSIGNED16, mapped into the TPDOs (two entries each).
+pub const INPUTS_INDEX: u16 = 0x2100;
+/// An ARRAY of 8 UNSIGNED16, mapped into the RPDOs (two entries each).
+pub const OUTPUTS_INDEX: u16 = 0x2200;
+
+fn mapping(index: u16, k: u16) -> [u32; 2] {
+    let entry = |sub: u16| (u32::from(index) << 16) | (u32::from(sub) << 8) | 16;
+    [entry(2 * k + 1), entry(2 * k + 2)]
+}
+
+/// The dictionary of the device: the CiA 301 communication objects with their defaults
+/// (storage 0x1010/0x1011, error history, heartbeat consumers), four RPDOs and TPDOs, and
+/// the application objects above.
+pub fn description() -> OdDescription {
+    let mut pdos = PdoObjects::new(4, 4);
+    for k in 0..4 {
+        pdos = pdos
+            .rpdo(k, 255, &mapping(OUTPUTS_INDEX, k))
+            .tpdo(k, 1, &mapping(INPUTS_INDEX, k));
+    }
+    let io = |name: &str| {
+        SubObject::new(name, DataType::Unsigned16, Access::Rw)
+            .mappable()
+            .default(Value::Unsigned16(0))
+    };
+    let options = Cia301Options {
+        device_name: "broken CiA 301 device".into(),
+        ..Cia301Options::default()
+    };
+    let b = cia301_defaults(OdBuilder::new(), &options)
+        .var(
+            DOMAIN_INDEX,
+            SubObject::new("Domain", DataType::Domain, Access::Rw)
+                .default(Value::Domain(
+                    (0..DOMAIN_SIZE).map(|i| (i % 251) as u8).collect(),
+                ))
+                .max_len(DOMAIN_SIZE),
+        )
+        .var(
+            SET_POINT_INDEX,
+            SubObject::new("Set point", DataType::Unsigned8, Access::Rw)
+                .limits(Value::Unsigned8(0), Value::Unsigned8(100)),
+        )
+        .array_of(INPUTS_INDEX, "Inputs", 8, io("Input"))
+        .array_of(OUTPUTS_INDEX, "Outputs", 8, io("Output"));
+    pdos.add_to(b).build().unwrap()
+}
+
+/// The device's EDS, generated from its dictionary.
+pub fn eds(desc: &OdDescription) -> Eds {
+    let mut info = DeviceInfo {
+        vendor_name: Some("cantwin".into()),
+        product_name: Some("broken CiA 301 device".into()),
+        granularity: Some(8),
+        nr_of_rx_pdo: Some(4),
+        nr_of_tx_pdo: Some(4),
+        ..DeviceInfo::default()
+    };
+    info.set_baud_rates(&[125, 250, 500, 1000]);
+    cantwin_eds::from_od(desc, info, FileInfo::new("broken.eds"))
+}
+
+/// A simulation of one bus with the device (broken by `fault`, or not) on it; the runner
+/// attaches to the bus before the simulation first runs and so sees the boot-up message.
+pub fn simulation(desc: &Arc<OdDescription>, fault: Option<Fault>) -> (Simulation, BusId, PortId) {
+    let mut sim = Simulation::new();
+    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
+    let config = DeviceConfig {
+        // Every frame reaches the node, as for a controller without acceptance filter: the
+        // broken node sees the SDO requests the device itself ignores in STOPPED.
+        acceptance_filter: false,
+        ..DeviceConfig::new(NODE_ID)
+    };
+    let device = Device::new(Arc::clone(desc), config).unwrap();
+    let port = PortConfig {
+        // A whole block-upload sub-block (127 segments) plus the other services' frames.
+        queue_depth: 256,
+        ..PortConfig::default()
+    };
+    let port = sim.attach(bus, Broken::new(device, fault), port).unwrap();
+    (sim, bus, port)
+}
+
+/// Where a segmented or block transfer of the SDO server stands, as far as the fault needs
+/// to know.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Transfer {
+    /// No transfer, or an expedited or segmented one (its frames carry a command byte).
+    Idle,
+    /// A block download: the client's frames are sequence-numbered segments until the
+    /// server's end response.
+    BlockDownload,
+    /// A block upload: once `started` (the client's start request, §7.2.4.3.14) the
+    /// server's frames are segments; `last` is the sequence number of the segment with
+    /// c = 1 once sent in the current sub-block, `end_next` says that the client
+    /// acknowledged it and the server's next frame is the end (§7.2.4.3.15).
+    BlockUpload {
+        started: bool,
+        last: Option<u8>,
+        end_next: bool,
+    },
+}
+
+/// A [`Device`] with one fault.
+pub struct Broken {
+    device: Device,
+    fault: Option<Fault>,
+    transfer: Transfer,
+    /// The toggle bit the next segment should carry ([`Fault::ToggleIgnored`]).
+    toggle: u8,
+    /// A reset communication is under way and its boot-up not yet left out.
+    reset_communication: bool,
+    /// Heartbeats the device produced so far.
+    heartbeats: u64,
+}
+
+impl Broken {
+    /// `device` with `fault` (none: the device as it is).
+    pub fn new(device: Device, fault: Option<Fault>) -> Broken {
+        Broken {
+            device,
+            fault,
+            transfer: Transfer::Idle,
+            toggle: 0,
+            reset_communication: false,
+            heartbeats: 0,
+        }
+    }
+
+    /// The device.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    fn sdo_rx(&self) -> u16 {
+        0x600 + u16::from(NODE_ID)
+    }
+
+    fn sdo_tx(&self) -> u16 {
+        0x580 + u16::from(NODE_ID)
+    }
+
+    fn answer(&self, out: &mut Outbox, request: &[u8], abort: Option<u32>) {
+        let mut data = [0u8; 8];
+        data[1..4].copy_from_slice(&request[1..4]);
+        match abort {
+            None => data[0] = 0x60,
+            Some(code) => {
+                data[0] = 0x80;
+                data[4..].copy_from_slice(&code.to_le_bytes());
+            }
+        }
+        out.push(Frame::std(self.sdo_tx(), &data).unwrap());
+    }
+
+    /// A frame for the device, as the fault lets it through: `None` if the fault answered
+    /// it instead.
+    fn incoming(&mut self, frame: &Frame, out: &mut Outbox) -> Option<Frame> {
+        let id = match frame.id() {
+            Id::Standard(id) => id.as_raw(),
+            Id::Extended(_) => return Some(*frame),
+        };
+        let data = frame.data_bytes();
+        if id == 0x000 && data.len() == 2 && data[0] == 0x82 && (data[1] == 0 || data[1] == NODE_ID)
+        {
+            self.reset_communication = true;
+        }
+        if id != self.sdo_rx() || frame.is_remote() || data.len() != 8 {
+            return Some(*frame);
+        }
+        let byte0 = data[0];
+        self.track_client(byte0, data);
+        match self.fault {
+            Some(Fault::SdoInStopped) if self.device.state() == State::Stopped => {
+                // 0x08000022: data cannot be transferred because of the present device state.
+                self.answer(out, data, Some(0x0800_0022));
+                None
+            }
+            Some(Fault::ToggleIgnored) if self.transfer == Transfer::Idle => {
+                let mut d: [u8; 8] = data.try_into().unwrap();
+                match byte0 >> 5 {
+                    // Initiate download or upload: the first segment carries toggle 0.
+                    1 | 2 => self.toggle = 0,
+                    // Download segment, upload segment request.
+                    0 | 3 => {
+                        d[0] = (byte0 & !0x10) | (self.toggle << 4);
+                        self.toggle ^= 1;
+                    }
+                    _ => {}
+                }
+                Some(Frame::std(id, &d).unwrap())
+            }
+            Some(Fault::MappingChangeOnValidPdo) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                let mapping =
+                    (0x1600..=0x17FF).contains(&index) || (0x1A00..=0x1BFF).contains(&index);
+                let comm = index - 0x200;
+                let cob = self
+                    .device
+                    .od()
+                    .get_unsigned(comm, 1)
+                    .unwrap_or(0x8000_0000) as u32;
+                if !mapping || cob & 0x8000_0000 != 0 {
+                    return Some(*frame);
+                }
+                let abort = self.change_mapping(comm, index, sub, value, cob).err();
+                self.answer(out, data, abort);
+                None
+            }
+            Some(Fault::EmcyCobIdChangeWhileValid) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                let cob = self
+                    .device
+                    .od()
+                    .get_unsigned(0x1014, 0)
+                    .unwrap_or(0x8000_0000) as u32;
+                let new = u32::from_le_bytes(value);
+                if (index, sub) != (0x1014, 0)
+                    || cob & 0x8000_0000 != 0
+                    || new & 0x1FFF_FFFF == cob & 0x1FFF_FFFF
+                {
+                    return Some(*frame);
+                }
+                // Made invalid first, as a client would have to, then the new value.
+                let abort = self
+                    .device
+                    .write(0x1014, 0, &(cob | 0x8000_0000).to_le_bytes())
+                    .and_then(|()| self.device.write(0x1014, 0, &new.to_le_bytes()))
+                    .err()
+                    .map(|a| a.to_u32());
+                self.answer(out, data, abort);
+                None
+            }
+            Some(Fault::StoreWithoutSignature) if is_expedited_download(byte0) => {
+                let (index, sub, _) = expedited(data);
+                if index != 0x1010 || sub == 0 {
+                    return Some(*frame);
+                }
+                let mut d: [u8; 8] = data.try_into().unwrap();
+                // Four bytes, size indicated: the signature "save" (0x65766173).
+                d[0] = 0x23;
+                d[4..].copy_from_slice(b"save");
+                Some(Frame::std(id, &d).unwrap())
+            }
+            _ => Some(*frame),
+        }
+    }
+
+    /// The mapping change the standard forbids on a valid PDO, done the allowed way behind
+    /// the client's back: PDO invalid, mapping disabled, entry written, mapping and PDO
+    /// restored.
+    fn change_mapping(
+        &mut self,
+        comm: u16,
+        index: u16,
+        sub: u8,
+        value: [u8; 4],
+        cob: u32,
+    ) -> Result<(), u32> {
+        let d = &mut self.device;
+        let count = d.od().get_unsigned(index, 0).unwrap_or(0) as u8;
+        let r = d
+            .write(comm, 1, &(cob | 0x8000_0000).to_le_bytes())
+            .and_then(|()| {
+                if sub == 0 {
+                    d.write(index, 0, &value[..1])
+                } else {
+                    d.write(index, 0, &[0])
+                        .and_then(|()| d.write(index, sub, &value))
+                        .and_then(|()| d.write(index, 0, &[count]))
+                }
+            });
+        let restored = d.write(comm, 1, &cob.to_le_bytes());
+        r.and(restored).map_err(|a| a.to_u32())
+    }
+
+    /// Follows block transfers from the client's frames.
+    fn track_client(&mut self, byte0: u8, data: &[u8]) {
+        match self.transfer {
+            Transfer::Idle => match byte0 >> 5 {
+                // Block download initiate (ccs 6, cs 0).
+                6 if byte0 & 0x01 == 0 => self.transfer = Transfer::BlockDownload,
+                // Block upload initiate (ccs 5, cs 0).
+                5 if byte0 & 0x03 == 0 => {
+                    self.transfer = Transfer::BlockUpload {
+                        started: false,
+                        last: None,
+                        end_next: false,
+                    }
+                }
+                _ => {}
+            },
+            // Segments carry no command specifier; only an abort ends the transfer early.
+            Transfer::BlockDownload => {}
+            Transfer::BlockUpload { last, .. } => match byte0 {
+                // Start upload (ccs 5, cs 3).
+                0xA3 => {
+                    self.transfer = Transfer::BlockUpload {
+                        started: true,
+                        last: None,
+                        end_next: false,
+                    }
+                }
+                // Block acknowledgement (ccs 5, cs 2) of the sequence number in byte 1: the
+                // end comes next if it covers the last segment, else the server goes on
+                // after the acknowledged one and sends the last segment again.
+                0xA2 => {
+                    let end_next = last.is_some() && last == Some(data[1]);
+                    self.transfer = Transfer::BlockUpload {
+                        started: true,
+                        last: if end_next { last } else { None },
+                        end_next,
+                    }
+                }
+                // The client's end response (ccs 5, cs 1).
+                0xA1 => self.transfer = Transfer::Idle,
+                _ => {}
+            },
+        }
+        if byte0 == 0x80 {
+            self.transfer = Transfer::Idle;
+        }
+    }
+
+    /// A frame from the device, as the fault lets it out: `None` if it is left out.
+    fn outgoing(&mut self, frame: Frame) -> Option<Frame> {
+        let Id::Standard(raw) = frame.id() else {
+            return Some(frame);
+        };
+        let id = raw.as_raw();
+        let data = frame.data_bytes();
+        if id == 0x700 + u16::from(NODE_ID) && data.len() == 1 {
+            if data[0] == 0 {
+                let after_reset = std::mem::take(&mut self.reset_communication);
+                if after_reset && self.fault == Some(Fault::NoBootUpAfterResetCommunication) {
+                    return None;
+                }
+            } else {
+                self.heartbeats += 1;
+                if self.fault == Some(Fault::HeartbeatAtTwiceThePeriod) && self.heartbeats % 2 == 0
+                {
+                    return None;
+                }
+            }
+            return Some(frame);
+        }
+        if id != self.sdo_tx() || data.len() != 8 {
+            return Some(frame);
+        }
+        let byte0 = data[0];
+        match self.transfer {
+            Transfer::BlockDownload if byte0 == 0xA1 || byte0 == 0x80 => {
+                self.transfer = Transfer::Idle;
+            }
+            Transfer::BlockUpload { end_next: true, .. } => {
+                self.transfer = Transfer::Idle;
+                if self.fault == Some(Fault::WrongBlockUploadCrc) && byte0 & 0xE3 == 0xC1 {
+                    let mut d: [u8; 8] = data.try_into().unwrap();
+                    d[1] ^= 0xFF;
+                    d[2] ^= 0x5A;
+                    return Some(Frame::std(id, &d).unwrap());
+                }
+            }
+            Transfer::BlockUpload {
+                end_next: false, ..
+            } if byte0 == 0x80 => {
+                self.transfer = Transfer::Idle;
+            }
+            Transfer::BlockUpload {
+                started: true,
+                last: None,
+                end_next: false,
+            } if byte0 & 0x80 != 0 => {
+                // The segment with c = 1.
+                self.transfer = Transfer::BlockUpload {
+                    started: true,
+                    last: Some(byte0 & 0x7F),
+                    end_next: false,
+                };
+            }
+            _ => {}
+        }
+        Some(frame)
+    }
+
+    fn flush(&mut self, produced: &mut Outbox, out: &mut Outbox) {
+        let frames: Vec<Frame> = produced.drain().collect();
+        for f in frames {
+            if let Some(f) = self.outgoing(f) {
+                out.push(f);
+            }
+        }
+    }
+}
+
+fn is_expedited_download(byte0: u8) -> bool {
+    // ccs 1 (initiate download), e = 1.
+    byte0 >> 5 == 1 && byte0 & 0x02 != 0
+}
+
+/// Index, sub-index and the four data bytes of an initiate request.
+fn expedited(data: &[u8]) -> (u16, u8, [u8; 4]) {
+    (
+        u16::from_le_bytes([data[1], data[2]]),
+        data[3],
+        [data[4], data[5], data[6], data[7]],
+    )
+}
+
+impl Node for Broken {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.transfer = Transfer::Idle;
+        self.reset_communication = false;
+        let mut produced = Outbox::new();
+        self.device.on_power_up(now, &mut produced);
+        self.flush(&mut produced, out);
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        let mut produced = Outbox::new();
+        if let Some(f) = self.incoming(frame, &mut produced) {
+            self.device.on_frame(&f, now, &mut produced);
+        }
+        self.flush(&mut produced, out);
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        let mut produced = Outbox::new();
+        self.device.on_tick(now, &mut produced);
+        self.flush(&mut produced, out);
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        self.device.next_deadline()
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        let mut produced = Outbox::new();
+        self.device.on_sent(frame, now, &mut produced);
+        self.flush(&mut produced, out);
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        let mut produced = Outbox::new();
+        self.device.on_controller_event(event, now, &mut produced);
+        self.flush(&mut produced, out);
+    }
+}
