@@ -38,21 +38,22 @@
 //! errors and keeps retransmitting, error-passive with TEC = 128.
 
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 
 use cantwin_can::{
-    BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Id, Instant, Outbox,
+    BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Instant, Outbox,
 };
 
 use cantwin_twin::{Context, Twin};
 
+use crate::arbiter::Arbiter;
 use crate::error::BusError;
 use crate::fault::{FaultAction, FaultRule, FrameSelector};
 use crate::ids::{BusId, PortId};
 use crate::port::{AnyNode, BoxedNode, PortConfig, PortStatus, TwinAccess};
 use crate::queue::TxQueue;
 use crate::rng::SplitMix64;
-use crate::stats::{BuildIdHasher, BusStats, PortStats};
+use crate::stats::{BusStats, IdIndex, PortStats};
 use crate::tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord};
 use crate::time_map::TimeMap;
 
@@ -203,8 +204,8 @@ pub struct Bus {
     ports: Vec<Port>,
     /// Per port: `arbitration_key << 32 | port`, or `u64::MAX` when it offers nothing.
     arb_keys: Vec<u64>,
-    /// The offered keys as a lazy min-heap: an entry is current while `arb_keys` holds it.
-    arb_heap: BinaryHeap<Reverse<u64>>,
+    /// The least of `arb_keys`.
+    arbiter: Arbiter,
     offering: usize,
     listeners: usize,
     /// Ports with a bit-rate mismatch.
@@ -214,11 +215,13 @@ pub struct Bus {
     /// The latest epoch in which some port's acceptance verdicts may have changed: cached
     /// verdicts taken after it are all still valid.
     accept_changed: u64,
-    accept_cache: HashMap<Id, AcceptEntry, BuildIdHasher>,
+    /// Numbers the identifiers of `accept_cache`.
+    accept_index: IdIndex,
+    /// Per identifier number: the cached verdicts.
+    accept_cache: Vec<AcceptEntry>,
     /// Some receiver needs its counters touched on every frame (REC above 0, or a
     /// bit-rate mismatch): deliver the slow way.
     rx_slow: bool,
-    scratch: Vec<u64>,
     deadlines: BinaryHeap<Reverse<(Instant, u32)>>,
     dirty: Vec<u32>,
     in_flight: Option<InFlight>,
@@ -262,15 +265,15 @@ impl Bus {
             now,
             ports: Vec::new(),
             arb_keys: Vec::new(),
-            arb_heap: BinaryHeap::new(),
+            arbiter: Arbiter::new(),
             offering: 0,
             listeners: 0,
             mismatched: 0,
             epoch: 1,
             accept_changed: 0,
-            accept_cache: HashMap::default(),
+            accept_index: IdIndex::default(),
+            accept_cache: Vec::new(),
             rx_slow: false,
-            scratch: Vec::new(),
             deadlines: BinaryHeap::new(),
             dirty: Vec::new(),
             in_flight: None,
@@ -411,6 +414,7 @@ impl Bus {
             stats: PortStats::default(),
         });
         self.arb_keys.push(u64::MAX);
+        self.arbiter.set(index, u64::MAX);
         self.mark_called(index);
         if config.powered {
             self.power_up(index);
@@ -1006,17 +1010,8 @@ impl Bus {
         }
         let old = self.arb_keys[i];
         self.arb_keys[i] = key;
-        if key != old && key != u64::MAX {
-            self.arb_heap.push(Reverse(key));
-            if self.arb_heap.len() > 4 * self.ports.len() + 64 {
-                // Too many outdated entries: rebuild from the current keys.
-                self.arb_heap = self
-                    .arb_keys
-                    .iter()
-                    .filter(|&&k| k != u64::MAX)
-                    .map(|&k| Reverse(k))
-                    .collect();
-            }
+        if key != old {
+            self.arbiter.set(i, key);
         }
         match (old == u64::MAX, key == u64::MAX) {
             (true, false) => self.offering += 1,
@@ -1140,16 +1135,10 @@ impl Bus {
     // The wire
 
     fn start_transmission(&mut self, t: Instant) {
-        // The lowest current key wins; outdated heap entries are dropped on the way.
-        let key = loop {
-            let Some(&Reverse(key)) = self.arb_heap.peek() else {
-                return;
-            };
-            if self.arb_keys[(key & 0xFFFF_FFFF) as usize] == key {
-                break key;
-            }
-            self.arb_heap.pop();
-        };
+        let key = self.arbiter.winner();
+        if key == u64::MAX {
+            return;
+        }
         let i = (key & 0xFFFF_FFFF) as usize;
         let p = &self.ports[i];
         let (frame, bits, source) = match p.source {
@@ -1370,8 +1359,14 @@ impl Bus {
         let id = f.frame.id();
         let n = self.ports.len();
         let words = n.div_ceil(64);
-        let entry = self.accept_cache.entry(id).or_default();
-        entry.accept.resize(words, 0);
+        let k = self.accept_index.number(id);
+        if k == self.accept_cache.len() {
+            self.accept_cache.push(AcceptEntry::default());
+        }
+        let entry = &mut self.accept_cache[k];
+        if entry.accept.len() != words {
+            entry.accept.resize(words, 0);
+        }
         let since = entry.epoch;
         // Verdicts taken after the last possible change are all valid: nothing to ask (the
         // usual case on a bus whose nodes keep their acceptance versions).
@@ -1403,11 +1398,11 @@ impl Bus {
             }
         }
         entry.epoch = self.epoch;
-        self.scratch.clear();
-        self.scratch.extend_from_slice(&entry.accept);
         let now = self.now;
+        // Nothing below changes the cached verdicts: a word read at its turn is the word as
+        // taken above.
         for w in 0..words {
-            let mut bits = self.scratch[w];
+            let mut bits = self.accept_cache[k].accept[w];
             while bits != 0 {
                 let i = w * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;

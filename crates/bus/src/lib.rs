@@ -52,6 +52,7 @@
 //! ```
 #![forbid(unsafe_code)]
 
+mod arbiter;
 pub mod bench;
 pub mod bus;
 mod error;

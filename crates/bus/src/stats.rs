@@ -3,7 +3,7 @@
 use std::collections::{HashMap, VecDeque};
 use std::hash::{BuildHasherDefault, Hasher};
 
-use cantwin_can::{Duration, Id, Instant};
+use cantwin_can::{Duration, Id, Instant, StandardId};
 
 /// A fast hasher for identifiers (multiply-rotate, as in rustc's FxHash): the per-frame
 /// maps are keyed by [`Id`], which needs no protection against crafted collisions.
@@ -48,6 +48,59 @@ impl Hasher for IdHasher {
 
 pub(crate) type BuildIdHasher = BuildHasherDefault<IdHasher>;
 
+/// A dense numbering of the identifiers seen on a bus, so that per-identifier tables are
+/// plain vectors: standard identifiers (all a CANopen or DeviceNet bus uses) through a table
+/// indexed by the 11-bit identifier, with no hashing; extended ones through a map.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct IdIndex {
+    /// Per standard identifier: its number + 1, or 0 while unseen. Allocated at the first.
+    standard: Vec<u32>,
+    extended: HashMap<u32, u32, BuildIdHasher>,
+    /// The identifiers in the order numbered.
+    ids: Vec<Id>,
+}
+
+impl IdIndex {
+    /// The number of `id`, if it has one.
+    #[inline]
+    pub fn get(&self, id: Id) -> Option<usize> {
+        match id {
+            Id::Standard(s) => match self.standard.get(usize::from(s.as_raw())) {
+                Some(&n) if n > 0 => Some(n as usize - 1),
+                _ => None,
+            },
+            Id::Extended(e) => self.extended.get(&e.as_raw()).map(|&n| n as usize),
+        }
+    }
+
+    /// The number of `id`, numbering it now if it had none.
+    #[inline]
+    pub fn number(&mut self, id: Id) -> usize {
+        if let Some(n) = self.get(id) {
+            return n;
+        }
+        let n = self.ids.len();
+        self.ids.push(id);
+        match id {
+            Id::Standard(s) => {
+                if self.standard.is_empty() {
+                    self.standard = vec![0; usize::from(StandardId::MAX.as_raw()) + 1];
+                }
+                self.standard[usize::from(s.as_raw())] = n as u32 + 1;
+            }
+            Id::Extended(e) => {
+                self.extended.insert(e.as_raw(), n as u32);
+            }
+        }
+        n
+    }
+
+    /// The identifiers numbered so far, in number order.
+    pub fn ids(&self) -> &[Id] {
+        &self.ids
+    }
+}
+
 /// Frames and bits seen for one identifier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct IdStats {
@@ -68,7 +121,10 @@ pub struct BusStats {
     error_frames: u64,
     busy: Duration,
     bits: u64,
-    per_id: HashMap<Id, IdStats, BuildIdHasher>,
+    /// Numbers the identifiers of `per_id`.
+    index: IdIndex,
+    /// Per identifier number.
+    per_id: Vec<IdStats>,
     window: Duration,
     recent: VecDeque<(Instant, Instant)>,
 }
@@ -82,7 +138,8 @@ impl BusStats {
             error_frames: 0,
             busy: Duration::ZERO,
             bits: 0,
-            per_id: HashMap::default(),
+            index: IdIndex::default(),
+            per_id: Vec::new(),
             window,
             recent: VecDeque::new(),
         }
@@ -117,7 +174,7 @@ impl BusStats {
         self.frames += 1;
         self.dropped_frames += u64::from(dropped);
         self.bits += u64::from(bits);
-        let s = self.per_id.entry(id).or_default();
+        let s = self.entry(id);
         s.frames += 1;
         s.bits += u64::from(bits);
         self.busy_interval(start, idle_at);
@@ -126,8 +183,17 @@ impl BusStats {
     pub(crate) fn error(&mut self, id: Id, bits: u32, start: Instant, idle_at: Instant) {
         self.error_frames += 1;
         self.bits += u64::from(bits);
-        self.per_id.entry(id).or_default().errors += 1;
+        self.entry(id).errors += 1;
         self.busy_interval(start, idle_at);
+    }
+
+    #[inline]
+    fn entry(&mut self, id: Id) -> &mut IdStats {
+        let n = self.index.number(id);
+        if n == self.per_id.len() {
+            self.per_id.push(IdStats::default());
+        }
+        &mut self.per_id[n]
     }
 
     /// When counting started.
@@ -194,12 +260,22 @@ impl BusStats {
 
     /// The counts for one identifier.
     pub fn id(&self, id: Id) -> IdStats {
-        self.per_id.get(&id).copied().unwrap_or_default()
+        self.index
+            .get(id)
+            .and_then(|n| self.per_id.get(n))
+            .copied()
+            .unwrap_or_default()
     }
 
     /// Per-identifier counts, in arbitration order (highest priority first).
     pub fn per_id(&self) -> Vec<(Id, IdStats)> {
-        let mut v: Vec<(Id, IdStats)> = self.per_id.iter().map(|(k, v)| (*k, *v)).collect();
+        let mut v: Vec<(Id, IdStats)> = self
+            .index
+            .ids()
+            .iter()
+            .copied()
+            .zip(self.per_id.iter().copied())
+            .collect();
         v.sort_by_key(|(id, _)| id.arbitration_key(false));
         v
     }
