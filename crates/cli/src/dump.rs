@@ -23,7 +23,11 @@ pub fn run(args: &Args) -> Result<()> {
     let summary = cantwin_capture::dump(&mut reader, &mut out);
     out.flush().ok();
     let summary = summary.with_context(|| format!("reading {}", args.file.display()))?;
-    eprintln!("{} records ({:?})", summary.records, reader.format());
+    eprintln!(
+        "{} ({:?})",
+        crate::report::count(summary.records, "record", "records"),
+        reader.format()
+    );
     Ok(())
 }
 

@@ -14,8 +14,9 @@ pub struct Args {
     /// Where to write the page (default: CAPTURE.html beside the capture).
     #[arg(short, long, value_name = "FILE")]
     output: Option<PathBuf>,
-    /// Bit rate of a channel for the bus load: CHANNEL=RATE, or RATE for every channel
-    /// (default 1M). Repeatable.
+    /// Bit rate of a channel for the bus load: CHANNEL=RATE, or RATE for every channel.
+    /// Repeatable. Captures do not record the bit rate: without this, 500k is assumed (as
+    /// `cantwin monitor` does), and the output says so.
     #[arg(long = "bit-rate", value_name = "[CHANNEL=]RATE")]
     bit_rate: Vec<String>,
     /// Protocol of a channel: CHANNEL=canopen|devicenet|cal (default canopen). Repeatable.
@@ -33,6 +34,11 @@ pub struct Args {
     pcap_channel: String,
 }
 
+/// `1 record`, `2 records`: a count with its noun in the right number.
+pub fn count(n: u64, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}
+
 fn options(args: &Args) -> Result<Options> {
     let mut opts = Options::default();
     for spec in &args.bit_rate {
@@ -43,7 +49,7 @@ fn options(args: &Args) -> Result<Options> {
             }
             None => {
                 opts.default_bit_rate =
-                    spec.parse().with_context(|| format!("--bit-rate {spec}"))?;
+                    Some(spec.parse().with_context(|| format!("--bit-rate {spec}"))?);
             }
         }
     }
@@ -101,13 +107,30 @@ pub fn run(args: &Args) -> Result<()> {
     });
     std::fs::write(&out, cantwin_report::render_html(&report))
         .with_context(|| format!("writing {}", out.display()))?;
+    let rates: Vec<String> = report
+        .channels
+        .iter()
+        .map(|c| {
+            let assumed = if c.bit_rate_assumed {
+                " assumed (the capture does not record it; --bit-rate to give it)"
+            } else {
+                ""
+            };
+            format!("{} at {}{assumed}", c.name, c.bit_rate)
+        })
+        .collect();
     crate::output::result(
         format_args!(
-            "{}: {} records, {} SDO transfers, {} anomalies",
+            "{}: {}, {}, {}; bus load of {}",
             out.display(),
-            records,
-            report.sdo_total,
-            report.anomalies.len()
+            count(records, "record", "records"),
+            count(report.sdo_total, "SDO transfer", "SDO transfers"),
+            count(report.anomalies.len() as u64, "anomaly", "anomalies"),
+            if rates.is_empty() {
+                "no channel".to_string()
+            } else {
+                rates.join(", ")
+            }
         ),
         || {
             serde_json::json!({
@@ -115,6 +138,11 @@ pub fn run(args: &Args) -> Result<()> {
                 "records": records,
                 "sdo_transfers": report.sdo_total,
                 "anomalies": report.anomalies.len(),
+                "channels": report.channels.iter().map(|c| serde_json::json!({
+                    "name": c.name,
+                    "bit_rate": c.bit_rate.bits_per_second(),
+                    "bit_rate_assumed": c.bit_rate_assumed,
+                })).collect::<Vec<_>>(),
             })
         },
     )?;

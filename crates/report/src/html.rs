@@ -186,9 +186,14 @@ pub fn render_html(report: &Report) -> String {
     for c in &report.channels {
         let _ = writeln!(
             o,
-            "<h3>{}</h3><p>{} bit/s, {}; {} frames, {} error frames, {} SYNC; mean load {:.2} %, peak {:.2} % (windows of {} ms).</p>",
+            "<h3>{}</h3><p>{} bit/s{}, {}; {} frames, {} error frames, {} SYNC; mean load {:.2} %, peak {:.2} % (windows of {} ms).</p>",
             escape(&c.name),
             c.bit_rate.bits_per_second(),
+            if c.bit_rate_assumed {
+                " (assumed: the capture does not record the bit rate)"
+            } else {
+                ""
+            },
             c.protocol.name(),
             c.frames,
             c.error_frames,

@@ -85,11 +85,17 @@ impl std::str::FromStr for Protocol {
     }
 }
 
+/// The bit rate assumed for a channel whose rate is not given: pcap, pcapng and candump
+/// logs do not record it. 500 kbit/s, the rate of the shipped scenarios and the demo, and
+/// the default of `cantwin monitor` too.
+pub const DEFAULT_BIT_RATE: BitRate = BitRate::R500K;
+
 /// How to analyse a capture.
 #[derive(Debug, Clone)]
 pub struct Options {
-    /// Bit rate of channels not named in `bit_rates` (for the bus load).
-    pub default_bit_rate: BitRate,
+    /// Bit rate of channels not named in `bit_rates` (for the bus load); `None` assumes
+    /// [`DEFAULT_BIT_RATE`], which the report then says it did.
+    pub default_bit_rate: Option<BitRate>,
     /// Bit rate per channel name.
     pub bit_rates: BTreeMap<String, BitRate>,
     /// Protocol per channel name (others: CANopen).
@@ -106,7 +112,7 @@ pub struct Options {
 impl Default for Options {
     fn default() -> Self {
         Options {
-            default_bit_rate: BitRate::R1M,
+            default_bit_rate: None,
             bit_rates: BTreeMap::new(),
             protocols: BTreeMap::new(),
             pdos: PdoDecoder::new(),
@@ -117,11 +123,12 @@ impl Default for Options {
 }
 
 impl Options {
-    fn bit_rate(&self, channel: &str) -> BitRate {
-        self.bit_rates
-            .get(channel)
-            .copied()
-            .unwrap_or(self.default_bit_rate)
+    /// The bit rate of `channel`, and whether it is assumed rather than given.
+    fn bit_rate(&self, channel: &str) -> (BitRate, bool) {
+        match (self.bit_rates.get(channel).copied(), self.default_bit_rate) {
+            (Some(r), _) | (None, Some(r)) => (r, false),
+            (None, None) => (DEFAULT_BIT_RATE, true),
+        }
     }
 
     fn protocol(&self, channel: &str) -> Protocol {
@@ -140,6 +147,8 @@ pub struct Channel {
     pub name: String,
     /// The bit rate used for the load.
     pub bit_rate: BitRate,
+    /// Whether `bit_rate` is [`DEFAULT_BIT_RATE`], assumed because none was given.
+    pub bit_rate_assumed: bool,
     /// Protocol used for decoding.
     pub protocol: Protocol,
     /// Data and remote frames.
@@ -485,7 +494,8 @@ impl<'o> Analysis<'o> {
             .entry(name.to_string())
             .or_insert_with(|| Channel {
                 name: name.to_string(),
-                bit_rate: opts.bit_rate(name),
+                bit_rate: opts.bit_rate(name).0,
+                bit_rate_assumed: opts.bit_rate(name).1,
                 protocol: opts.protocol(name),
                 frames: 0,
                 error_frames: 0,

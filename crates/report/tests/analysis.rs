@@ -326,7 +326,7 @@ fn bus_load_from_exact_frame_lengths_per_window() {
         Record::new(T0 + 150 * MS, "can0", a),
     ];
     let opts = Options {
-        default_bit_rate: BitRate::R500K,
+        default_bit_rate: Some(BitRate::R500K),
         ..Options::default()
     };
     let report = analyse(&records, &opts);
@@ -356,8 +356,9 @@ fn window_widens_so_long_captures_keep_at_most_2000_windows() {
     assert_eq!(c.window_ns, 600 * MS);
     assert_eq!(c.load.len(), 1667);
     let bits = f64::from(f(0x080, &[]).bit_length());
-    assert_eq!(c.load[0], bits / 600_000.0);
-    assert_eq!(c.load[1666], bits / 600_000.0);
+    // 600 ms at the default 500 kbit/s hold 300 000 bits.
+    assert_eq!(c.load[0], bits / 300_000.0);
+    assert_eq!(c.load[1666], bits / 300_000.0);
     assert!(c.load[1..1666].iter().all(|&l| l == 0.0));
 }
 

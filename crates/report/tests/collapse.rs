@@ -152,3 +152,24 @@ fn cia305_lss_frames_are_timeline_rows() {
         ["LSS master: inquire node-ID", "LSS slave: node-ID 7"]
     );
 }
+
+#[test]
+fn an_unknown_bit_rate_is_assumed_500k_and_the_page_says_so() {
+    let records = [rec(0, 0x080, &[])];
+    let report = analyse(&records, &Options::default());
+    let c = &report.channels[0];
+    assert_eq!(c.bit_rate, cantwin_report::DEFAULT_BIT_RATE);
+    assert_eq!(c.bit_rate.bits_per_second(), 500_000);
+    assert!(c.bit_rate_assumed);
+    assert!(
+        render_html(&report)
+            .contains("500000 bit/s (assumed: the capture does not record the bit rate)")
+    );
+    let given = Options {
+        default_bit_rate: Some(cantwin_can::BitRate::R250K),
+        ..Options::default()
+    };
+    let report = analyse(&records, &given);
+    assert!(!report.channels[0].bit_rate_assumed);
+    assert!(!render_html(&report).contains("assumed"));
+}
