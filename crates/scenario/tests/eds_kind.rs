@@ -285,3 +285,36 @@ fn parameter_values_without_device_comissioning_are_reported_as_such() {
     assert!(warnings("io.eds").is_empty());
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// `[DummyUsage]` with every `Dummy000n=0` supports no dummy type (CiA 306 §4.5.5): a dummy
+/// entry in an RPDO mapping is refused with 0x06040041 (CiA 301 §7.4.7.1); with
+/// `Dummy0005=1` the UNSIGNED8 dummy is accepted.
+#[test]
+fn cia306_dummy_usage_that_supports_no_dummy_refuses_dummy_mapping() {
+    let text = std::fs::read_to_string(scenarios().join("eds/example-io.eds")).unwrap();
+    assert!(text.contains("[DummyUsage]\nDummy0001=0\n"));
+    assert!(text.contains("Dummy0005=0\n"));
+    let dir = temp_dir("dummy-usage");
+    for (dummy0005, answer) in [
+        (0, vec![0x80, 0x00, 0x16, 0x01, 0x41, 0x00, 0x04, 0x06]),
+        (1, vec![0x60, 0x00, 0x16, 0x01, 0, 0, 0, 0]),
+    ] {
+        let file = dir.join("io.eds");
+        std::fs::write(
+            &file,
+            text.replace("Dummy0005=0\n", &format!("Dummy0005={dummy0005}\n")),
+        )
+        .unwrap();
+        let path = scenario_in(&dir, &format!("file = \"{}\"\nnode_id = 6", file.display()));
+        let mut rig = Rig::load(&path, "dev");
+        // The mapping procedure (CiA 301 §7.5.2.36): RPDO1 invalid, no entries, then the
+        // dummy entry 0x0005 (UNSIGNED8), 8 bits.
+        rig.send(0x606, &[0x23, 0x00, 0x14, 0x01, 0x06, 0x02, 0x00, 0x80]);
+        assert_eq!(rig.sdo_response(6)[0], 0x60);
+        rig.send(0x606, &[0x2F, 0x00, 0x16, 0x00, 0, 0, 0, 0]);
+        assert_eq!(rig.sdo_response(6)[0], 0x60);
+        rig.send(0x606, &[0x23, 0x00, 0x16, 0x01, 0x08, 0x00, 0x05, 0x00]);
+        assert_eq!(rig.sdo_response(6), answer, "Dummy0005={dummy0005}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -177,18 +177,33 @@ impl DeviceKind for EdsKind {
             ..PortConfig::default()
         };
         let desc = std::sync::Arc::new(desc);
+        // A `[DummyUsage]` that supports no dummy type (every `Dummy000n=0`, CiA 306 §4.5.5)
+        // refuses dummy entries in RPDO mappings (CiA 301 §7.4.7.1); without the section
+        // every dummy type is accepted.
+        let dummies = eds
+            .dummy_usage
+            .as_ref()
+            .is_none_or(|d| d.values().any(|&supported| supported));
+        let obey_dummy_usage = move |mut dev: cantwin_canopen::device::Device| {
+            if let Some(p) = dev.pdo_mut() {
+                p.set_dummy_mapping(dummies);
+            }
+            dev
+        };
         if lss {
             let make: super::lss::Make<cantwin_canopen::device::Device> = Box::new(move |id| {
                 let config = cantwin_canopen::device::DeviceConfig {
                     sdo_timeout,
                     ..cantwin_canopen::device::DeviceConfig::new(id)
                 };
-                cantwin_canopen::device::Device::new(std::sync::Arc::clone(&desc), config).ok()
+                cantwin_canopen::device::Device::new(std::sync::Arc::clone(&desc), config)
+                    .ok()
+                    .map(obey_dummy_usage)
             });
             let node = super::lss::build(s, env, bus, node_id, make)?;
             return Ok((BoxedNode::twin(node), port));
         }
-        let device = canopen_device(s, env, desc, node_id, sdo_timeout)?;
+        let device = obey_dummy_usage(canopen_device(s, env, desc, node_id, sdo_timeout)?);
         Ok((BoxedNode::twin(device), port))
     }
 }
