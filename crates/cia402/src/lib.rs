@@ -4,8 +4,8 @@
 //! stops ([`options`]), the modes of operation ([`modes`]), velocity mode with its limits
 //! and ramps ([`vl`]), and the servo side: the plant ([`physics`]), the factor group
 //! ([`units`]), the cascaded controller ([`control`]), the trajectory generator
-//! ([`profile`]), one module per operating mode ([`pp`], [`pv`], [`pt`], [`cyclic`],
-//! [`ip`], [`hm`]) and the drive that runs them over a dictionary ([`drive`]).
+//! ([`profile`]), one module per operating mode ([`pp`], [`pv`], [`pt`], [`cyclic`] (csp, csv, cst and ip),
+//! [`hm`]) and the drive that runs them over a dictionary ([`drive`]).
 //!
 //! # Modes, objects, statusword bits and the tests that check them
 //!
@@ -74,13 +74,19 @@
 
 pub mod control;
 pub mod controlword;
+pub mod cyclic;
 pub mod dictionary;
+pub mod drive;
+pub mod hm;
 pub mod index;
 pub mod modes;
 pub mod objects;
 pub mod options;
 pub mod physics;
+pub mod pp;
 pub mod profile;
+pub mod pt;
+pub mod pv;
 pub mod state;
 pub mod statusword;
 pub mod units;

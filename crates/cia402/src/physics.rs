@@ -162,17 +162,20 @@ impl Encoder {
 }
 
 /// Switches along the axis, by motor angle (rad): a negative limit switch active below
-/// `negative_limit`, a positive one above `positive_limit`, and a home switch active
-/// above `home` (a "positive home switch", CiA 402-2 homing methods 3, 4, 19, 20; its
-/// edge is the home switch transition the methods search).
+/// `negative_limit`, a positive one above `positive_limit`, and a home switch whose edge
+/// is at `home`: active above it (a "positive home switch", CiA 402-2 homing methods 3, 4,
+/// 19, 20) or, with `home_below`, below it (a "negative home switch", methods 5, 6, 21,
+/// 22). Its edge is the home switch transition the methods search.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Switches {
     /// The negative limit switch is active at angles below this.
     pub negative_limit: Option<f64>,
     /// The positive limit switch is active at angles above this.
     pub positive_limit: Option<f64>,
-    /// The home switch is active at angles above this.
+    /// The home switch's edge.
     pub home: Option<f64>,
+    /// The home switch is active below its edge rather than above.
+    pub home_below: bool,
 }
 
 /// 0x60FD bit 0: negative limit switch.
@@ -188,6 +191,7 @@ impl Switches {
         negative_limit: None,
         positive_limit: None,
         home: None,
+        home_below: false,
     };
 
     /// The 0x60FD bits at `angle`.
@@ -199,7 +203,13 @@ impl Switches {
         if self.positive_limit.is_some_and(|l| angle > l) {
             bits |= POSITIVE_LIMIT_SWITCH;
         }
-        if self.home.is_some_and(|h| angle > h) {
+        if self.home.is_some_and(|h| {
+            if self.home_below {
+                angle < h
+            } else {
+                angle > h
+            }
+        }) {
             bits |= HOME_SWITCH;
         }
         bits
@@ -341,6 +351,7 @@ mod tests {
             negative_limit: Some(-10.0),
             positive_limit: Some(10.0),
             home: Some(0.0),
+            home_below: false,
         };
         assert_eq!(s.inputs(-11.0), NEGATIVE_LIMIT_SWITCH);
         assert_eq!(s.inputs(11.0), POSITIVE_LIMIT_SWITCH | HOME_SWITCH);
