@@ -8,7 +8,7 @@
 use std::sync::Arc;
 
 use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
-use cantwin_can::{BitRate, ControllerEvent, Frame, Id, Instant, Node, Outbox};
+use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::ObjectAccess;
 use cantwin_canopen::device::{Device, DeviceConfig};
 use cantwin_canopen::nmt::State;
@@ -39,7 +39,7 @@ pub enum Fault {
     /// heartbeat is left out.
     HeartbeatAtTwiceThePeriod,
     /// Accepts a new CAN-ID in 0x1014 while the EMCY is valid (bit 31 = 0), which
-    /// §7.5.2.17 forbids.
+    /// §7.5.2.20 forbids.
     EmcyCobIdChangeWhileValid,
     /// Stores (0x1010) whatever is written, where §7.5.2.13 requires the signature "save"
     /// and an abort 0x08000020 for anything else.
@@ -131,8 +131,26 @@ pub fn eds(desc: &OdDescription) -> Eds {
     cantwin_eds::from_od(desc, info, FileInfo::new("broken.eds"))
 }
 
-/// A simulation of one bus with the device (broken by `fault`, or not) on it; the runner
-/// attaches to the bus before the simulation first runs and so sees the boot-up message.
+/// A node that acknowledges frames and does nothing else: another station on the bus, so
+/// that the device's frames are acknowledged (CiA 301 §7.2: an unacknowledged frame is
+/// repeated, and the device goes error passive) before the runner attaches.
+struct Acknowledger;
+
+impl Node for Acknowledger {
+    fn on_frame(&mut self, _frame: &Frame, _now: Instant, _out: &mut Outbox) {}
+    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// How long the device runs before the runner attaches: its power-up boot-up is over by
+/// then, as a real device's is when a tool connects to its bus.
+pub const POWERED_BEFORE: Duration = Duration::from_millis(10);
+
+/// A simulation of one bus with the device (broken by `fault`, or not) on it, powered
+/// [`POWERED_BEFORE`] ago. The runner's first reset then cannot mistake the power-up
+/// boot-up for the answer to it.
 pub fn simulation(desc: &Arc<OdDescription>, fault: Option<Fault>) -> (Simulation, BusId, PortId) {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
@@ -149,6 +167,9 @@ pub fn simulation(desc: &Arc<OdDescription>, fault: Option<Fault>) -> (Simulatio
         ..PortConfig::default()
     };
     let port = sim.attach(bus, Broken::new(device, fault), port).unwrap();
+    sim.attach(bus, Acknowledger, PortConfig::default())
+        .unwrap();
+    sim.run_for(POWERED_BEFORE);
     (sim, bus, port)
 }
 

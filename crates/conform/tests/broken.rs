@@ -1,0 +1,171 @@
+//! The suite discriminates: against devices with one deliberate fault each (see
+//! [`broken::Fault`]), the case written for that fault fails, while the same device without
+//! the fault passes the same cases. Each run is in virtual time and limited to the area of
+//! the case.
+#![allow(clippy::unwrap_used)]
+
+#[path = "broken/mod.rs"]
+mod broken;
+
+use std::sync::Arc;
+
+use broken::{Fault, NODE_ID};
+use cantwin_can::{Duration, Frame, Id};
+use cantwin_conform::{Area, Options, Profile, Report, Transport, Verdict, VirtualBus, run};
+
+/// The case each fault is meant to be caught by, and its area; `None` for a fault no case
+/// of the catalogue checks yet.
+fn case_for(fault: Fault) -> Option<(&'static str, Area)> {
+    Some(match fault {
+        Fault::SdoInStopped => ("nmt.sdo-stopped", Area::Nmt),
+        Fault::ToggleIgnored => ("sdo.abort-toggle", Area::Sdo),
+        Fault::NoBootUpAfterResetCommunication => ("nmt.boot-up-reset-communication", Area::Nmt),
+        Fault::MappingChangeOnValidPdo => ("pdo.mapping-procedure", Area::Pdo),
+        Fault::WrongBlockUploadCrc => ("sdo.block-upload", Area::Sdo),
+        Fault::HeartbeatAtTwiceThePeriod => ("error-control.heartbeat-period", Area::ErrorControl),
+        Fault::StoreWithoutSignature => ("store.wrong-signature", Area::StoreRestore),
+        // `emcy.cob-id` reads 0x1014 and does not try to change it while valid.
+        Fault::EmcyCobIdChangeWhileValid => return None,
+    })
+}
+
+/// Runs the cases of `area` against the device, broken by `fault` or not.
+fn conform(fault: Option<Fault>, area: Area) -> Report {
+    let desc = Arc::new(broken::description());
+    let eds = broken::eds(&desc);
+    let (sim, bus, _) = broken::simulation(&desc, fault);
+    let mut transport = VirtualBus::new(sim, bus).unwrap();
+    let options = Options {
+        only: vec![area],
+        ..Options::default()
+    };
+    run(
+        &mut transport,
+        NODE_ID,
+        &eds,
+        &Profile::from_eds(&eds),
+        &options,
+        &mut |_| {},
+    )
+}
+
+fn show(r: &Report) -> String {
+    cantwin_conform::output::summary(r)
+}
+
+/// Checks that `fault` is caught by its case and that the device without it passes that
+/// case.
+fn caught(fault: Fault) {
+    let (id, area) = case_for(fault).unwrap();
+    let good = conform(None, area);
+    let case = good
+        .case(id)
+        .unwrap_or_else(|| panic!("no case {id} in the report:\n{}", show(&good)));
+    assert_eq!(
+        case.verdict,
+        Verdict::Pass,
+        "the unbroken device fails {id}: {}\n{}",
+        case.detail,
+        show(&good)
+    );
+    let bad = conform(Some(fault), area);
+    let case = bad.case(id).unwrap();
+    assert_eq!(
+        case.verdict,
+        Verdict::Fail,
+        "{fault:?} is not caught by {id}: {}\n{}",
+        case.detail,
+        show(&bad)
+    );
+    assert!(!bad.passed(), "{fault:?}: the run passes\n{}", show(&bad));
+}
+
+#[test]
+fn unbroken_device_passes_every_mandatory_case_of_every_area() {
+    for area in Area::ALL {
+        let r = conform(None, area);
+        assert!(r.passed(), "{area:?}:\n{}", show(&r));
+    }
+}
+
+#[test]
+fn cia301_7_3_2_2_3_sdo_answered_in_stopped_is_caught() {
+    caught(Fault::SdoInStopped);
+}
+
+#[test]
+fn cia301_7_2_4_3_4_unchecked_toggle_bit_is_caught() {
+    caught(Fault::ToggleIgnored);
+}
+
+#[test]
+fn cia301_7_2_8_3_2_1_no_boot_up_after_reset_communication_is_caught() {
+    caught(Fault::NoBootUpAfterResetCommunication);
+}
+
+#[test]
+fn cia301_7_5_2_36_mapping_change_on_a_valid_pdo_is_caught() {
+    caught(Fault::MappingChangeOnValidPdo);
+}
+
+#[test]
+fn cia301_7_2_4_3_16_wrong_block_upload_crc_is_caught() {
+    caught(Fault::WrongBlockUploadCrc);
+}
+
+#[test]
+fn cia301_7_2_8_3_2_2_heartbeat_at_twice_the_period_is_caught() {
+    caught(Fault::HeartbeatAtTwiceThePeriod);
+}
+
+/// The EMCY fault on the wire, as no case checks it yet: the unbroken device refuses a new
+/// CAN-ID in 0x1014 while the EMCY is valid (CiA 301 §7.5.2.20), the broken one takes it.
+#[test]
+fn cia301_7_5_2_20_emcy_cob_id_change_while_valid_is_the_broken_devices_only_difference() {
+    let sdo = |transport: &mut VirtualBus, data: [u8; 8]| {
+        transport
+            .send(Frame::std(0x600 + u16::from(NODE_ID), &data).unwrap())
+            .unwrap();
+        let until = transport.now() + Duration::from_millis(100);
+        loop {
+            let (_, f) = transport.recv(until).unwrap().expect("an SDO answer");
+            if f.id() == Id::standard(0x580 + u16::from(NODE_ID)).unwrap() {
+                return f.data_bytes().to_vec();
+            }
+        }
+    };
+    // 0x1014 sub 0 = 0x86: valid, another CAN-ID than the default 0x85.
+    let write = [0x23, 0x14, 0x10, 0x00, 0x86, 0x00, 0x00, 0x00];
+    let read = [0x40, 0x14, 0x10, 0x00, 0, 0, 0, 0];
+    let desc = Arc::new(broken::description());
+    for (fault, answer, value) in [
+        (None, 0x80, 0x85),
+        (Some(Fault::EmcyCobIdChangeWhileValid), 0x60, 0x86),
+    ] {
+        let (sim, bus, _) = broken::simulation(&desc, fault);
+        let mut transport = VirtualBus::new(sim, bus).unwrap();
+        let got = sdo(&mut transport, write);
+        assert_eq!(got[0], answer, "{fault:?}: {got:02X?}");
+        let got = sdo(&mut transport, read);
+        assert_eq!(got[..5], [0x43, 0x14, 0x10, 0x00, value], "{fault:?}");
+    }
+}
+
+#[test]
+fn cia301_7_5_2_13_store_without_signature_is_caught() {
+    caught(Fault::StoreWithoutSignature);
+}
+
+/// Every case named above is in the catalogue, in the area the run is limited to.
+#[test]
+fn every_case_named_is_in_the_catalogue() {
+    let catalogue = cantwin_conform::catalogue();
+    for fault in Fault::ALL {
+        let Some((id, area)) = case_for(fault) else {
+            continue;
+        };
+        let info = catalogue.iter().find(|c| c.id == id);
+        assert!(info.is_some(), "{fault:?}: no case {id} in the catalogue");
+        assert_eq!(info.unwrap().area, area, "{fault:?}: {id}");
+    }
+}
