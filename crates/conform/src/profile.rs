@@ -222,3 +222,23 @@ impl Profile {
         self.deviations.iter().find(|d| d.case == id)
     }
 }
+
+/// The profile of the ADV200 card (CANopen and DS402 personality): expedited-only SDO,
+/// the Opt Bus Fault alarm only while the drive is enabled, each deviation with the
+/// manual's section.
+pub const ADV200: &str = include_str!("../profiles/adv200.toml");
+
+/// The profile of the twins built on the cantwin CANopen stack (`cia301`, `eds`, `tm3`):
+/// every SDO protocol, no deviation.
+pub const STACK: &str = include_str!("../profiles/stack.toml");
+
+/// The profile of a shipped twin of scenario kind `kind`, as `cantwin eds export` writes
+/// it beside the twin's EDS.
+pub fn shipped(kind: &str) -> ProfileFile {
+    let text = match kind {
+        "adv200" => ADV200,
+        _ => STACK,
+    };
+    // The shipped files are checked by this crate's tests.
+    ProfileFile::parse(text).unwrap_or_default()
+}

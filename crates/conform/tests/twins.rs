@@ -6,24 +6,54 @@ use cantwin_conform::{Options, Profile, Report, Verdict, VirtualBus, run};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
 
 fn scenario(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenarios").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenarios")
+        .join(name)
 }
 
-/// Runs every case against `device` of `file`, with the EDS made from its dictionary.
+/// Runs every case against `device` of `file`, with the EDS made from its dictionary and
+/// the twin's shipped profile.
 fn conform(file: &str, device: &str) -> Report {
+    conform_with(file, device, None, &Options::default())
+}
+
+/// As [`conform`]; `profile`: this profile file instead of the shipped one (`Some("")`:
+/// the EDS alone).
+fn conform_with(file: &str, device: &str, profile: Option<&str>, options: &Options) -> Report {
     let sc = Scenario::load(&scenario(file)).unwrap();
-    let built = sc.build(&Registry::builtin(), &BuildEnv::default()).unwrap();
+    let built = sc
+        .build(&Registry::builtin(), &BuildEnv::default())
+        .unwrap();
     let dev = built.device(device).unwrap().clone();
     let node = dev.node_id.unwrap();
-    let desc = built.sim.twin(dev.port).unwrap().dictionary().unwrap().description();
+    let desc = built
+        .sim
+        .twin(dev.port)
+        .unwrap()
+        .dictionary()
+        .unwrap()
+        .description();
     let eds = cantwin_eds::from_od(
         desc,
         cantwin_eds::DeviceInfo::default(),
         cantwin_eds::FileInfo::new(format!("{device}.eds")),
     );
     let mut bus = VirtualBus::new(built.sim, dev.port.bus()).unwrap();
-    let profile = Profile::from_eds(&eds);
-    run(&mut bus, node, &eds, &profile, &Options::default(), &mut |_| {})
+    let file = match profile {
+        Some(text) => cantwin_conform::ProfileFile::parse(text).unwrap(),
+        None => cantwin_conform::profile::shipped(&dev.kind),
+    };
+    let profile = Profile::from_eds(&eds).with_file(&file, "test");
+    run(&mut bus, node, &eds, &profile, options, &mut |_| {})
+}
+
+/// Every deviation the shipped profile lists was observed, as the runner checks.
+fn deviations_observed(r: &Report, kind: &str) {
+    for d in cantwin_conform::profile::shipped(kind).deviations {
+        let c = r.case(&d.case).unwrap();
+        assert_eq!(c.verdict, Verdict::Deviation, "{}: {}", c.id, c.detail);
+        assert_eq!(c.manual_section.as_deref(), Some(d.section.as_str()));
+    }
 }
 
 fn show(r: &Report) -> String {
@@ -35,4 +65,97 @@ fn cia301_twin_passes_every_mandatory_case() {
     let r = conform("cia301-device.toml", "node5");
     assert!(r.passed(), "{}", show(&r));
     assert!(r.count(Verdict::Pass) > 30, "{}", show(&r));
+}
+
+#[test]
+fn tm3_island_passes_every_mandatory_case() {
+    let r = conform("tm3-island.toml", "island");
+    assert!(r.passed(), "{}", show(&r));
+}
+
+#[test]
+fn eds_twin_of_example_io_passes_every_mandatory_case() {
+    let r = conform("eds-device.toml", "io6");
+    assert!(r.passed(), "{}", show(&r));
+}
+
+#[test]
+fn adv200_canopen_passes_every_mandatory_case() {
+    let r = conform("adv200-example.toml", "drive");
+    assert!(r.passed(), "{}", show(&r));
+    deviations_observed(&r, "adv200");
+}
+
+#[test]
+fn adv200_ds402_passes_every_mandatory_case() {
+    let r = conform("adv200-ds402.toml", "drive");
+    assert!(r.passed(), "{}", show(&r));
+    deviations_observed(&r, "adv200");
+}
+
+fn sdo_only() -> Options {
+    Options {
+        only: vec![cantwin_conform::Area::Sdo],
+        ..Options::default()
+    }
+}
+
+#[test]
+fn without_a_profile_an_expedited_only_server_is_reported_not_failed() {
+    let r = conform_with("adv200-example.toml", "drive", Some(""), &sdo_only());
+    let c = r.case("sdo.segmented-download").unwrap();
+    assert_eq!(c.verdict, Verdict::NotSupported, "{}", c.detail);
+    assert!(c.detail.contains("expedited-only"), "{}", c.detail);
+    assert!(c.detail.contains("0x05040001"), "{}", c.detail);
+    assert!(r.passed(), "{}", show(&r));
+}
+
+#[test]
+fn an_unlisted_deviation_fails() {
+    // The profile claims segmented transfers and lists no deviation.
+    let r = conform_with(
+        "adv200-example.toml",
+        "drive",
+        Some("[sdo]\nsegmented = true\n"),
+        &sdo_only(),
+    );
+    let c = r.case("sdo.segmented-download").unwrap();
+    assert_eq!(c.verdict, Verdict::Fail, "{}", c.detail);
+    assert!(!r.passed());
+}
+
+#[test]
+fn a_listed_deviation_that_is_not_observed_fails() {
+    let profile = "[[deviation]]\ncase = \"sdo.segmented-download\"\nsection = \"§9\"\nbehaviour = \"expedited only\"\nabort = 0x05040001\n";
+    let r = conform_with("cia301-device.toml", "node5", Some(profile), &sdo_only());
+    let c = r.case("sdo.segmented-download").unwrap();
+    assert_eq!(c.verdict, Verdict::Fail, "{}", c.detail);
+    assert_eq!(c.manual_section.as_deref(), Some("§9"));
+    assert!(c.detail.contains("not observed"), "{}", c.detail);
+}
+
+#[test]
+fn a_deviation_with_another_abort_code_is_not_the_listed_one() {
+    let profile = "[sdo]\nsegmented = false\n[[deviation]]\ncase = \"sdo.segmented-download\"\nsection = \"§9\"\nbehaviour = \"x\"\nabort = 0x06010000\n";
+    let r = conform_with("adv200-example.toml", "drive", Some(profile), &sdo_only());
+    assert_eq!(
+        r.case("sdo.segmented-download").unwrap().verdict,
+        Verdict::Fail
+    );
+}
+
+#[test]
+fn shipped_profiles_parse_and_name_cases_of_the_catalogue() {
+    for text in [
+        cantwin_conform::profile::ADV200,
+        cantwin_conform::profile::STACK,
+    ] {
+        cantwin_conform::ProfileFile::parse(text).unwrap();
+    }
+    assert!(matches!(
+        cantwin_conform::ProfileFile::parse(
+            "[[deviation]]\ncase = \"sdo.nope\"\nsection = \"1\"\nbehaviour = \"x\"\n"
+        ),
+        Err(cantwin_conform::ProfileError::UnknownCase(_))
+    ));
 }

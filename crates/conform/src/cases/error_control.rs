@@ -192,6 +192,9 @@ fn heartbeat_consumer(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.send(Frame::data_array(hb, [0x05]))?;
     let sent = ctx.now();
     let got = ctx.wait_for(Duration::from_millis(600), |f| is_emcy(f, cob, 0x8130))?;
+    // The producer comes back, which ends the error (§7.2.8.3.2.2), before the entry goes.
+    ctx.send(Frame::data_array(hb, [0x05]))?;
+    ctx.idle(Duration::from_millis(50))?;
     ctx.write(0x1016, 1, &0u32.to_le_bytes(), "a heartbeat consumer entry")?;
     if !early.is_empty() {
         return Err(fail(
@@ -328,6 +331,9 @@ fn life_guarding(ctx: &mut Ctx<'_>) -> Outcome {
     })?;
     let sent = ctx.now();
     let got = ctx.wait_for(Duration::from_millis(900), |f| is_emcy(f, cob, 0x8130))?;
+    // A poll ends the life guarding event before guarding goes off.
+    ctx.send(Frame::remote(ec, 1).map_err(|e| fail(e.to_string()))?)?;
+    ctx.idle(Duration::from_millis(50))?;
     guarding_off(ctx, &hb)?;
     if first.is_none() {
         return Err(fail("the guarding request was not answered"));

@@ -217,7 +217,20 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
     let sync = sync_id(ctx)?;
     let mut notes = Vec::new();
     for (ty, syncs, want) in [(1u8, 6usize, 6usize), (2, 6, 3)] {
-        ctx.write(comm, 2, &[ty], "the transmission type")?;
+        // A device need not offer every synchronous type (§7.5.2.36): 0x06090030 says so.
+        match ctx.download(comm, 2, &[ty])? {
+            Ok(()) => {}
+            Err(a) if a.code == cantwin_canopen::AbortCode::INVALID_VALUE => {
+                notes.push(format!("type {ty} not offered"));
+                continue;
+            }
+            Err(a) => {
+                ctx.write(comm, 2, &tt, "the transmission type")?;
+                return Err(fail(format!(
+                    "writing type {ty} to 0x{comm:04X} sub 2: {a}"
+                )));
+            }
+        }
         ctx.nmt(NmtCs::Start)?;
         ctx.idle(Duration::from_millis(30))?;
         let mut got = 0;
@@ -238,6 +251,9 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
         notes.push(format!("type {ty}: {got} after {syncs} SYNCs"));
     }
     ctx.write(comm, 2, &tt, "the transmission type")?;
+    if notes.iter().all(|n| n.ends_with("not offered")) {
+        return Err(not_supported(notes.join(", ")));
+    }
     Ok(notes.join(", "))
 }
 
