@@ -31,7 +31,9 @@
 //! ```
 #![forbid(unsafe_code)]
 
+pub mod cal;
 pub mod canopen;
+pub mod decode;
 pub mod devicenet;
 mod html;
 pub mod lss;
@@ -44,6 +46,7 @@ use cantwin_canopen::master::pdo::PdoDecoder;
 use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs};
 use cantwin_capture::{Event, Record};
 
+pub use decode::Decoder;
 pub use html::{escape, render_html};
 
 /// The protocol a channel carries, which decides how its frames are decoded.
@@ -98,8 +101,10 @@ pub struct Options {
     pub default_bit_rate: Option<BitRate>,
     /// Bit rate per channel name.
     pub bit_rates: BTreeMap<String, BitRate>,
-    /// Protocol per channel name (others: CANopen).
+    /// Protocol per channel name.
     pub protocols: BTreeMap<String, Protocol>,
+    /// Protocol of channels not named in `protocols` (CANopen unless told).
+    pub default_protocol: Protocol,
     /// PDO mappings that name PDO values (see [`canopen::add_eds_pdos`]).
     pub pdos: PdoDecoder,
     /// Width of a bus load window; `None` chooses 100 ms, widened so a capture has at most
@@ -115,6 +120,7 @@ impl Default for Options {
             default_bit_rate: None,
             bit_rates: BTreeMap::new(),
             protocols: BTreeMap::new(),
+            default_protocol: Protocol::CanOpen,
             pdos: PdoDecoder::new(),
             window_ns: None,
             max_timeline: 20_000,
@@ -132,7 +138,10 @@ impl Options {
     }
 
     fn protocol(&self, channel: &str) -> Protocol {
-        self.protocols.get(channel).copied().unwrap_or_default()
+        self.protocols
+            .get(channel)
+            .copied()
+            .unwrap_or(self.default_protocol)
     }
 }
 
@@ -839,19 +848,7 @@ impl<'o> Analysis<'o> {
         if self.full() {
             return;
         }
-        // DS 202-2: byte 0 is the CMS control byte; which COB is which is the
-        // application's choice, so the row names the COB and splits the control byte.
-        let text = match f.data_bytes().split_first() {
-            _ if f.is_remote() => format!("COB 0x{:X} remote read request", id_raw(f.id())),
-            Some((c, rest)) => format!(
-                "COB 0x{:X} control 0x{c:02X} (bit 7 {}, multiplexor {}) data {}",
-                id_raw(f.id()),
-                c >> 7,
-                c & 0x7F,
-                canopen::hex_bytes(rest)
-            ),
-            None => format!("COB 0x{:X} (no data)", id_raw(f.id())),
-        };
+        let text = cal::describe(f);
         self.row(t, ch, Kind::Cal, None, text);
     }
 
