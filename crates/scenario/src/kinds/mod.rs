@@ -2,6 +2,7 @@
 
 pub mod adv200;
 pub mod cia301;
+pub mod cia402_master;
 mod common;
 pub mod eds;
 pub mod generator;
@@ -17,6 +18,7 @@ fn builtin_kinds() -> Vec<Box<dyn DeviceKind>> {
     vec![
         Box::new(generator::Generator),
         Box::new(master::MasterKind),
+        Box::new(cia402_master::Cia402MasterKind),
         Box::new(cia301::Cia301::default()),
         Box::new(opendrive::OpenDriveKind),
         Box::new(adv200::Adv200Kind::default()),
