@@ -1,0 +1,388 @@
+//! The servo drive as a [`Node`]: a CiA 301 device over the dictionary of [`crate::od`]
+//! whose CiA 402 objects a [`Drive`] reads and writes.
+//!
+//! * **One truth.** The master's commands and parameters are the dictionary's values; the
+//!   device's hooks ([`ServoHooks`]) only note that a CiA 402 object was written, and the
+//!   drive evaluates them once the frame that wrote them has been handled (an RPDO
+//!   mapping the controlword and a target is taken as a whole).
+//! * **Time.** Before the device handles a frame or a timer, the drive is brought to that
+//!   bus time, so a TPDO sent at a SYNC carries the actual values of the last loop cycle
+//!   before it. While the drive is active (high voltage applied or the motor turning) the
+//!   node wakes every [`ServoConfig::status_period`] to publish its statusword: a change
+//!   goes out in the event-driven TPDOs mapping it.
+//! * **SYNC.** At every SYNC the cyclic modes take the set-points received (those of
+//!   synchronous RPDOs are applied by the device at that SYNC).
+//! * **Refusals.** 0x6060 refuses a mode the drive does not support and 0x6098 a homing
+//!   method it does not run, with 0x06090030 (value range of parameter exceeded).
+//! * **Faults** raise an EMCY with the CiA 402 error code (0x603F); the fault reset clears
+//!   it.
+//! * **Power-up and reset application** start the drive afresh: motor at rest, SWITCH ON
+//!   DISABLED.
+
+use std::sync::Arc;
+
+use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
+use cantwin_canopen::AbortCode;
+use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
+use cantwin_canopen::od::{ObjectDictionary, OdDescription, OdHooks};
+use cantwin_cia402::drive::{Drive, DriveConfig, DriveEvent};
+use cantwin_cia402::index::*;
+use cantwin_cia402::{Mode, SupportedModes, hm};
+
+/// How a servo is set up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoConfig {
+    /// The node-ID, 1..=127.
+    pub node_id: u8,
+    /// The drive: motor, load, inverter, gains, encoder, switches, modes.
+    pub drive: DriveConfig,
+    /// How often an active drive publishes its statusword.
+    pub status_period: Duration,
+    /// The SDO server's timeout.
+    pub sdo_timeout: Duration,
+}
+
+impl ServoConfig {
+    /// A servo at `node_id` with the default drive, publishing every millisecond.
+    pub fn new(node_id: u8) -> Self {
+        ServoConfig {
+            node_id,
+            drive: DriveConfig::default(),
+            status_period: Duration::from_millis(1),
+            sdo_timeout: Duration::from_millis(1000),
+        }
+    }
+}
+
+/// The objects whose writes the drive evaluates at once (commands and set-points); a write
+/// of any other CiA 402 object is a parameter change.
+fn is_input(index: u16) -> bool {
+    matches!(
+        index,
+        CONTROLWORD
+            | MODES_OF_OPERATION
+            | TARGET_POSITION
+            | TARGET_VELOCITY
+            | TARGET_TORQUE
+            | INTERPOLATION_DATA_RECORD
+            | VL_TARGET_VELOCITY
+            | POSITION_OFFSET
+            | VELOCITY_OFFSET
+            | TORQUE_OFFSET
+    )
+}
+
+/// The servo's hooks into its CiA 301 device: they check 0x6060 and 0x6098 and note
+/// which kind of CiA 402 object was written.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ServoHooks {
+    modes: SupportedModes,
+    inputs: bool,
+    params: bool,
+}
+
+impl OdHooks for ServoHooks {
+    fn validate(
+        &mut self,
+        _od: &ObjectDictionary,
+        index: u16,
+        _sub: u8,
+        data: &[u8],
+    ) -> Result<(), AbortCode> {
+        let code = data.first().map_or(0, |b| *b as i8);
+        let ok = match index {
+            // CiA 402-2 object 6060h: 0 is "no mode"; other codes must be a supported mode.
+            MODES_OF_OPERATION => {
+                code == 0 || Mode::from_code(code).is_some_and(|m| self.modes.contains(m))
+            }
+            HOMING_METHOD => hm::supported(code),
+            _ => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(AbortCode::INVALID_VALUE)
+        }
+    }
+
+    fn written(&mut self, _od: &mut ObjectDictionary, index: u16, _sub: u8) {
+        if is_input(index) {
+            self.inputs = true;
+        } else {
+            self.params = true;
+        }
+    }
+}
+
+/// Why a servo cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum ServoError {
+    /// The dictionary could not be built.
+    #[error("object dictionary: {0}")]
+    Od(#[from] cantwin_canopen::od::OdBuildError),
+    /// The node-ID is outside 1..=127.
+    #[error(transparent)]
+    Device(#[from] DeviceError),
+    /// The dictionary lacks an object every CiA 402 drive has.
+    #[error("the dictionary has no object {0:#06x}, which every CiA 402 drive has")]
+    Missing(u16),
+}
+
+/// A CiA 402 servo drive. See the [module documentation](self).
+pub struct Servo {
+    device: Device<ServoHooks>,
+    drive: Drive,
+    config: ServoConfig,
+    powered: bool,
+    powered_at: Instant,
+    last: Instant,
+    statusword: u16,
+    mode_display: i64,
+}
+
+impl core::fmt::Debug for Servo {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Servo")
+            .field("node_id", &self.device.node_id())
+            .field("state", &self.drive.state())
+            .field("mode", &self.drive.mode())
+            .finish_non_exhaustive()
+    }
+}
+
+impl Servo {
+    /// A servo on the built-in dictionary of its configured modes
+    /// ([`crate::od::description`]), unpowered until [`Node::on_power_up`].
+    pub fn new(config: ServoConfig) -> Result<Self, ServoError> {
+        let objects = cantwin_cia402::dictionary::ServoObjects {
+            modes: config.drive.modes,
+            mode: None,
+            motion: cantwin_cia402::dictionary::MotionDefaults {
+                encoder_increments: config.drive.encoder,
+                feed: config.drive.encoder,
+                rated_torque_mnm: (config.drive.mechanics.rated_torque * 1000.0).round() as u32,
+                rated_current_ma: (config.drive.mechanics.rated_current * 1000.0).round() as u32,
+                ..Default::default()
+            },
+        };
+        let desc = Arc::new(crate::od::description(&objects)?);
+        Self::with_description(desc, config)
+    }
+
+    /// A servo on `desc` (a vendor's dictionary; its CiA 402 objects must be hooked, see
+    /// [`crate::od::hooked`]). The profile's behaviour runs on whatever objects it has:
+    /// the factor group where it has one, the defaults of `config` otherwise.
+    pub fn with_description(
+        desc: Arc<OdDescription>,
+        config: ServoConfig,
+    ) -> Result<Self, ServoError> {
+        for index in [
+            CONTROLWORD,
+            STATUSWORD,
+            MODES_OF_OPERATION,
+            MODES_OF_OPERATION_DISPLAY,
+        ] {
+            if desc.object(index).is_none() {
+                return Err(ServoError::Missing(index));
+            }
+        }
+        let hooks = ServoHooks {
+            modes: config.drive.modes,
+            ..ServoHooks::default()
+        };
+        let device_config = DeviceConfig {
+            sdo_timeout: config.sdo_timeout,
+            ..DeviceConfig::new(config.node_id)
+        };
+        let mut device = Device::with_hooks(desc, device_config, hooks)?;
+        let drive = Drive::new(config.drive, device.od_mut());
+        Ok(Servo {
+            device,
+            drive,
+            config,
+            powered: false,
+            powered_at: Instant::ZERO,
+            last: Instant::ZERO,
+            statusword: 0,
+            mode_display: 0,
+        })
+    }
+
+    /// The CiA 301 device inside.
+    pub fn device(&self) -> &Device<ServoHooks> {
+        &self.device
+    }
+
+    /// The CiA 301 device inside, mutably.
+    pub fn device_mut(&mut self) -> &mut Device<ServoHooks> {
+        &mut self.device
+    }
+
+    /// The drive.
+    pub fn drive(&self) -> &Drive {
+        &self.drive
+    }
+
+    /// The drive, mutably (to load the motor, fault the inverter, force a switch); call
+    /// [`Servo::changed`] after a change so that it is evaluated at once.
+    pub fn drive_mut(&mut self) -> &mut Drive {
+        &mut self.drive
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ServoConfig {
+        &self.config
+    }
+
+    /// Brings the drive to `now` (before a change made from outside).
+    pub fn settle(&mut self, now: Instant) {
+        if !self.powered {
+            return;
+        }
+        let t = now.max(self.last);
+        self.last = t;
+        let elapsed = t.saturating_duration_since(self.powered_at);
+        if self.drive.next_cycle() <= elapsed {
+            self.drive.advance(self.device.od_mut(), elapsed);
+            self.publish();
+        }
+    }
+
+    /// Evaluates the drive after a change made from outside at `now`.
+    pub fn changed(&mut self, now: Instant) {
+        self.settle(now);
+        if self.powered {
+            self.drive.evaluate(self.device.od_mut());
+            self.publish();
+        }
+    }
+
+    /// Passes the drive's news to the bus: EMCYs for its faults, event-driven TPDOs for
+    /// a changed statusword or mode.
+    fn publish(&mut self) {
+        for e in self.drive.take_events() {
+            match e {
+                DriveEvent::Fault(code) => {
+                    self.device.emcy().raise(code, [0; 5]);
+                }
+                DriveEvent::Cleared(code) => {
+                    self.device.emcy().clear(code);
+                }
+            }
+        }
+        let od = self.device.od();
+        let sw = od.get_unsigned(STATUSWORD, 0).unwrap_or(0) as u16;
+        let mode = od
+            .get(MODES_OF_OPERATION_DISPLAY, 0)
+            .ok()
+            .and_then(|v| v.as_i128())
+            .unwrap_or(0) as i64;
+        if sw != self.statusword || mode != self.mode_display {
+            self.statusword = sw;
+            self.mode_display = mode;
+            if let Some(p) = self.device.pdo_mut() {
+                p.mark_changed(STATUSWORD, 0);
+                p.mark_changed(MODES_OF_OPERATION_DISPLAY, 0);
+            }
+        }
+    }
+
+    /// Takes the device's events and the hooks' notes, and has the drive evaluate them.
+    pub(crate) fn after_device(&mut self) {
+        let mut sync = false;
+        while let Some(e) = self.device.poll_event() {
+            match e {
+                Event::Sync { .. } => sync = true,
+                Event::ResetApplication => {
+                    self.drive = Drive::new(self.config.drive, self.device.od_mut());
+                }
+                _ => {}
+            }
+        }
+        let hooks = *self.device.hooks();
+        if hooks.params {
+            self.drive.parameters_changed();
+        }
+        if hooks.inputs || hooks.params {
+            let h = self.device.hooks_mut();
+            h.inputs = false;
+            h.params = false;
+            self.drive.evaluate(self.device.od_mut());
+        }
+        if sync {
+            self.drive.sync(self.device.od_mut());
+        }
+        self.publish();
+    }
+
+    fn drive_deadline(&self) -> Option<Instant> {
+        if !self.powered || !self.drive.active() {
+            return None;
+        }
+        let period = self.config.status_period.as_nanos().max(1);
+        let elapsed = self
+            .last
+            .saturating_duration_since(self.powered_at)
+            .as_nanos();
+        let next = (elapsed / period + 1) * period;
+        self.powered_at.checked_add(Duration::from_nanos(next))
+    }
+}
+
+impl Node for Servo {
+    fn on_power_up(&mut self, now: Instant, out: &mut Outbox) {
+        self.powered = true;
+        self.powered_at = now;
+        self.last = now;
+        let h = self.device.hooks_mut();
+        h.inputs = false;
+        h.params = false;
+        self.device.on_power_up(now, out);
+        self.drive = Drive::new(self.config.drive, self.device.od_mut());
+        while self.device.poll_event().is_some() {}
+        self.statusword = 0;
+        self.publish();
+    }
+
+    fn on_frame(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.settle(now);
+        self.device.on_frame(frame, now, out);
+        self.after_device();
+    }
+
+    fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
+        self.settle(now);
+        if self.device.next_deadline().is_some_and(|d| d <= now) {
+            self.device.on_tick(now, out);
+        }
+        self.after_device();
+        if self.device.next_deadline().is_some_and(|d| d <= now) {
+            self.device.on_tick(now, out);
+        }
+    }
+
+    fn next_deadline(&self) -> Option<Instant> {
+        [self.device.next_deadline(), self.drive_deadline()]
+            .into_iter()
+            .flatten()
+            .min()
+    }
+
+    fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
+        self.device.on_sent(frame, now, out);
+    }
+
+    fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
+        self.settle(now);
+        self.device.on_controller_event(event, now, out);
+        self.after_device();
+    }
+
+    fn accepts(&self, id: Id) -> bool {
+        self.device.accepts(id)
+    }
+
+    fn acceptance_version(&self) -> Option<u64> {
+        self.device.acceptance_version()
+    }
+}
