@@ -33,9 +33,9 @@
 //!   active the error register has bit 4 set (manual 1001H: communication error).
 //! * **No EMCY before boot-up** (CiA 301 §7.3.2.2.1: EMCY is a service of PRE-OPERATIONAL
 //!   and OPERATIONAL, entered with the boot-up message). The errors raised again by a
-//!   power-up or reset communication are queued behind the boot-up message and handed to
-//!   the controller only once it was sent: queued together, the EMCY's lower identifier
-//!   would win arbitration and reach the bus first.
+//!   power-up or reset communication wait in the CiA 301 device until the boot-up message
+//!   was sent: queued together, the EMCY's lower identifier would win arbitration and
+//!   reach the bus first.
 //! * **RPDO length.** A received RPDO longer or shorter than its mapping is not processed
 //!   and raises 0x8210 (manual, EMCY table: PDO_LENGTH); 0x8220 is not used.
 //! * **Queues.** The firmware's receive queue (capacity and service time in
@@ -90,10 +90,6 @@ use cantwin_canopen::pdo::PdoEvent;
 use cantwin_cia401::inputs::{self, AnalogTriggers};
 use cantwin_cia401::{objects as cia401, outputs};
 use std::sync::Arc;
-
-/// The most EMCYs held behind an unsent boot-up message: more than the coupler can have
-/// active at once (one per module error and coupler error).
-const MAX_HELD_EMCYS: usize = 64;
 
 /// How the coupler is set up.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -289,9 +285,6 @@ pub struct Tm3Coupler {
     rx_level: u64,
     rx_last: Instant,
     now: Instant,
-    /// The EMCYs raised since the last boot-up message, while that message is not sent
-    /// yet (`Some`); `None` once it was.
-    held: Option<Vec<Frame>>,
     /// The CiA 301 layer's events, passed on to [`Tm3Coupler::poll_event`].
     events: std::collections::VecDeque<Event>,
 }
@@ -317,10 +310,6 @@ fn device_config(node_id: u8) -> DeviceConfig {
 
 /// Whether `f` is the boot-up message on `id` (CiA 301 §7.2.8.3.3: one byte, 0; a node
 /// guarding answer on the same identifier never carries 0).
-fn is_boot_up(f: &Frame, id: u32) -> bool {
-    !f.is_extended() && !f.is_remote() && f.id().as_raw() == id && f.data_bytes() == [0]
-}
-
 /// The CiA 301 device of a coupler at `node_id`.
 fn coupler_device(
     desc: Arc<OdDescription>,
@@ -381,7 +370,6 @@ impl Tm3Coupler {
             rx_level: 0,
             rx_last: Instant::ZERO,
             now: Instant::ZERO,
-            held: None,
             events: std::collections::VecDeque::new(),
             config,
         })
@@ -769,51 +757,6 @@ impl Tm3Coupler {
 
     /// Runs `f` on the coupler and then everything that follows a call into the device.
     fn run(&mut self, now: Instant, out: &mut Outbox, f: impl FnOnce(&mut Self, &mut Outbox)) {
-        let before = out.len();
-        self.run_inner(now, out, f);
-        self.hold_emcys(before, out);
-    }
-
-    /// Takes the EMCYs queued from `from` on out of `out` while the boot-up message is not
-    /// sent yet (a boot-up message among the new frames starts the wait). See the module
-    /// documentation, "No EMCY before boot-up".
-    fn hold_emcys(&mut self, from: usize, out: &mut Outbox) {
-        let boot_up = 0x700 + u32::from(self.device.node_id());
-        let is_boot_up = |f: &Frame| is_boot_up(f, boot_up);
-        let new = out.frames().get(from..).unwrap_or_default();
-        if self.held.is_none() && !new.iter().any(is_boot_up) {
-            return;
-        }
-        let emcy = self.device.od().get_unsigned(0x1014, 0).unwrap_or(0) as u32 & 0x7FF;
-        let frames: Vec<Frame> = out.drain().collect();
-        for (i, f) in frames.into_iter().enumerate() {
-            if i < from {
-                out.push(f);
-            } else if is_boot_up(&f) {
-                // A new boot-up: the errors held for an earlier one were raised again by
-                // the reset that sent it.
-                self.held = Some(Vec::new());
-                out.push(f);
-            } else if !f.is_extended()
-                && f.id().as_raw() == emcy
-                && let Some(held) = &mut self.held
-            {
-                // Bounded by the active errors: each is raised once per reset.
-                if held.len() < MAX_HELD_EMCYS {
-                    held.push(f);
-                }
-            } else {
-                out.push(f);
-            }
-        }
-    }
-
-    fn run_inner(
-        &mut self,
-        now: Instant,
-        out: &mut Outbox,
-        f: impl FnOnce(&mut Self, &mut Outbox),
-    ) {
         self.now = now;
         let timed_out = self.device.emcy_active(diag::RPDO_TIMEOUT);
         f(self, out);
@@ -994,16 +937,6 @@ impl Node for Tm3Coupler {
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
-        let boot_up = 0x700 + u32::from(self.device.node_id());
-        if is_boot_up(frame, boot_up)
-            && let Some(held) = self.held.take()
-            && matches!(self.state(), State::PreOperational | State::Operational)
-        {
-            // The boot-up message is on the bus: the EMCYs behind it may follow.
-            for f in held {
-                out.push(f);
-            }
-        }
         self.run(now, out, |c, o| {
             c.device.on_sent(frame, now, o);
             c.clear(diag::TX_QUEUE_OVERRUN);
