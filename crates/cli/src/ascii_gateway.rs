@@ -31,8 +31,9 @@ pub const MAX_CLIENTS: usize = 4;
 pub struct GatewayArgs {
     #[command(flatten)]
     target: Target,
-    /// Speak the CiA 309-3 ASCII protocol (the only one offered).
-    #[arg(long, required = true)]
+    /// Speak the CiA 309-3 ASCII protocol: the default and the only one offered, so the
+    /// option changes nothing (kept for the command lines that give it).
+    #[arg(long)]
     ascii: bool,
     /// Serve TCP clients on [ADDR:]PORT (ADDR defaults to 127.0.0.1; port 0 picks one)
     /// instead of reading stdin.
@@ -331,9 +332,8 @@ fn listen_addr(spec: &str) -> String {
 
 /// Runs `cantwin gateway`.
 pub fn run(args: &GatewayArgs) -> Result<()> {
-    if !args.ascii {
-        bail!("give --ascii: the CiA 309-3 ASCII protocol is the only one offered");
-    }
+    // CiA 309-3 ASCII is the only protocol: `--ascii` is accepted and changes nothing.
+    let _ = args.ascii;
     if args.sdo_timeout == 0 {
         bail!("--sdo-timeout must be greater than 0");
     }

@@ -103,6 +103,26 @@ impl Net {
 
     /// Print the frames since the last call, decoded, at most `limit` of them.
     pub(crate) fn frames(&mut self, limit: usize) -> Result<()> {
+        self.frames_with(limit, |_| None)
+    }
+
+    /// Print the frames since the last call, decoded, at most `limit` of them, and the
+    /// master's events `line` has a line for, all in bus time order (an event right after
+    /// the frame that caused it); the other events stay for the next `events()`.
+    pub(crate) fn frames_with(
+        &mut self,
+        limit: usize,
+        mut line: impl FnMut(&MasterEvent) -> Option<String>,
+    ) -> Result<()> {
+        let mut printed: Vec<(Instant, u8, String)> = Vec::new();
+        let mut kept = Vec::new();
+        for (at, ev) in self.events()? {
+            match line(&ev) {
+                Some(text) => printed.push((at, 1, format!("  {:>12}  {text}", at.to_string()))),
+                None => kept.push((at, ev)),
+            }
+        }
+        self.pending = kept;
         let bus = self.sim.bus(self.bus).context("bus")?;
         let rec = bus.tap::<Recorder>(self.tap).context("recorder")?;
         let new: Vec<_> = rec.events[self.shown..]
@@ -115,12 +135,18 @@ impl Net {
         self.shown = rec.events.len();
         let none = PdoDecoder::new();
         for f in new.iter().take(limit) {
-            println!(
+            let text = format!(
                 "  {:>12}  {:<22} {}",
                 f.end.to_string(),
                 f.frame.to_string(),
                 describe(&f.frame, &none)
             );
+            printed.push((f.end, 0, text));
+        }
+        // Stable: frames keep their bus order, an event follows the frame of its instant.
+        printed.sort_by_key(|(at, kind, _)| (*at, *kind));
+        for (_, _, text) in printed {
+            println!("{text}");
         }
         if new.len() > limit {
             println!("  {:>12}  … {} more frames", "", new.len() - limit);
@@ -230,18 +256,15 @@ pub fn run() -> Result<()> {
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     let t = net.sim.now() + Duration::from_millis(2);
     net.sim.run_until(t);
-    net.frames(3)?;
-    for (at, ev) in net.events()? {
-        if let MasterEvent::Emcy { node, emcy } = ev {
-            println!(
-                "  {:>12}  EMCY from node {node}: 0x{:04X} {} (error register 0x{:02X})",
-                at.to_string(),
-                emcy.code,
-                emcy_meaning(emcy.code),
-                emcy.register
-            );
-        }
-    }
+    net.frames_with(3, |ev| match ev {
+        MasterEvent::Emcy { node, emcy } => Some(format!(
+            "EMCY from node {node}: 0x{:04X} {} (error register 0x{:02X})",
+            emcy.code,
+            emcy_meaning(emcy.code),
+            emcy.register
+        )),
+        _ => None,
+    })?;
 
     println!("\nBlock upload of the 64 KiB DOMAIN 0x2000:");
     let start = net.sim.now();

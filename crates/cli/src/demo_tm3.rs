@@ -42,24 +42,23 @@ fn set_signal(
         .map_err(|e| anyhow::anyhow!("{e}"))
 }
 
-fn emcys(net: &mut Net) -> Result<()> {
-    for (at, ev) in net.events()? {
-        if let MasterEvent::Emcy { node, emcy } = ev {
-            println!(
-                "  {:>12}  EMCY from node {node}: 0x{:04X} {} (register 0x{:02X}, manufacturer bytes {})",
-                at.to_string(),
-                emcy.code,
-                emcy_meaning(emcy.code),
-                emcy.register,
-                emcy.manufacturer
-                    .iter()
-                    .map(|b| format!("{b:02X}"))
-                    .collect::<Vec<_>>()
-                    .join(" ")
-            );
-        }
-    }
-    Ok(())
+/// The frames since the last call (at most `limit`) and the EMCYs the master received, in
+/// bus time order.
+fn frames_and_emcys(net: &mut Net, limit: usize) -> Result<()> {
+    net.frames_with(limit, |ev| match ev {
+        MasterEvent::Emcy { node, emcy } => Some(format!(
+            "EMCY from node {node}: 0x{:04X} {} (register 0x{:02X}, manufacturer bytes {})",
+            emcy.code,
+            emcy_meaning(emcy.code),
+            emcy.register,
+            emcy.manufacturer
+                .iter()
+                .map(|b| format!("{b:02X}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        )),
+        _ => None,
+    })
 }
 
 pub fn run() -> Result<()> {
@@ -80,8 +79,7 @@ pub fn run() -> Result<()> {
     println!("\nNMT start: the coupler sends its event-driven TPDOs with the inputs once:");
     net.master(|m, _, out| m.nmt(NmtCs::Start, 3, out))??;
     net.sim.run_until(ms(20));
-    net.frames(8)?;
-    emcys(&mut net)?;
+    frames_and_emcys(&mut net, 8)?;
     println!(
         "  {:>12}  (0x0080 is the manual's \"analog interrupts disabled\": 0x6423 is FALSE)",
         ""
@@ -116,8 +114,7 @@ pub fn run() -> Result<()> {
     println!("\nModule 5 (TM3AQ2) is pulled out at runtime: EMCY, and 0x1002 shows it:");
     set_signal(&mut net, island, "module.5", SignalValue::from("pulled"))?;
     net.sim.run_until(ms(50));
-    net.frames(3)?;
-    emcys(&mut net)?;
+    frames_and_emcys(&mut net, 3)?;
     net.master(|m, now, out| m.upload(3, Mux::new(0x1002, 0), Mode::Expedited, now, out))??;
     match net.sdo(Duration::from_secs(1))? {
         Ok(data) if data.len() == 4 => {

@@ -85,7 +85,8 @@ fn cia309_3_gateway_on_stdin_reads_writes_aborts_and_sends_nmt() {
 fn cia309_3_gateway_serves_tcp_clients() {
     let (mut sim, addr) = sim_with_socketcand(&scenario_file("cia301-device.toml"), "300");
     let mut gw = Command::new(env!("CARGO_BIN_EXE_cantwin"))
-        .args(["gateway", "--ascii", "--listen", "0", "--socketcand", &addr])
+        // CiA 309-3 ASCII is the default protocol: no --ascii needed.
+        .args(["gateway", "--listen", "0", "--socketcand", &addr])
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()
