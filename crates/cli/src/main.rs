@@ -15,6 +15,7 @@ mod demo_devicenet;
 mod demo_opendrive;
 mod demo_tm3;
 mod dnet;
+mod drive;
 mod dump;
 mod eds;
 mod fuzz;
@@ -102,6 +103,16 @@ enum Command {
                             cantwin sdo --socketcand 127.0.0.1:29536 --mode block read 5 0x2000 0 --output domain.bin"
     )]
     Sdo(canopen::SdoArgs),
+    /// CiA 402 drives: power state, mode of operation, profile position and velocity moves,
+    /// homing.
+    #[command(
+        after_help = "Examples:\n  cantwin drive --socketcand 127.0.0.1:29536 state 2 enable\n  \
+                            cantwin drive --socketcand 127.0.0.1:29536 mode 2 pp\n  \
+                            cantwin drive --socketcand 127.0.0.1:29536 move pp 2 100000\n  \
+                            cantwin drive --socketcand 127.0.0.1:29536 home 2 35\n  \
+                            cantwin drive --scenario scenarios/adv200-ds402.toml state 2 enable"
+    )]
+    Drive(drive::DriveArgs),
     /// Send an NMT command to one node or all: start, stop, preop, reset, reset-comm.
     #[command(
         after_help = "Examples:\n  cantwin nmt --socketcand 127.0.0.1:29536 start 5\n  cantwin nmt --socketcand 127.0.0.1:29536 reset-comm all"
@@ -189,6 +200,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Cal(args) => cal::run(&args),
         Command::Dnet(args) => dnet::run(&args),
         Command::Sdo(args) => canopen::run_sdo(&args),
+        Command::Drive(args) => drive::run(&args),
         Command::Nmt(args) => canopen::run_nmt(&args),
         Command::Scan(args) => canopen::run_scan(&args),
         Command::Trace(args) => canopen::run_trace(&args),
