@@ -7,6 +7,7 @@ mod cal;
 mod canopen;
 mod capture_tap;
 mod check;
+mod conform;
 mod connect;
 mod demo;
 mod demo_adv200;
@@ -186,6 +187,14 @@ enum Command {
         after_long_help = replay::LONG_HELP
     )]
     Replay(replay::Args),
+    /// Run the CiA 301/306 conformance cases against one device: EDS, SDO, OD, PDO,
+    /// SYNC/EMCY/TIME, error control, NMT, store/restore; JUnit, JSON and HTML reports.
+    #[command(
+        after_help = "Examples:\n  cantwin conform --scenario scenarios/cia301-device.toml --node-id 5 --eds node5.eds --junit conform.xml\n  \
+                            cantwin conform --socketcand 127.0.0.1:29536 --node-id 5 --eds device.eds --profile device.profile.toml --html conform.html\n  \
+                            cantwin conform --list"
+    )]
+    Conform(conform::Args),
 }
 
 fn run(cli: Cli) -> Result<()> {
@@ -210,6 +219,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(args) => report::run(&args),
         Command::Scenario(args) => scenario_cmd::run(&args),
         Command::Replay(args) => replay::run(&args),
+        Command::Conform(args) => conform::run(&args),
     }
 }
 

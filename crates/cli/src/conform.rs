@@ -1,0 +1,206 @@
+//! `cantwin conform`: the CiA 301/306 conformance cases of `cantwin-conform` against one
+//! device, over a socketcand connection or a scenario run in virtual time.
+
+use std::net::ToSocketAddrs;
+use std::path::{Path, PathBuf};
+use std::time::Duration as WallDuration;
+
+use anyhow::{Context, Result, bail};
+use cantwin_can::Duration;
+use cantwin_conform::{
+    Area, Options, PortTransport, Profile, ProfileFile, Report, Transport, VirtualBus,
+};
+use cantwin_gateway::BusConnector as _;
+use cantwin_gateway::socketcand::Remote;
+use cantwin_scenario::{BuildEnv, Registry, Scenario};
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The device's node-ID (1–127).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=127))]
+    node_id: u8,
+    /// The device's EDS or DCF.
+    #[arg(long, value_name = "FILE")]
+    eds: PathBuf,
+    /// A device profile (TOML): optional features the EDS cannot express and the
+    /// deviations the device's manual prescribes (`cantwin eds export` writes one beside a
+    /// twin's EDS).
+    #[arg(long, value_name = "FILE")]
+    profile: Option<PathBuf>,
+    /// A socketcand server in front of the device, HOST:PORT.
+    #[arg(long, value_name = "HOST:PORT", conflicts_with = "scenario")]
+    socketcand: Option<String>,
+    /// Run this scenario in-process in virtual time and test its device.
+    #[arg(long, value_name = "FILE")]
+    scenario: Option<PathBuf>,
+    /// The bus (socketcand channel): default the scenario's only bus, or can0.
+    #[arg(long, value_name = "NAME")]
+    bus: Option<String>,
+    /// Run only this area (repeatable): eds, sdo, od, pdo, sync-emcy-time,
+    /// error-control, nmt, store-restore.
+    #[arg(long, value_name = "AREA")]
+    only: Vec<String>,
+    /// Skip this case (repeatable), e.g. sdo.abort-timeout.
+    #[arg(long, value_name = "CASE")]
+    skip: Vec<String>,
+    /// Write JUnit XML here.
+    #[arg(long, value_name = "FILE")]
+    junit: Option<PathBuf>,
+    /// Write the report as JSON here.
+    #[arg(long = "json-report", value_name = "FILE")]
+    json_report: Option<PathBuf>,
+    /// Write an HTML page here: every case with its clause and its frames.
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
+    /// How long the device has to answer an SDO request, in ms.
+    #[arg(long, default_value_t = 1000)]
+    sdo_timeout_ms: u64,
+    /// Timing cases accept periods within this many percent of the nominal one.
+    #[arg(long, default_value_t = 10.0)]
+    tolerance_percent: f64,
+    /// List the cases with their clauses and exit.
+    #[arg(long)]
+    list: bool,
+}
+
+fn write(path: &Path, text: &str) -> Result<()> {
+    // Written whole to a temporary file and renamed: a reader never sees half a report.
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+}
+
+fn options(args: &Args) -> Result<Options> {
+    let mut only = Vec::new();
+    for a in &args.only {
+        let area = Area::from_name(a).with_context(|| {
+            let names: Vec<&str> = Area::ALL.iter().map(|a| a.name()).collect();
+            format!("--only {a:?}: no such area ({})", names.join(", "))
+        })?;
+        only.push(area);
+    }
+    let ids: Vec<&str> = cantwin_conform::catalogue().iter().map(|c| c.id).collect();
+    for s in &args.skip {
+        if !ids.contains(&s.as_str()) {
+            bail!("--skip {s:?}: no such case (cantwin conform --list shows them)");
+        }
+    }
+    if !(0.0..=100.0).contains(&args.tolerance_percent) {
+        bail!("--tolerance-percent must be between 0 and 100");
+    }
+    Ok(Options {
+        only,
+        skip: args.skip.clone(),
+        sdo_timeout: Duration::from_millis(args.sdo_timeout_ms.max(1)),
+        tolerance: args.tolerance_percent / 100.0,
+        ..Options::default()
+    })
+}
+
+fn transport(args: &Args) -> Result<Box<dyn Transport>> {
+    match (&args.socketcand, &args.scenario) {
+        (Some(spec), _) => {
+            let addr = spec
+                .to_socket_addrs()
+                .with_context(|| format!("--socketcand {spec:?}: expected HOST:PORT"))?
+                .next()
+                .with_context(|| format!("--socketcand {spec:?}: resolves to no address"))?;
+            let bus = args.bus.clone().unwrap_or_else(|| "can0".into());
+            let remote = Remote {
+                addr,
+                timeout: WallDuration::from_secs(5),
+            };
+            let port = remote
+                .open(&bus, 16_384)
+                .with_context(|| format!("opening bus {bus:?} on the socketcand server {addr}"))?;
+            Ok(Box::new(PortTransport::new(
+                port,
+                format!("socketcand {addr} {bus}"),
+            )))
+        }
+        (None, Some(file)) => {
+            let scenario = Scenario::load(file)?;
+            let built = scenario.build(&Registry::builtin(), &BuildEnv::default())?;
+            let bus = match &args.bus {
+                Some(b) => b.clone(),
+                None if built.buses.len() == 1 => built.buses[0].0.clone(),
+                None => bail!(
+                    "{} has several buses: choose one with --bus NAME",
+                    file.display()
+                ),
+            };
+            let id = built
+                .bus(&bus)
+                .with_context(|| format!("{} has no bus {bus:?}", file.display()))?;
+            let vb = VirtualBus::new(built.sim, id).context("attaching to the bus")?;
+            Ok(Box::new(vb))
+        }
+        (None, None) => bail!("say where the device is: --socketcand HOST:PORT or --scenario FILE"),
+    }
+}
+
+pub fn run(args: &Args) -> Result<()> {
+    if args.list {
+        for c in cantwin_conform::catalogue() {
+            let sev = match c.severity {
+                cantwin_conform::Severity::Mandatory => "",
+                cantwin_conform::Severity::Advisory => " (advisory)",
+            };
+            println!("{:<44} {} — {}{sev}", c.id, c.clause, c.title);
+        }
+        return Ok(());
+    }
+    let options = options(args)?;
+    let bytes =
+        std::fs::read(&args.eds).with_context(|| format!("reading {}", args.eds.display()))?;
+    let eds = cantwin_eds::load_bytes(&bytes).eds;
+    let mut profile = Profile::from_eds(&eds);
+    if let Some(path) = &args.profile {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let file = ProfileFile::parse(&text).with_context(|| format!("{}", path.display()))?;
+        profile = profile.with_file(&file, &path.display().to_string());
+    }
+    let mut transport = transport(args)?;
+    let total = cantwin_conform::catalogue()
+        .iter()
+        .filter(|c| options.only.is_empty() || options.only.contains(&c.area))
+        .count();
+    let pb = crate::output::steps(total as u64, "conform");
+    let report: Report = cantwin_conform::run(
+        transport.as_mut(),
+        args.node_id,
+        &eds,
+        &profile,
+        &options,
+        &mut |p| {
+            pb.set_position(p.done as u64);
+            pb.set_message(p.case.id.clone());
+        },
+    );
+    pb.finish_and_clear();
+    if let Some(path) = &args.junit {
+        write(path, &cantwin_conform::output::junit(&report))?;
+    }
+    if let Some(path) = &args.json_report {
+        write(path, &cantwin_conform::output::json(&report))?;
+    }
+    if let Some(path) = &args.html {
+        write(path, &cantwin_conform::output::html(&report))?;
+    }
+    if crate::output::json() {
+        println!("{}", cantwin_conform::output::json(&report));
+    } else {
+        print!("{}", cantwin_conform::output::summary(&report));
+    }
+    if let Some(why) = &report.stopped {
+        bail!("the run stopped: {why}");
+    }
+    if !report.passed() {
+        bail!(
+            "{} mandatory cases failed",
+            report.mandatory_failures().count()
+        );
+    }
+    Ok(())
+}
