@@ -23,8 +23,16 @@ use axum::http::{HeaderMap, Method, StatusCode, Uri, header};
 /// The header that carries the run's token.
 pub const TOKEN_HEADER: &str = "x-cantwin-token";
 
-/// The page's script and style carry no secret and are needed before the token is known.
-const PUBLIC_PATHS: [&str; 2] = ["/app.js", "/app.css"];
+/// The page's script and style and the charting library carry no secret and are needed
+/// before the token is known.
+const PUBLIC_PATHS: [&str; 6] = [
+    "/app.js",
+    "/charts.js",
+    "/app.css",
+    "/vendor/uplot.js",
+    "/vendor/uplot.css",
+    "/vendor/uplot-license.txt",
+];
 
 /// What the dashboard accepts.
 #[derive(Debug)]

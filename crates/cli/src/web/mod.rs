@@ -3,12 +3,13 @@
 //! The simulation runs paced to the wall clock on its own thread; the web server runs on
 //! another thread with its own runtime. They meet only through channels: requests go in
 //! through an unbounded queue the sim loop drains without waiting, and the sim loop publishes
-//! each snapshot (JSON with the charts already drawn as SVG) into a watch channel that keeps
-//! only the newest. Neither side ever waits for the other.
+//! each snapshot (JSON) into a watch channel that keeps only the newest. Neither side ever
+//! waits for the other.
 //!
 //! What the page shows is the monitor's dashboard model ([`cantwin_monitor::dashboard`]):
-//! this module reads the simulation for it, encodes its snapshots as JSON with the charts
-//! drawn as SVG, and carries out the page's commands.
+//! this module reads the simulation for it, encodes its snapshots as JSON, and carries out the
+//! page's commands. The page draws the charts itself (with the vendored uPlot) from the
+//! snapshots' signal samples, after reading the window so far from `/api/history`.
 //!
 //! The dashboard owns one port per bus: a CANopen master ([`Master`]) from which NMT commands
 //! and SDO downloads go out on the wire, and from which the fault vocabulary's `send` action
@@ -19,7 +20,6 @@
 mod guard;
 mod listen;
 mod server;
-mod svg;
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -32,11 +32,13 @@ use cantwin_bus::{BusId, PortConfig, PortId, SimHandle, Simulation, TapId};
 use cantwin_can::{ErrorState, Frame};
 use cantwin_canopen::master::sdo_client::{Mode, SdoEvent};
 use cantwin_canopen::master::{Master, MasterEvent, TransferId};
+use cantwin_canopen::od::{DataType, ObjectCode, OdDescription, Value as OdValue};
 use cantwin_canopen::sdo::wire::Mux;
 use cantwin_canopen::wire::NmtCs;
 use cantwin_monitor::Led;
 use cantwin_monitor::dashboard::{
-    self, BusSample, DashboardTap, Device, DeviceSample, Model, RowKind, Sample, Snapshot, WINDOW_S,
+    self, BusSample, DashboardTap, Device, DeviceSample, Model, RowKind, Sample, SignalSource,
+    Snapshot,
 };
 use cantwin_scenario::script::{ActionKind, apply_action, parse_action};
 use cantwin_scenario::{BuiltDevice, Role, Scenario};
@@ -102,17 +104,31 @@ pub enum Command {
         /// The value.
         value: f64,
     },
-    /// An SDO download of `data` to `index`/`sub` of a device.
-    Sdo {
+    /// An SDO download of `data` to `index`/`sub` of a device (CiA 301 §7.2.4.3.3).
+    SdoDownload {
         /// The device.
         device: String,
         /// The object.
         index: u16,
         /// The sub-index.
         sub: u8,
-        /// Little-endian bytes.
-        data: Vec<u8>,
+        /// What to write.
+        data: SdoData,
     },
+    /// An SDO upload of `index`/`sub` of a device (CiA 301 §7.2.4.3.6), shown as `ty`, else
+    /// as the type the device's dictionary gives the object, else as hex bytes.
+    SdoUpload {
+        /// The device.
+        device: String,
+        /// The object.
+        index: u16,
+        /// The sub-index.
+        sub: u8,
+        /// The type to read the bytes as.
+        ty: Option<DataType>,
+    },
+    /// Every chart signal's samples over the window, as JSON.
+    History,
     /// Power a device off and on again.
     PowerCycle {
         /// The device.
@@ -120,6 +136,20 @@ pub enum Command {
     },
     /// An action in the vocabulary of the scenarios' `[[at]]` tables (faults and repairs).
     Fault(toml::Table),
+}
+
+/// What an SDO download writes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SdoData {
+    /// A value already encoded, as type `ty` (`None`: raw bytes).
+    Encoded {
+        /// The type it was encoded as.
+        ty: Option<DataType>,
+        /// Little-endian bytes.
+        bytes: Vec<u8>,
+    },
+    /// A value as text, to encode as the type the device's dictionary gives the object.
+    Text(String),
 }
 
 /// How a command ended: `Ok` with a message for the page, or `Err`.
@@ -146,7 +176,12 @@ pub struct Request {
 struct PendingSdo {
     bus: BusId,
     id: TransferId,
+    /// The device, node and object, for the answer.
     what: String,
+    /// For an upload, the type its bytes are read as (`None`: hex bytes).
+    upload: Option<Option<DataType>>,
+    /// For a download, the value written as the page should read it.
+    written: String,
     reply: tokio::sync::oneshot::Sender<Outcome>,
 }
 
@@ -312,12 +347,25 @@ impl Dashboard {
             } => self.set_input(handle, &device, &input, value),
             Command::PowerCycle { device } => self.power_cycle(handle, &device),
             Command::Fault(table) => self.fault(handle, table),
-            Command::Sdo {
+            Command::History => Ok(self.history_json().to_string()),
+            Command::SdoDownload {
                 device,
                 index,
                 sub,
                 data,
-            } => match self.sdo(handle, &device, index, sub, data) {
+            } => match self.sdo(handle, &device, Mux::new(index, sub), Some(data), None) {
+                Ok(p) => {
+                    self.pending.push(PendingSdo { reply, ..p });
+                    return;
+                }
+                Err(e) => Err(e),
+            },
+            Command::SdoUpload {
+                device,
+                index,
+                sub,
+                ty,
+            } => match self.sdo(handle, &device, Mux::new(index, sub), None, ty) {
                 Ok(p) => {
                     self.pending.push(PendingSdo { reply, ..p });
                     return;
@@ -419,15 +467,18 @@ impl Dashboard {
         Ok(format!("{what}: applied ({})", describe_action(&action)))
     }
 
+    /// Starts an SDO download of `data` (or, without it, an upload read as `ty`) of `mux`
+    /// of `device`, through the dashboard's master on the device's bus.
     fn sdo(
         &mut self,
         handle: &SimHandle,
         device: &str,
-        index: u16,
-        sub: u8,
-        data: Vec<u8>,
+        mux: Mux,
+        data: Option<SdoData>,
+        ty: Option<DataType>,
     ) -> Result<PendingSdo, Refusal> {
-        let d = &self.model.devices()[self.device(device)?];
+        let k = self.device(device)?;
+        let d = &self.model.devices()[k];
         let node = d.node_id.ok_or_else(|| {
             Refusal::BadRequest(format!(
                 "{device} has sent no boot-up or heartbeat message: its CANopen node-ID is unknown"
@@ -437,12 +488,49 @@ impl Dashboard {
             .masters
             .get(&d.bus_name)
             .ok_or_else(|| Refusal::Failed(format!("no dashboard port on bus {}", d.bus_name)))?;
-        let bytes = hex(&data);
+        // The object's name and type, as the device's dictionary (its EDS) gives them.
+        let twin_port = self.devices[k].port;
+        let entry = handle
+            .with(|sim| {
+                sim.twin(twin_port)
+                    .and_then(|t| t.dictionary())
+                    .and_then(|od| object_entry(od.description(), mux))
+            })
+            .map_err(|e| Refusal::Failed(e.to_string()))?;
+        let name = entry
+            .as_ref()
+            .map(|(n, _)| format!(" \"{n}\""))
+            .unwrap_or_default();
+        let what = format!(
+            "{device} (node {node}) {:04X}sub{}{name}",
+            mux.index, mux.sub
+        );
+        let dictionary_type = entry.map(|(_, t)| t);
+        let (bytes, written, upload) = match data {
+            Some(SdoData::Encoded { ty, bytes }) => {
+                let shown = show_value(ty, &bytes);
+                (Some(bytes), shown, None)
+            }
+            Some(SdoData::Text(text)) => {
+                let ty = dictionary_type.ok_or_else(|| {
+                    Refusal::BadRequest(format!(
+                        "{device}'s dictionary has no {:04X}sub{}: give the value's type",
+                        mux.index, mux.sub
+                    ))
+                })?;
+                let v = OdValue::parse(ty, text.trim())
+                    .map_err(|e| Refusal::BadRequest(format!("{text:?} as {ty}: {e}")))?;
+                let bytes = v.to_le_bytes();
+                (Some(bytes), format!("{v}"), None)
+            }
+            None => (None, String::new(), Some(ty.or(dictionary_type))),
+        };
         let r = handle
             .with(|sim| {
                 let bus = sim.bus_mut(port.bus())?;
-                bus.with_node::<Master, _>(port, |m, now, out| {
-                    m.download(node, Mux::new(index, sub), data, Mode::Auto, now, out)
+                bus.with_node::<Master, _>(port, |m, now, out| match bytes {
+                    Some(b) => m.download(node, mux, b, Mode::Auto, now, out),
+                    None => m.upload(node, mux, Mode::Auto, now, out),
                 })
             })
             .map_err(|e| Refusal::Failed(e.to_string()))?;
@@ -455,12 +543,14 @@ impl Dashboard {
         Ok(PendingSdo {
             bus: port.bus(),
             id,
-            what: format!("{device} (node {node}) {index:04X}sub{sub} = {bytes}"),
+            what,
+            upload,
+            written,
             reply,
         })
     }
 
-    /// Answers the SDO downloads that completed or were aborted.
+    /// Answers the SDO transfers that completed or were aborted.
     fn sdo_results(&mut self, handle: &SimHandle) {
         if self.pending.is_empty() {
             return;
@@ -484,7 +574,7 @@ impl Dashboard {
                 continue;
             };
             let outcome = match event {
-                SdoEvent::Completed { .. } => Ok(()),
+                SdoEvent::Completed { data, .. } => Ok(data),
                 SdoEvent::Aborted {
                     code, by_server, ..
                 } => Err((code, by_server)),
@@ -492,10 +582,18 @@ impl Dashboard {
             };
             if let Some(i) = self.pending.iter().position(|p| p.bus == bus && p.id == id) {
                 let p = self.pending.swap_remove(i);
-                let msg = match outcome {
-                    Ok(()) => Ok(format!("SDO download {}: done", p.what)),
-                    Err((code, by_server)) => Err(Refusal::Failed(format!(
-                        "SDO download {}: aborted by the {} with {code}",
+                let service = if p.upload.is_some() {
+                    "upload"
+                } else {
+                    "download"
+                };
+                let msg = match (outcome, p.upload) {
+                    (Ok(data), Some(ty)) => {
+                        Ok(format!("SDO upload {} = {}", p.what, show_value(ty, &data)))
+                    }
+                    (Ok(_), None) => Ok(format!("SDO download {} = {}: done", p.what, p.written)),
+                    (Err((code, by_server)), _) => Err(Refusal::Failed(format!(
+                        "SDO {service} {}: aborted by the {} with {code}",
                         p.what,
                         if by_server { "device" } else { "dashboard" },
                     ))),
@@ -565,30 +663,30 @@ impl Dashboard {
         self.publish.send_replace(Arc::new(json.to_string()));
     }
 
-    /// The snapshot as the page reads it, with the charts drawn.
+    /// Every signal's samples over the window: `{"uptime_s": …, "series": {key: [[t, v], …]}}`
+    /// with `t` in seconds since the dashboard started.
+    fn history_json(&self) -> Value {
+        let series: serde_json::Map<String, Value> = self
+            .model
+            .history()
+            .into_iter()
+            .map(|(k, points)| {
+                let points: Vec<Value> = points
+                    .into_iter()
+                    .map(|(t, v)| json!([round3(t), round3(v)]))
+                    .collect();
+                (k.to_string(), Value::Array(points))
+            })
+            .collect();
+        json!({ "series": series })
+    }
+
+    /// The snapshot as the page reads it.
     fn encode(&self, snap: &Snapshot) -> Value {
         let bus_json: Vec<Value> = snap
             .buses
             .iter()
             .map(|b| {
-                let load_chart = svg::chart(
-                    &format!("{} bus load", b.name),
-                    "%",
-                    WINDOW_S,
-                    &[svg::Series {
-                        label: "load",
-                        points: &b.load_history,
-                    }],
-                );
-                let fps_chart = svg::chart(
-                    &format!("{} frames per second", b.name),
-                    "1/s",
-                    WINDOW_S,
-                    &[svg::Series {
-                        label: "frames/s",
-                        points: &b.fps_history,
-                    }],
-                );
                 json!({
                     "name": b.name,
                     "bit_rate": b.bit_rate.to_string(),
@@ -596,7 +694,6 @@ impl Dashboard {
                     "error_frames": b.error_frames,
                     "load": round2(b.load),
                     "fps": round2(b.fps),
-                    "charts": [load_chart, fps_chart],
                 })
             })
             .collect();
@@ -637,39 +734,43 @@ impl Dashboard {
             .devices
             .iter()
             .map(|p| {
-                let mut charts = Vec::new();
-                let mut vals = Vec::new();
-                for pv in &p.values {
-                    let v = &pv.value;
-                    let (min, max) = match v.role {
-                        Role::AnalogInput { min, max } => (Some(min), Some(max)),
-                        _ => (None, None),
-                    };
-                    vals.push(json!({
-                        "name": v.name,
-                        "value": round3(v.value),
-                        "unit": v.unit,
-                        "role": role_name(v.role),
-                        "min": min,
-                        "max": max,
-                    }));
-                    if let Some(points) = &pv.history {
-                        charts.push(svg::chart(
-                            &format!("{} {}", p.name, v.name),
-                            v.unit,
-                            WINDOW_S,
-                            &[svg::Series {
-                                label: &v.name,
-                                points,
-                            }],
-                        ));
-                    }
-                }
+                let vals: Vec<Value> = p
+                    .values
+                    .iter()
+                    .map(|v| {
+                        let (min, max) = match v.role {
+                            Role::AnalogInput { min, max } => (Some(min), Some(max)),
+                            _ => (None, None),
+                        };
+                        json!({
+                            "name": v.name,
+                            "value": round3(v.value),
+                            "unit": v.unit,
+                            "role": role_name(v.role),
+                            "min": min,
+                            "max": max,
+                        })
+                    })
+                    .collect();
+                json!({ "name": p.name, "kind": p.kind, "values": vals })
+            })
+            .collect();
+        let signals: Vec<Value> = snap
+            .signals
+            .iter()
+            .map(|s| {
                 json!({
-                    "name": p.name,
-                    "kind": p.kind,
-                    "values": vals,
-                    "charts": charts,
+                    "key": s.key,
+                    "label": s.label,
+                    "unit": s.unit,
+                    "group": s.group,
+                    "source": match s.source {
+                        SignalSource::Bus => "bus",
+                        SignalSource::Device => "device",
+                        SignalSource::Pdo => "pdo",
+                    },
+                    "non_negative": s.non_negative,
+                    "value": round3(s.value),
                 })
             })
             .collect();
@@ -678,6 +779,7 @@ impl Dashboard {
             .iter()
             .map(|r| {
                 json!({
+                    "seq": r.seq,
                     "t_ms": round3(r.at.as_nanos() as f64 / 1e6),
                     "bus": self.model.bus_name(r.bus).unwrap_or("?"),
                     "id": r.frame.as_ref().map(id_text).unwrap_or_default(),
@@ -692,6 +794,29 @@ impl Dashboard {
                 })
             })
             .collect();
+        let mut fixed = Vec::new();
+        let mut fixed_overflow = 0;
+        for (i, b) in snap.buses.iter().enumerate() {
+            let Some(trace) = self.model.fixed_trace(i) else {
+                continue;
+            };
+            fixed_overflow += trace.overflow();
+            for r in trace.rows() {
+                let f = &r.last.frame;
+                fixed.push(json!({
+                    "bus": b.name,
+                    "id": id_text(f),
+                    "count": r.count,
+                    "cycle_ms": r.cycle.last.map(ms),
+                    "min_ms": r.cycle.min.map(ms),
+                    "max_ms": r.cycle.max.map(ms),
+                    "age_ms": ms(r.age(snap.now)),
+                    "data": if f.is_remote() { format!("R{}", f.dlc()) } else { hex_spaced(f.data_bytes()) },
+                    "changed": r.changed,
+                    "text": r.last.text,
+                }));
+            }
+        }
         json!({
             "scenario": snap.scenario,
             "time_ms": round3(snap.now.as_nanos() as f64 / 1e6),
@@ -699,10 +824,67 @@ impl Dashboard {
             "buses": bus_json,
             "nodes": nodes,
             "devices": panels,
+            "signals": signals,
             "frames": stream,
+            "next_seq": snap.next_seq,
             "missed": snap.missed,
+            "missed_total": snap.missed_total,
+            "fixed": fixed,
+            "fixed_overflow": fixed_overflow,
         })
     }
+}
+
+/// The name and type of `mux` in dictionary `od`: a VAR's own name, a record's or array's
+/// name with its sub-object's (CiA 306 §4.6.3 ParameterName).
+fn object_entry(od: &OdDescription, mux: Mux) -> Option<(String, DataType)> {
+    let object = od.object(mux.index)?;
+    let (_, sub) = object.subs().find(|(s, _)| *s == mux.sub)?;
+    let name = if object.code() == ObjectCode::Var || sub.name == object.name() {
+        object.name().to_string()
+    } else {
+        format!("{}: {}", object.name(), sub.name)
+    };
+    Some((name, sub.data_type))
+}
+
+/// The most bytes an answer shows of an upload read as hex bytes.
+const SHOWN_BYTES: usize = 64;
+
+/// `bytes` read as `ty` (CiA 301 §7.1), with the bytes beside numbers; as hex bytes without a
+/// type or when they do not fit it.
+fn show_value(ty: Option<DataType>, bytes: &[u8]) -> String {
+    let raw = || {
+        let shown = hex_spaced(&bytes[..bytes.len().min(SHOWN_BYTES)]);
+        if bytes.len() > SHOWN_BYTES {
+            format!("{shown} … ({} bytes)", bytes.len())
+        } else if bytes.is_empty() {
+            "(0 bytes)".to_string()
+        } else {
+            shown
+        }
+    };
+    let Some(ty) = ty else { return raw() };
+    match OdValue::from_le_bytes(ty, bytes) {
+        Ok(OdValue::OctetString(_) | OdValue::Domain(_)) => format!("{} ({ty})", raw()),
+        Ok(v @ (OdValue::VisibleString(_) | OdValue::UnicodeString(_))) => {
+            let text: String = v.to_string().chars().take(SHOWN_BYTES).collect();
+            format!("{text:?} ({ty})")
+        }
+        Ok(v) if v.as_i128().is_some() => format!("{v} (0x{}, {ty})", hex_le(bytes)),
+        Ok(v) => format!("{v} ({ty})"),
+        Err(e) => format!("{} (not a {ty}: {e})", raw()),
+    }
+}
+
+/// Little-endian bytes as one hexadecimal number, most significant digit first.
+fn hex_le(b: &[u8]) -> String {
+    b.iter().rev().map(|b| format!("{b:02X}")).collect()
+}
+
+/// A bus time span in milliseconds, to the microsecond.
+fn ms(d: cantwin_can::Duration) -> f64 {
+    round3(d.as_nanos() as f64 / 1e6)
 }
 
 fn round2(v: f64) -> f64 {
@@ -711,10 +893,6 @@ fn round2(v: f64) -> f64 {
 
 fn round3(v: f64) -> f64 {
     (v * 1000.0).round() / 1000.0
-}
-
-fn hex(b: &[u8]) -> String {
-    b.iter().map(|b| format!("{b:02X}")).collect()
 }
 
 fn hex_spaced(b: &[u8]) -> String {
@@ -845,6 +1023,54 @@ mod tests {
     ) -> (&'static str, &'static str) {
         let l = cantwin_monitor::dashboard::leds(powered, seen, c);
         (led_name(l.run), led_name(l.err))
+    }
+
+    #[test]
+    fn cia301_sdo_answers_are_read_by_type_and_named_as_in_the_dictionary() {
+        use cantwin_canopen::od::{Access, OdBuilder, SubObject};
+        assert_eq!(
+            show_value(Some(DataType::Unsigned16), &[0xE8, 0x03]),
+            "1000 (0x03E8, UNSIGNED16)"
+        );
+        assert_eq!(
+            show_value(Some(DataType::Integer8), &[0xFF]),
+            "-1 (0xFF, INTEGER8)"
+        );
+        assert_eq!(
+            show_value(Some(DataType::VisibleString), b"ADV2"),
+            "\"ADV2\" (VISIBLE_STRING)"
+        );
+        assert_eq!(show_value(None, &[0xE8, 0x03]), "E8 03");
+        assert!(
+            show_value(Some(DataType::Unsigned16), &[0xE8]).starts_with("E8 (not a UNSIGNED16"),
+            "bytes that do not fit the type are shown as they came"
+        );
+        assert!(show_value(None, &[0; 100]).ends_with("… (100 bytes)"));
+        let od = OdBuilder::new()
+            .var(
+                0x1017,
+                SubObject::new("Producer heartbeat time", DataType::Unsigned16, Access::Rw),
+            )
+            .record(
+                0x1018,
+                "Identity object",
+                [(
+                    1,
+                    SubObject::new("Vendor-ID", DataType::Unsigned32, Access::Ro),
+                )],
+            )
+            .build()
+            .unwrap();
+        assert_eq!(
+            object_entry(&od, Mux::new(0x1018, 1)),
+            Some(("Identity object: Vendor-ID".into(), DataType::Unsigned32))
+        );
+        assert_eq!(
+            object_entry(&od, Mux::new(0x1017, 0)),
+            Some(("Producer heartbeat time".into(), DataType::Unsigned16))
+        );
+        assert_eq!(object_entry(&od, Mux::new(0x1017, 1)), None);
+        assert_eq!(object_entry(&od, Mux::new(0x1019, 0)), None);
     }
 
     #[test]

@@ -23,6 +23,7 @@ use axum::middleware::Next;
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
+use cantwin_canopen::od::{DataType, Value as OdValue};
 use cantwin_canopen::wire::NmtCs;
 use serde_json::{Value, json};
 use tokio::sync::Semaphore;
@@ -30,11 +31,16 @@ use tower_http::set_header::SetResponseHeaderLayer;
 
 use super::guard::{self, Policy};
 use super::listen::{self, Limits};
-use super::{Command, Options, Outcome, Refusal, Request};
+use super::{Command, Options, Outcome, Refusal, Request, SdoData};
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
 const APP_JS: &str = include_str!("assets/app.js");
+const CHARTS_JS: &str = include_str!("assets/charts.js");
 const APP_CSS: &str = include_str!("assets/app.css");
+/// The charting library, vendored unchanged (see `assets/vendor/README.md`).
+const UPLOT_JS: &str = include_str!("assets/vendor/uPlot.iife.min.js");
+const UPLOT_CSS: &str = include_str!("assets/vendor/uPlot.min.css");
+const UPLOT_LICENSE: &str = include_str!("assets/vendor/uPlot.LICENSE");
 
 /// Where the page's template takes the run's token.
 const TOKEN_SLOT: &str = "{{token}}";
@@ -44,8 +50,10 @@ const TOKEN_SLOT: &str = "{{token}}";
 const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The page's own script, style and connections only, no inline code, no framing
-/// (CSP Level 3; `frame-ancestors` is the CSP form of X-Frame-Options). The charts are inline
-/// SVG elements styled by the stylesheet, which `style-src 'self'` allows.
+/// (CSP Level 3; `frame-ancestors` is the CSP form of X-Frame-Options). The charts are drawn
+/// on canvases by the vendored library served from here, which places its elements through
+/// the CSS object model (never inline `style` attributes, which `style-src 'self'` refuses);
+/// a chart's CSV export is a `blob:` download, a navigation, which the policy leaves alone.
 const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
 /// The headers every answer carries (RFC 7034 X-Frame-Options, Fetch's nosniff, the
@@ -260,9 +268,26 @@ fn router(state: AppState, policy: Arc<Policy>) -> Router {
             get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
         )
         .route(
+            "/charts.js",
+            get(|| async { asset("text/javascript; charset=utf-8", CHARTS_JS) }),
+        )
+        .route(
             "/app.css",
             get(|| async { asset("text/css; charset=utf-8", APP_CSS) }),
         )
+        .route(
+            "/vendor/uplot.js",
+            get(|| async { asset("text/javascript; charset=utf-8", UPLOT_JS) }),
+        )
+        .route(
+            "/vendor/uplot.css",
+            get(|| async { asset("text/css; charset=utf-8", UPLOT_CSS) }),
+        )
+        .route(
+            "/vendor/uplot-license.txt",
+            get(|| async { asset("text/plain; charset=utf-8", UPLOT_LICENSE) }),
+        )
+        .route("/api/history", get(history))
         .route("/api/snapshot", get(snapshot))
         .route("/events", get(events))
         .route("/api/nmt", post(nmt))
@@ -320,6 +345,40 @@ fn answer(status: StatusCode, ok: bool, message: String) -> Response {
 
 fn bad(message: impl Into<String>) -> Response {
     answer(StatusCode::BAD_REQUEST, false, message.into())
+}
+
+/// Every chart signal's samples over the window, asked of the simulation (it keeps them).
+async fn history(State(s): State<AppState>) -> Response {
+    let (reply, outcome) = tokio::sync::oneshot::channel::<Outcome>();
+    if s.requests
+        .send(Request {
+            command: Command::History,
+            reply,
+        })
+        .is_err()
+    {
+        return answer(
+            StatusCode::SERVICE_UNAVAILABLE,
+            false,
+            "the simulation has stopped".into(),
+        );
+    }
+    match tokio::time::timeout(REPLY_TIMEOUT, outcome).await {
+        Ok(Ok(Ok(body))) => ([(header::CONTENT_TYPE, "application/json")], body).into_response(),
+        Ok(Ok(Err(_)) | Err(_)) => answer(
+            StatusCode::SERVICE_UNAVAILABLE,
+            false,
+            "the simulation has stopped".into(),
+        ),
+        Err(_) => answer(
+            StatusCode::GATEWAY_TIMEOUT,
+            false,
+            format!(
+                "no answer from the simulation within {} s",
+                REPLY_TIMEOUT.as_secs()
+            ),
+        ),
+    }
 }
 
 async fn snapshot(State(s): State<AppState>) -> Response {
@@ -468,19 +527,24 @@ async fn nmt(State(s): State<AppState>, request: axum::body::Body) -> Response {
     control(&s, request, nmt_command).await
 }
 
-fn nmt_command(m: &Body) -> Result<Command, String> {
-    let cs = match text(m, "command")? {
+/// The NMT command a word names: the words of `cantwin nmt` (start, stop, preop, reset,
+/// reset-comm), and the older words of this endpoint (reset-node), which keep working.
+fn nmt_cs(word: &str) -> Option<NmtCs> {
+    Some(match word {
         "start" => NmtCs::Start,
         "stop" => NmtCs::Stop,
         "preop" => NmtCs::EnterPreOperational,
-        "reset-node" => NmtCs::ResetNode,
+        "reset" | "reset-node" => NmtCs::ResetNode,
         "reset-comm" => NmtCs::ResetCommunication,
-        other => {
-            return Err(format!(
-                "unknown NMT command {other:?} (start, stop, preop, reset-node, reset-comm)"
-            ));
-        }
-    };
+        _ => return None,
+    })
+}
+
+fn nmt_command(m: &Body) -> Result<Command, String> {
+    let word = text(m, "command")?;
+    let cs = nmt_cs(word).ok_or_else(|| {
+        format!("unknown NMT command {word:?} (start, stop, preop, reset, reset-comm)")
+    })?;
     let device = match m.get("device") {
         None | Some(Value::Null) => None,
         Some(Value::String(d)) if d == "all" => None,
@@ -517,23 +581,36 @@ fn input_command(m: &Body) -> Result<Command, String> {
     })
 }
 
-/// The little-endian bytes of `value` as CiA 301 data type `ty` (§7.1.4), or hex bytes.
-fn encode_value(ty: &str, value: &str) -> Result<Vec<u8>, String> {
-    let int = |min: i64, max: i64| {
-        parse_int(value.trim())
-            .filter(|v| (min..=max).contains(v))
-            .ok_or_else(|| format!("{value:?} is not a {ty} ({min}..={max})"))
-    };
-    Ok(match ty {
-        "u8" => vec![int(0, 0xFF)? as u8],
-        "u16" => (int(0, 0xFFFF)? as u16).to_le_bytes().to_vec(),
-        "u32" => (int(0, 0xFFFF_FFFF)? as u32).to_le_bytes().to_vec(),
-        "i8" => (int(-0x80, 0x7F)? as i8).to_le_bytes().to_vec(),
-        "i16" => (int(-0x8000, 0x7FFF)? as i16).to_le_bytes().to_vec(),
-        "i32" => (int(-0x8000_0000, 0x7FFF_FFFF)? as i32)
-            .to_le_bytes()
-            .to_vec(),
-        "hex" => {
+/// The type a request names: a CiA 309-3 mnemonic (`u16`, `i32`, `vs`, `r32` …), `hex` for
+/// raw bytes (`None`), or `auto` for the type the device's dictionary gives the object.
+#[derive(Debug)]
+enum Ty {
+    Typed(DataType),
+    Hex,
+    Auto,
+}
+
+fn sdo_type(name: &str) -> Result<Ty, String> {
+    match name {
+        "hex" => Ok(Ty::Hex),
+        "auto" => Ok(Ty::Auto),
+        m => cantwin_cia309::data_type(m).map(Ty::Typed).ok_or_else(|| {
+            let all: Vec<&str> = cantwin_cia309::MNEMONICS.iter().map(|(m, _)| *m).collect();
+            format!(
+                "unknown type {m:?} (auto, hex, or a CiA 309-3 mnemonic: {})",
+                all.join(" ")
+            )
+        }),
+    }
+}
+
+/// The little-endian bytes of `value` as CiA 301 data type `ty` (§7.1), or hex bytes.
+fn encode_value(ty: Option<DataType>, value: &str) -> Result<Vec<u8>, String> {
+    match ty {
+        Some(ty) => OdValue::parse(ty, value.trim())
+            .map(|v| v.to_le_bytes())
+            .map_err(|e| format!("{value:?} is not a {ty}: {e}")),
+        None => {
             let digits: String = value.chars().filter(|c| !c.is_whitespace()).collect();
             if digits.is_empty() || digits.len() % 2 != 0 {
                 return Err(format!(
@@ -542,22 +619,23 @@ fn encode_value(ty: &str, value: &str) -> Result<Vec<u8>, String> {
             }
             (0..digits.len())
                 .step_by(2)
-                .map(|i| u8::from_str_radix(&digits[i..i + 2], 16))
-                .collect::<Result<Vec<u8>, _>>()
-                .map_err(|_| format!("{value:?} is not hex bytes"))?
+                .map(|i| {
+                    digits
+                        .get(i..i + 2)
+                        .and_then(|d| u8::from_str_radix(d, 16).ok())
+                })
+                .collect::<Option<Vec<u8>>>()
+                .ok_or_else(|| format!("{value:?} is not hex bytes"))
         }
-        other => {
-            return Err(format!(
-                "unknown type {other:?} (u8, u16, u32, i8, i16, i32, hex)"
-            ));
-        }
-    })
+    }
 }
 
 async fn sdo(State(s): State<AppState>, request: axum::body::Body) -> Response {
     control(&s, request, sdo_command).await
 }
 
+/// `{"device", "index", "sub", "op": "download" | "upload", "type", "value"}`; `op` is
+/// `download` when absent (`write` and `read`, the words of `cantwin sdo`, are taken too).
 fn sdo_command(m: &Body) -> Result<Command, String> {
     let device = text(m, "device")?.to_string();
     let index = integer(m, "index")?;
@@ -565,14 +643,50 @@ fn sdo_command(m: &Body) -> Result<Command, String> {
         u16::try_from(index).map_err(|_| format!("`index` is 0x0000–0xFFFF, not {index}"))?;
     let sub = integer(m, "sub")?;
     let sub = u8::try_from(sub).map_err(|_| format!("`sub` is 0–255, not {sub}"))?;
-    let ty = text(m, "type")?;
+    let ty = match m.get("type") {
+        None | Some(Value::Null) => Ty::Auto,
+        Some(_) => sdo_type(text(m, "type")?)?,
+    };
+    let upload = match m.get("op") {
+        None | Some(Value::Null) => false,
+        Some(_) => match text(m, "op")? {
+            "download" | "write" => false,
+            "upload" | "read" => true,
+            other => {
+                return Err(format!(
+                    "unknown SDO operation {other:?} (download, upload)"
+                ));
+            }
+        },
+    };
+    if upload {
+        return Ok(Command::SdoUpload {
+            device,
+            index,
+            sub,
+            ty: match ty {
+                Ty::Typed(t) => Some(t),
+                Ty::Hex | Ty::Auto => None,
+            },
+        });
+    }
     let value = match m.get("value") {
         Some(Value::String(v)) => v.clone(),
         Some(Value::Number(n)) => n.to_string(),
         _ => return Err("`value` is missing".into()),
     };
-    let data = encode_value(ty, &value)?;
-    Ok(Command::Sdo {
+    let data = match ty {
+        Ty::Typed(t) => SdoData::Encoded {
+            ty: Some(t),
+            bytes: encode_value(Some(t), &value)?,
+        },
+        Ty::Hex => SdoData::Encoded {
+            ty: None,
+            bytes: encode_value(None, &value)?,
+        },
+        Ty::Auto => SdoData::Text(value),
+    };
+    Ok(Command::SdoDownload {
         device,
         index,
         sub,
@@ -626,17 +740,80 @@ fn fault_command(m: &Body) -> Result<Command, String> {
 mod tests {
     use super::*;
 
+    fn typed(name: &str) -> Option<DataType> {
+        match sdo_type(name) {
+            Ok(Ty::Typed(t)) => Some(t),
+            _ => None,
+        }
+    }
+
     #[test]
     fn cia301_values_encode_little_endian_within_their_type() {
-        assert_eq!(encode_value("u16", "1000"), Ok(vec![0xE8, 0x03]));
-        assert_eq!(
-            encode_value("u32", "0x12345678"),
-            Ok(vec![0x78, 0x56, 0x34, 0x12])
+        let enc = |ty: &str, v: &str| encode_value(typed(ty), v);
+        assert_eq!(enc("u16", "1000"), Ok(vec![0xE8, 0x03]));
+        assert_eq!(enc("u32", "0x12345678"), Ok(vec![0x78, 0x56, 0x34, 0x12]));
+        assert_eq!(enc("i8", "-1"), Ok(vec![0xFF]));
+        assert_eq!(enc("vs", "Pump 3"), Ok(b"Pump 3".to_vec()));
+        assert_eq!(encode_value(None, "e8 03"), Ok(vec![0xE8, 0x03]));
+        assert!(enc("u8", "256").is_err());
+        assert!(encode_value(None, "e8 0").is_err());
+        assert!(
+            encode_value(None, "é8").is_err(),
+            "no panic on a multi-byte character"
         );
-        assert_eq!(encode_value("i8", "-1"), Ok(vec![0xFF]));
-        assert_eq!(encode_value("hex", "e8 03"), Ok(vec![0xE8, 0x03]));
-        assert!(encode_value("u8", "256").is_err());
-        assert!(encode_value("hex", "e8 0").is_err());
-        assert!(encode_value("f32", "1").is_err());
+        assert!(sdo_type("f32").unwrap_err().contains("vs"));
+    }
+
+    #[test]
+    fn nmt_takes_the_words_of_the_cli_and_the_older_ones() {
+        let cs = |w: &str| nmt_cs(w);
+        assert_eq!(cs("start"), Some(NmtCs::Start));
+        assert_eq!(cs("stop"), Some(NmtCs::Stop));
+        assert_eq!(cs("preop"), Some(NmtCs::EnterPreOperational));
+        assert_eq!(cs("reset"), Some(NmtCs::ResetNode));
+        assert_eq!(cs("reset-node"), Some(NmtCs::ResetNode));
+        assert_eq!(cs("reset-comm"), Some(NmtCs::ResetCommunication));
+        assert_eq!(cs("halt"), None);
+    }
+
+    #[test]
+    fn sdo_requests_name_an_upload_or_a_download_and_a_type() {
+        let body = |v: serde_json::Value| v.as_object().unwrap().clone();
+        let up = sdo_command(&body(json!({
+            "device": "node5", "index": "0x1008", "sub": 0, "op": "upload", "type": "vs"
+        })))
+        .unwrap();
+        assert!(
+            matches!(
+                up,
+                Command::SdoUpload {
+                    index: 0x1008,
+                    sub: 0,
+                    ty: Some(DataType::VisibleString),
+                    ..
+                }
+            ),
+            "{up:?}"
+        );
+        let down = sdo_command(&body(json!({
+            "device": "node5", "index": "0x1017", "sub": 0, "type": "u16", "value": "1000"
+        })))
+        .unwrap();
+        assert!(
+            matches!(&down, Command::SdoDownload { data: SdoData::Encoded { ty: Some(DataType::Unsigned16), bytes }, .. } if bytes == &[0xE8, 0x03]),
+            "{down:?}"
+        );
+        let auto = sdo_command(&body(json!({
+            "device": "node5", "index": "0x1017", "sub": 0, "type": "auto", "value": "1000"
+        })))
+        .unwrap();
+        assert!(
+            matches!(&auto, Command::SdoDownload { data: SdoData::Text(t), .. } if t == "1000"),
+            "{auto:?}"
+        );
+        let bad = sdo_command(&body(json!({
+            "device": "node5", "index": 1, "sub": 0, "op": "erase", "type": "u8", "value": "1"
+        })));
+        assert!(bad.unwrap_err().contains("upload"));
     }
 }

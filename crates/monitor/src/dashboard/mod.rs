@@ -10,10 +10,15 @@
 //!   state, heartbeat, EMCY and LED columns of the node table;
 //! * each device's CANopen node-ID, learned from the COB-IDs of the boot-up, heartbeat and
 //!   EMCY messages its port sends, or from what its twin says;
-//! * the frame stream: the last [`STREAM_LEN`] frames, error frames and controller events of
-//!   every bus, with who sent them;
-//! * a sliding [`WINDOW_S`] window ([`History`]) of each bus's load and frames per second
-//!   and of each device's analog live values.
+//! * per bus, the fixed trace ([`Model::fixed_trace`]) of every frame, CANopen or not;
+//! * the frame stream: every frame, error frame and controller event of every bus, with who
+//!   sent it, numbered ([`StreamRow::seq`]) so that a page sees where rows are missing; a
+//!   snapshot carries the rows since the previous one, at most [`STREAM_LEN`] (the rest are
+//!   left out, and their numbers with them);
+//! * the charts' signals ([`Signal`]): each bus's load and frames per second, every live
+//!   value of every device, every PDO value the bus views decoded, each with a sliding
+//!   [`WINDOW_S`] window of its samples ([`History`]), which [`Model::history`] hands out
+//!   whole for a page that opens late.
 //!
 //! The wall time is a [`std::time::Duration`] since the dashboard started, given by the
 //! caller: the charts run on it, so they move at the pace the viewer sees even when the
@@ -29,14 +34,17 @@ use cantwin_can::{BitRate, Duration, ErrorCounters, ErrorState, Frame, Instant};
 use cantwin_canopen::wire::{self, ErrorControl, Message};
 use cantwin_twin::{LiveValue, Role, SignalValue};
 
-use crate::{Config, DeviceKind, Led, Leds, NetworkView};
+use crate::kind::{Field, Format};
+use crate::{Config, DeviceKind, FixedTrace, FrameEntry, Led, Leds, NetworkView, Service};
 
 pub use tap::{DashboardTap, Seen};
 
 /// The window the series keep, in seconds.
-pub const WINDOW_S: f64 = 60.0;
-/// Rows kept for the frame stream (and frames kept by each bus's view).
-pub const STREAM_LEN: usize = 200;
+pub const WINDOW_S: f64 = 300.0;
+/// Rows a snapshot carries at most (and frames kept by each bus's view): 2048 rows in a
+/// quarter of a second is 8192 frames/s, most of a 1 Mbit/s bus; beyond it rows are left
+/// out and their numbers show the gap.
+pub const STREAM_LEN: usize = 2048;
 
 /// A sliding window of samples over wall time.
 #[derive(Debug, Default, Clone)]
@@ -55,12 +63,9 @@ impl History {
         }
     }
 
-    /// The samples as (seconds before `now`, value), oldest first.
-    pub fn points(&self, now: WallDuration) -> Vec<(f64, f64)> {
-        self.0
-            .iter()
-            .map(|(t, v)| (now.saturating_sub(*t).as_secs_f64(), *v))
-            .collect()
+    /// The samples as (seconds since the dashboard started, value), oldest first.
+    pub fn points(&self) -> Vec<(f64, f64)> {
+        self.0.iter().map(|(t, v)| (t.as_secs_f64(), *v)).collect()
     }
 }
 
@@ -91,8 +96,9 @@ struct Bus {
     name: String,
     /// The CANopen model of the bus, fed with the frames of CANopen senders.
     view: NetworkView,
-    load: History,
-    fps: History,
+    /// The fixed trace of every frame that reached the receivers, whatever its protocol
+    /// (the view's own sees CANopen senders only).
+    fixed: FixedTrace,
 }
 
 /// What a row of the frame stream is.
@@ -111,6 +117,8 @@ pub enum RowKind {
 /// One row of the frame stream.
 #[derive(Debug, Clone)]
 pub struct StreamRow {
+    /// Its number since the dashboard started, over all buses (0 for the first row).
+    pub seq: u64,
     /// Bus time.
     pub at: Instant,
     /// The index of its bus.
@@ -181,10 +189,6 @@ pub struct BusSnapshot {
     pub load: f64,
     /// Frames per second of wall time since the previous snapshot (0 for the first).
     pub fps: f64,
-    /// The load over the window, as (seconds ago, percent), oldest first.
-    pub load_history: Vec<(f64, f64)>,
-    /// The frames per second over the window, as (seconds ago, 1/s), oldest first.
-    pub fps_history: Vec<(f64, f64)>,
 }
 
 /// The last EMCY of a node in a snapshot.
@@ -231,15 +235,6 @@ pub struct NodeSnapshot {
     pub leds: Leds,
 }
 
-/// A live value of a device in a snapshot.
-#[derive(Debug, Clone)]
-pub struct PanelValue {
-    /// The value now.
-    pub value: LiveValue,
-    /// For analog values, the value over the window as (seconds ago, value), oldest first.
-    pub history: Option<Vec<(f64, f64)>>,
-}
-
 /// A device's panel of live values in a snapshot.
 #[derive(Debug, Clone)]
 pub struct DevicePanel {
@@ -248,7 +243,39 @@ pub struct DevicePanel {
     /// Its kind.
     pub kind: String,
     /// Its live values, in the twin's order.
-    pub values: Vec<PanelValue>,
+    pub values: Vec<LiveValue>,
+}
+
+/// Where a chartable signal comes from, for the page's picker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SignalSource {
+    /// The bus's statistics.
+    Bus,
+    /// A twin's live value, read from its model.
+    Device,
+    /// A value the bus view decoded from a PDO on the wire.
+    Pdo,
+}
+
+/// A value the page can chart, sampled at each snapshot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Signal {
+    /// Its key, unique and stable over the run: `bus/can0/load`, `device/drive/speed`,
+    /// `pdo/can0/5/TPDO1/statusword`.
+    pub key: String,
+    /// What the page calls it.
+    pub label: String,
+    /// Its unit (may be empty).
+    pub unit: String,
+    /// The group the picker lists it under (a bus or a device).
+    pub group: String,
+    /// Where it comes from.
+    pub source: SignalSource,
+    /// Whether it cannot be negative (a load, a rate, a count, an on/off signal, an input
+    /// whose range starts at zero or above): its axis starts at zero.
+    pub non_negative: bool,
+    /// The value at this snapshot.
+    pub value: f64,
 }
 
 /// What the dashboard shows at one moment.
@@ -266,10 +293,18 @@ pub struct Snapshot {
     pub nodes: Vec<NodeSnapshot>,
     /// The devices' panels, one per device.
     pub devices: Vec<DevicePanel>,
-    /// The frame stream, newest first.
+    /// The charts' signals at this snapshot's wall time ([`Snapshot::uptime`]).
+    pub signals: Vec<Signal>,
+    /// The rows of the frame stream since the previous snapshot, oldest first, at most
+    /// [`STREAM_LEN`]: when more came, the oldest are left out (their `seq` numbers with
+    /// them, so the gap shows).
     pub frames: Vec<StreamRow>,
-    /// Events the taps could not keep since the dashboard started.
+    /// The `seq` the next row will have: rows up to it have been numbered.
+    pub next_seq: u64,
+    /// Events the taps could not keep since the previous snapshot (they got no number).
     pub missed: u64,
+    /// Events the taps could not keep since the dashboard started.
+    pub missed_total: u64,
 }
 
 /// The dashboard's model of a running simulation.
@@ -280,9 +315,13 @@ pub struct Model {
     devices: Vec<Device>,
     /// The dashboard's own ports (its CANopen masters).
     masters: Vec<PortId>,
+    /// The rows since the previous snapshot, at most [`STREAM_LEN`].
     stream: VecDeque<StreamRow>,
+    seq: u64,
     missed: u64,
-    values: BTreeMap<(usize, String), History>,
+    missed_total: u64,
+    /// Each signal's samples, by key.
+    series: BTreeMap<String, History>,
     /// The wall time and frame counts of the previous snapshot.
     last: Option<(WallDuration, Vec<u64>)>,
 }
@@ -305,8 +344,7 @@ impl Model {
                     ring: STREAM_LEN,
                     ..Config::default()
                 }),
-                load: History::default(),
-                fps: History::default(),
+                fixed: FixedTrace::new(FixedTrace::DEFAULT_CAPACITY),
             })
             .collect();
         Model {
@@ -315,8 +353,10 @@ impl Model {
             devices,
             masters,
             stream: VecDeque::new(),
+            seq: 0,
             missed: 0,
-            values: BTreeMap::new(),
+            missed_total: 0,
+            series: BTreeMap::new(),
             last: None,
         }
     }
@@ -334,6 +374,12 @@ impl Model {
     /// The view of bus `bus`.
     pub fn view(&self, bus: usize) -> Option<&NetworkView> {
         self.buses.get(bus).map(|b| &b.view)
+    }
+
+    /// The fixed trace of bus `bus`: one row per identifier of every frame that reached the
+    /// receivers, from any sender.
+    pub fn fixed_trace(&self, bus: usize) -> Option<&FixedTrace> {
+        self.buses.get(bus).map(|b| &b.fixed)
     }
 
     /// Takes in what was read from the simulation and answers what the dashboard shows.
@@ -354,17 +400,40 @@ impl Model {
                 self.name_node(k, node);
             }
         }
+        self.missed = 0;
         for (i, (seen, missed)) in events.into_iter().enumerate() {
             self.missed += missed;
+            self.missed_total += missed;
             self.absorb(i, seen);
             if let Some(b) = self.buses.get_mut(i) {
                 b.view.advance(now);
             }
         }
         let buses = self.sample_buses(wall, &bus_stats);
+        let mut signals = Vec::new();
+        for b in &buses {
+            signals.push(Signal {
+                key: format!("bus/{}/load", b.name),
+                label: format!("{} bus load", b.name),
+                unit: "%".into(),
+                group: format!("bus {}", b.name),
+                source: SignalSource::Bus,
+                non_negative: true,
+                value: b.load,
+            });
+            signals.push(Signal {
+                key: format!("bus/{}/fps", b.name),
+                label: format!("{} frames per second", b.name),
+                unit: "1/s".into(),
+                group: format!("bus {}", b.name),
+                source: SignalSource::Bus,
+                non_negative: true,
+                value: b.fps,
+            });
+        }
         let mut nodes = Vec::new();
         let mut panels = Vec::new();
-        for (k, (d, l)) in self.devices.iter().zip(live).enumerate() {
+        for (d, l) in self.devices.iter().zip(live) {
             let powered = l.status.as_ref().is_none_or(|s| s.powered);
             let counters = l.status.as_ref().map(|s| s.counters).unwrap_or_default();
             let info = d
@@ -394,24 +463,58 @@ impl Model {
                 counters,
                 leds: leds(powered, info.map(|i| i.leds(now)), &counters),
             });
-            let values = l
-                .values
-                .into_iter()
-                .map(|v| {
-                    let history = v.role.is_analog().then(|| {
-                        let h = self.values.entry((k, v.name.clone())).or_default();
-                        h.push(wall, v.value);
-                        h.points(wall)
-                    });
-                    PanelValue { value: v, history }
-                })
-                .collect();
+            for v in &l.values {
+                signals.push(Signal {
+                    key: format!("device/{}/{}", d.name, v.name),
+                    label: format!("{} {}", d.name, v.name),
+                    unit: v.unit.to_string(),
+                    group: format!("device {}", d.name),
+                    source: SignalSource::Device,
+                    non_negative: match v.role {
+                        Role::DigitalInput | Role::DigitalOutput => true,
+                        Role::AnalogInput { min, .. } => min >= 0.0,
+                        Role::Measured | Role::AnalogOutput => false,
+                    },
+                    value: v.value,
+                });
+            }
             panels.push(DevicePanel {
                 name: d.name.clone(),
                 kind: d.kind.clone(),
-                values,
+                values: l.values,
             });
         }
+        for (i, b) in self.buses.iter().enumerate() {
+            for n in b.view.nodes() {
+                let who = self
+                    .devices
+                    .iter()
+                    .find(|d| d.bus == i && d.node_id == Some(n.id))
+                    .map_or_else(|| format!("node {}", n.id), |d| d.name.clone());
+                for (v, _) in &n.values {
+                    let Some(value) = pdo_number(n.kind.as_ref(), v) else {
+                        continue;
+                    };
+                    let pdo = crate::kind::pdo_label(v.pdo);
+                    signals.push(Signal {
+                        key: format!("pdo/{}/{}/{pdo}/{}", b.name, n.id, v.name),
+                        label: format!("{who} {pdo} {}", v.name),
+                        unit: pdo_unit(n.kind.as_ref(), v),
+                        group: format!("PDOs of {who} on {}", b.name),
+                        source: SignalSource::Pdo,
+                        non_negative: value >= 0.0 && pdo_unsigned(n.kind.as_ref(), v),
+                        value,
+                    });
+                }
+            }
+        }
+        for s in &signals {
+            self.series
+                .entry(s.key.clone())
+                .or_default()
+                .push(wall, s.value);
+        }
+        let frames: Vec<StreamRow> = self.stream.drain(..).collect();
         Snapshot {
             scenario: self.scenario.clone(),
             now,
@@ -419,9 +522,21 @@ impl Model {
             buses,
             nodes,
             devices: panels,
-            frames: self.stream.iter().rev().cloned().collect(),
+            signals,
+            frames,
+            next_seq: self.seq,
             missed: self.missed,
+            missed_total: self.missed_total,
         }
+    }
+
+    /// Every signal's samples over the window, as (seconds since the dashboard started,
+    /// value), oldest first, by key: what a page that opens late draws first.
+    pub fn history(&self) -> Vec<(&str, Vec<(f64, f64)>)> {
+        self.series
+            .iter()
+            .map(|(k, h)| (k.as_str(), h.points()))
+            .collect()
     }
 
     /// The buses' rows of a snapshot at `wall`: frames per second since the previous one,
@@ -432,15 +547,13 @@ impl Model {
             .as_ref()
             .map(|(t, _)| wall.saturating_sub(*t).as_secs_f64());
         let mut rows = Vec::new();
-        for (i, (bus, s)) in self.buses.iter_mut().zip(stats).enumerate() {
+        for (i, (bus, s)) in self.buses.iter().zip(stats).enumerate() {
             let fps = match (&self.last, elapsed) {
                 (Some((_, before)), Some(dt)) if dt > 0.0 => {
                     s.frames.saturating_sub(before.get(i).copied().unwrap_or(0)) as f64 / dt
                 }
                 _ => 0.0,
             };
-            bus.load.push(wall, s.load_percent);
-            bus.fps.push(wall, fps);
             rows.push(BusSnapshot {
                 name: bus.name.clone(),
                 bit_rate: s.bit_rate,
@@ -448,8 +561,6 @@ impl Model {
                 error_frames: s.error_frames,
                 load: s.load_percent,
                 fps,
-                load_history: bus.load.points(wall),
-                fps_history: bus.fps.points(wall),
             });
         }
         self.last = Some((wall, stats.iter().map(|s| s.frames).collect()));
@@ -479,17 +590,31 @@ impl Model {
                     let mut text = String::new();
                     if canopen && !dropped {
                         self.learn(&frame, sender);
-                        if let Some(b) = self.buses.get_mut(bus) {
+                    }
+                    if let Some(b) = self.buses.get_mut(bus)
+                        && !dropped
+                    {
+                        let entry = if canopen {
                             b.view.push(at, &frame);
-                            text = b
-                                .view
-                                .frames()
-                                .next_back()
-                                .map(|e| e.text.clone())
-                                .unwrap_or_default();
-                        }
+                            b.view.frames().next_back().cloned()
+                        } else {
+                            None
+                        };
+                        // Other protocols on the same identifiers mean other things: their
+                        // rows carry the frame undecoded.
+                        let entry = entry.unwrap_or(FrameEntry {
+                            seq: self.seq,
+                            at,
+                            frame,
+                            service: Service::Other,
+                            node: None,
+                            text: String::new(),
+                        });
+                        b.fixed.record(&entry);
+                        text = entry.text;
                     }
                     self.push_row(StreamRow {
+                        seq: 0,
                         at,
                         bus,
                         frame: Some(frame),
@@ -508,6 +633,7 @@ impl Model {
                     sender,
                     kind,
                 } => self.push_row(StreamRow {
+                    seq: 0,
                     at,
                     bus,
                     frame: Some(frame),
@@ -518,6 +644,7 @@ impl Model {
                 Seen::Controller { at, port, event } => {
                     let from = self.name_of(port);
                     self.push_row(StreamRow {
+                        seq: 0,
                         at,
                         bus,
                         frame: None,
@@ -530,7 +657,11 @@ impl Model {
         }
     }
 
-    fn push_row(&mut self, row: StreamRow) {
+    /// Numbers `row` and keeps it for the next snapshot; past [`STREAM_LEN`] rows the
+    /// oldest is left out (its number is not given again, so the page sees the gap).
+    fn push_row(&mut self, mut row: StreamRow) {
+        row.seq = self.seq;
+        self.seq += 1;
         self.stream.push_back(row);
         while self.stream.len() > STREAM_LEN {
             self.stream.pop_front();
@@ -586,6 +717,41 @@ impl Model {
             );
         }
     }
+}
+
+/// The field of `kind` that carries PDO value `v`.
+fn pdo_field<'a>(kind: Option<&'a DeviceKind>, v: &crate::LiveValue) -> Option<&'a Field> {
+    kind?
+        .pdos
+        .iter()
+        .filter(|l| l.pdo == v.pdo)
+        .flat_map(|l| l.fields.iter())
+        .find(|f| f.name == v.name)
+}
+
+/// PDO value `v` as a number to chart: its field's number (sign-extended where the field is
+/// signed), else its raw bits; `None` for values that are no number of at most 64 bits.
+fn pdo_number(kind: Option<&DeviceKind>, v: &crate::LiveValue) -> Option<f64> {
+    let raw = v.raw?;
+    Some(match pdo_field(kind, v) {
+        Some(f) => f.number(raw) as f64,
+        None => raw as f64,
+    })
+}
+
+/// The unit of PDO value `v`, where its field names one.
+fn pdo_unit(kind: Option<&DeviceKind>, v: &crate::LiveValue) -> String {
+    match pdo_field(kind, v).map(|f| &f.format) {
+        Some(Format::Unsigned(Some(u)) | Format::Signed(Some(u))) => u.clone(),
+        _ => String::new(),
+    }
+}
+
+/// Whether PDO value `v` can only be zero or more: a field of the kind that is not signed
+/// (bits, flags and statuswords are unsigned too). Values without a field (mapped from a
+/// dictionary) may be either.
+fn pdo_unsigned(kind: Option<&DeviceKind>, v: &crate::LiveValue) -> bool {
+    pdo_field(kind, v).is_some_and(|f| !matches!(f.format, Format::Signed(_)))
 }
 
 /// The indicator states (CiA 303-3 §3) a dashboard shows: what the bus shows of the node

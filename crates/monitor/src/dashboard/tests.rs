@@ -95,10 +95,10 @@ fn a_device_is_named_by_the_node_id_of_its_heartbeat_and_its_frames_are_decoded(
     // The dropped heartbeat reached nobody: the node is still pre-operational.
     assert_eq!(s.nodes[0].nmt, Some("pre-operational"));
     let froms: Vec<&str> = s.frames.iter().map(|r| r.from.as_str()).collect();
-    assert_eq!(froms, ["island", "dashboard", "island"], "newest first");
-    assert_eq!(s.frames[0].kind, RowKind::Dropped);
-    assert_eq!(s.frames[0].text, "", "a dropped frame is not decoded");
-    assert!(!s.frames[2].text.is_empty());
+    assert_eq!(froms, ["island", "dashboard", "island"], "oldest first");
+    assert_eq!(s.frames[2].kind, RowKind::Dropped);
+    assert_eq!(s.frames[2].text, "", "a dropped frame is not decoded");
+    assert!(!s.frames[0].text.is_empty());
 }
 
 #[test]
@@ -108,24 +108,136 @@ fn frames_per_second_count_the_frames_since_the_previous_snapshot_over_wall_time
     assert_eq!(first.buses[0].fps, 0.0);
     let second = m.update(sample(500, Vec::new(), 150));
     assert_eq!(second.buses[0].fps, 100.0);
-    assert_eq!(second.buses[0].fps_history, [(0.5, 0.0), (0.0, 100.0)]);
-    assert_eq!(second.buses[0].load_history.len(), 2);
+    let history = m.history();
+    let series = |key: &str| {
+        history
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, p)| p.clone())
+            .unwrap()
+    };
+    assert_eq!(series("bus/field/fps"), [(0.0, 0.0), (0.5, 100.0)]);
+    assert_eq!(series("bus/field/load"), [(0.0, 1.5), (0.5, 1.5)]);
 }
 
-#[test]
-fn the_stream_keeps_the_last_rows_only() {
-    let (mut m, device, _) = model();
-    let seen = (0..STREAM_LEN as u64 + 5)
+fn pdos(device: PortId, from: u64, n: u64) -> Vec<Seen> {
+    (from..from + n)
         .map(|i| Seen::Frame {
             at: ms(i),
             frame: frame(0x181, &[i as u8]),
             sender: device,
             dropped: false,
         })
+        .collect()
+}
+
+#[test]
+fn each_snapshot_carries_every_row_since_the_previous_one_numbered_without_gaps() {
+    let (mut m, device, _) = model();
+    let first = m.update(sample(250, pdos(device, 0, 300), 300));
+    let second = m.update(sample(500, pdos(device, 300, 200), 500));
+    let seqs: Vec<u64> = first
+        .frames
+        .iter()
+        .chain(&second.frames)
+        .map(|r| r.seq)
         .collect();
-    let s = m.update(sample(1000, seen, 0));
+    assert_eq!(seqs, (0..500).collect::<Vec<u64>>());
+    assert_eq!(second.next_seq, 500);
+    assert_eq!(second.frames[0].at, ms(300));
+    // Nothing new: an empty snapshot, nothing counted as lost.
+    let third = m.update(sample(750, Vec::new(), 500));
+    assert!(third.frames.is_empty());
+    assert_eq!((third.next_seq, third.missed), (500, 0));
+}
+
+#[test]
+fn past_the_bound_a_snapshot_leaves_out_the_oldest_rows_and_their_numbers_show_the_gap() {
+    let (mut m, device, _) = model();
+    let extra = 5;
+    let s = m.update(sample(1000, pdos(device, 0, STREAM_LEN as u64 + extra), 0));
     assert_eq!(s.frames.len(), STREAM_LEN);
-    assert_eq!(s.frames[0].at, ms(STREAM_LEN as u64 + 4));
+    assert_eq!(s.frames[0].seq, extra, "rows 0..5 left out");
+    assert_eq!(s.next_seq, STREAM_LEN as u64 + extra);
+    // What the tap could not keep is counted per snapshot and in total.
+    let mut lost = sample(1250, Vec::new(), 0);
+    lost.events = vec![(Vec::new(), 7)];
+    let s = m.update(lost);
+    assert_eq!((s.missed, s.missed_total), (7, 7));
+    let s = m.update(sample(1500, Vec::new(), 0));
+    assert_eq!((s.missed, s.missed_total), (0, 7));
+}
+
+#[test]
+fn signals_cover_bus_statistics_device_values_and_decoded_pdo_values() {
+    let (mut m, device, _) = model();
+    let mut s = sample(
+        10,
+        vec![
+            Seen::Frame {
+                at: ms(1),
+                frame: frame(0x705, &[0x05]),
+                sender: device,
+                dropped: false,
+            },
+            // TM3 TPDO1 of node 5: the first digital input byte.
+            Seen::Frame {
+                at: ms(2),
+                frame: frame(0x185, &[0x21, 0x00]),
+                sender: device,
+                dropped: false,
+            },
+        ],
+        2,
+    );
+    s.devices = vec![DeviceSample {
+        values: vec![
+            LiveValue::measured("temperature", -3.5, "°C"),
+            LiveValue::digital("digital_input.1.0", true, Role::DigitalInput),
+            LiveValue {
+                name: "analog_input.3.0".into(),
+                value: 2.0,
+                unit: "V",
+                role: Role::AnalogInput {
+                    min: 0.0,
+                    max: 10.0,
+                },
+            },
+        ],
+        ..DeviceSample::default()
+    }];
+    let snap = m.update(s);
+    let find = |key: &str| {
+        snap.signals
+            .iter()
+            .find(|s| s.key == key)
+            .unwrap_or_else(|| panic!("no {key} in {:#?}", snap.signals))
+    };
+    assert!(find("bus/field/load").non_negative);
+    assert_eq!(find("bus/field/fps").unit, "1/s");
+    let t = find("device/island/temperature");
+    assert_eq!((t.value, t.non_negative), (-3.5, false));
+    assert!(find("device/island/digital_input.1.0").non_negative);
+    assert!(find("device/island/analog_input.3.0").non_negative);
+    let pdo: Vec<&Signal> = snap
+        .signals
+        .iter()
+        .filter(|s| s.source == SignalSource::Pdo)
+        .collect();
+    assert!(!pdo.is_empty(), "{:#?}", snap.signals);
+    assert!(pdo.iter().all(|s| s.key.starts_with("pdo/field/5/TPDO1/")));
+    assert!(
+        pdo[0].label.starts_with("island TPDO1 "),
+        "{}",
+        pdo[0].label
+    );
+    assert_eq!(pdo[0].value, 33.0, "0x21 as a number: {:?}", pdo[0]);
+    // Each signal has its series.
+    assert!(
+        m.history()
+            .iter()
+            .any(|(k, p)| *k == "device/island/temperature" && p == &[(0.01, -3.5)])
+    );
 }
 
 #[test]
@@ -133,9 +245,8 @@ fn a_history_forgets_what_left_the_window() {
     let mut h = History::default();
     h.push(WallDuration::from_secs(0), 1.0);
     h.push(WallDuration::from_secs(30), 2.0);
-    h.push(WallDuration::from_secs(61), 3.0);
-    let now = WallDuration::from_secs(61);
-    assert_eq!(h.points(now), [(31.0, 2.0), (0.0, 3.0)]);
+    h.push(WallDuration::from_secs(301), 3.0);
+    assert_eq!(h.points(), [(30.0, 2.0), (301.0, 3.0)]);
 }
 
 #[test]
@@ -176,4 +287,43 @@ fn inputs_take_values_of_their_role() {
         input_signal(&values[2..], "drive", "speed", 1.0),
         Err("drive has no inputs".into())
     );
+}
+
+#[test]
+fn the_fixed_trace_keeps_one_row_per_identifier_of_every_sender_and_skips_dropped_frames() {
+    let (mut m, device, master) = model();
+    // A port that is neither a device nor the dashboard (a gateway's client).
+    let mut bus = Bus::new(BusConfig::new("other", BitRate::R500K));
+    bus.attach(ListenOnly, PortConfig::default());
+    bus.attach(ListenOnly, PortConfig::default());
+    let outsider = bus.attach(ListenOnly, PortConfig::default());
+    let seen = |at: u64, id: u16, data: &[u8], sender: PortId, dropped: bool| Seen::Frame {
+        at: ms(at),
+        frame: frame(id, data),
+        sender,
+        dropped,
+    };
+    m.update(sample(
+        100,
+        vec![
+            seen(0, 0x705, &[0x7F], device, false),
+            seen(10, 0x123, &[1, 2], outsider, false),
+            seen(30, 0x123, &[1, 3], outsider, false),
+            seen(40, 0x123, &[9, 9], outsider, true),
+            seen(50, 0x000, &[0x01, 5], master, false),
+            seen(100, 0x705, &[0x05], device, false),
+        ],
+        5,
+    ));
+    let fixed = m.fixed_trace(0).unwrap();
+    let ids: Vec<u32> = fixed.rows().map(|r| r.key.id).collect();
+    assert_eq!(ids, [0x000, 0x123, 0x705]);
+    let other = fixed.rows().find(|r| r.key.id == 0x123).unwrap();
+    assert_eq!(other.count, 2, "the dropped frame reached nobody");
+    assert_eq!(other.cycle.last.unwrap().as_millis(), 20);
+    assert_eq!(other.changed, 0b10);
+    assert_eq!(other.last.text, "", "not decoded as CANopen");
+    let hb = fixed.rows().find(|r| r.key.id == 0x705).unwrap();
+    assert_eq!((hb.count, hb.cycle.last.unwrap().as_millis()), (2, 100));
+    assert!(!hb.last.text.is_empty());
 }
