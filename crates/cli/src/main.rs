@@ -27,6 +27,7 @@ mod output;
 mod replay;
 mod report;
 mod scenario_cmd;
+mod silkit;
 mod sim;
 mod web;
 
