@@ -30,13 +30,17 @@
 //! ```
 #![deny(unsafe_code)]
 
+pub mod bridge;
 mod error;
 #[allow(unsafe_code)]
 mod ffi;
 mod types;
 
+pub use bridge::{BridgeConfig, BridgeError, PacedBridge, run_synchronized};
 pub use error::Error;
-pub use ffi::{CanController, LIBRARY_NAME, Lifecycle, Participant, SilKit, TimeSync};
+pub use ffi::{
+    CanController, LIBRARY_NAME, Lifecycle, Participant, SilKit, SystemMonitor, TimeSync,
+};
 pub use types::{
     CanFrame, ControllerState, Direction, DirectionMask, ErrorState, ErrorStateChangeEvent,
     FLAG_BRS, FLAG_ESI, FLAG_FDF, FLAG_IDE, FLAG_RTR, FLAG_SEC, FLAG_XLF, FrameConversionError,

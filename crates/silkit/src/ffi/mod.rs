@@ -193,6 +193,13 @@ fn load_functions(lib: &libloading::Library, path: &Path) -> Result<raw::Functio
         time_sync_create: req!("SilKit_TimeSyncService_Create"),
         time_sync_set_step_handler: req!("SilKit_TimeSyncService_SetSimulationStepHandler"),
         time_sync_now: req!("SilKit_TimeSyncService_Now"),
+        system_monitor_create: req!("SilKit_SystemMonitor_Create"),
+        system_monitor_add_participant_status_handler: req!(
+            "SilKit_SystemMonitor_AddParticipantStatusHandler"
+        ),
+        system_monitor_set_participant_disconnected_handler: req!(
+            "SilKit_SystemMonitor_SetParticipantDisconnectedHandler"
+        ),
         system_controller_create: opt!("SilKit_Experimental_SystemController_Create"),
         system_controller_set_workflow: opt!(
             "SilKit_Experimental_SystemController_SetWorkflowConfiguration"
@@ -383,6 +390,22 @@ impl Participant {
         Ok(Lifecycle {
             inner: Arc::clone(&self.inner),
             raw: ls,
+        })
+    }
+
+    /// Create the participant's system monitor (one per participant), which reports the
+    /// other participants' states and departures.
+    pub fn system_monitor(&self) -> Result<SystemMonitor, Error> {
+        let mut m: *mut raw::SystemMonitor = core::ptr::null_mut();
+        let p = self.inner.raw;
+        self.inner.call(|api| {
+            // SAFETY: the participant is alive; the monitor is owned by it.
+            let rc = unsafe { (api.f.system_monitor_create)(&mut m, p) };
+            api.check("SilKit_SystemMonitor_Create", rc)
+        })??;
+        Ok(SystemMonitor {
+            inner: Arc::clone(&self.inner),
+            raw: m,
         })
     }
 
@@ -967,6 +990,113 @@ impl Lifecycle {
 /// The abort trampoline of a closure type.
 fn abort_tramp_for<F: Fn(ParticipantState) + Send + Sync + 'static>(_: &F) -> raw::AbortHandler {
     abort_trampoline::<F>
+}
+
+/// The system monitor of a participant (`SilKit_SystemMonitor`). Cheap to clone.
+#[derive(Clone)]
+pub struct SystemMonitor {
+    inner: Arc<Inner>,
+    raw: *mut raw::SystemMonitor,
+}
+
+// SAFETY: see `Inner`.
+unsafe impl Send for SystemMonitor {}
+// SAFETY: as above.
+unsafe impl Sync for SystemMonitor {}
+
+impl core::fmt::Debug for SystemMonitor {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("SystemMonitor").finish_non_exhaustive()
+    }
+}
+
+unsafe extern "C" fn status_trampoline<F: Fn(&str, ParticipantState) + Send + Sync + 'static>(
+    ctx: *mut c_void,
+    _monitor: *mut raw::SystemMonitor,
+    name: *const c_char,
+    status: *mut raw::ParticipantStatus,
+) {
+    if ctx.is_null() || name.is_null() || status.is_null() {
+        return;
+    }
+    // SAFETY: `ctx` is the `F` kept by the participant; the name and status are valid
+    // during the call and copied here.
+    let (f, name, state) = unsafe {
+        (
+            &*(ctx as *const F),
+            CStr::from_ptr(name).to_string_lossy().into_owned(),
+            (*status).participant_state,
+        )
+    };
+    guarded(|| f(&name, ParticipantState::from_raw(state)));
+}
+
+unsafe extern "C" fn disconnected_trampoline<F: Fn(&str) + Send + Sync + 'static>(
+    ctx: *mut c_void,
+    _monitor: *mut raw::SystemMonitor,
+    info: *const raw::ParticipantConnectionInformation,
+) {
+    if ctx.is_null() || info.is_null() {
+        return;
+    }
+    // SAFETY: as in `status_trampoline`.
+    let (f, name) = unsafe { (&*(ctx as *const F), (*info).participant_name) };
+    if name.is_null() {
+        return;
+    }
+    // SAFETY: a NUL-terminated string valid during the call, copied.
+    let name = unsafe { CStr::from_ptr(name) }
+        .to_string_lossy()
+        .into_owned();
+    guarded(|| f(&name));
+}
+
+impl SystemMonitor {
+    /// Call `handler(name, state)` whenever a participant's state changes (this one's too).
+    pub fn on_participant_status(
+        &self,
+        handler: impl Fn(&str, ParticipantState) + Send + Sync + 'static,
+    ) -> Result<(), Error> {
+        let h = status_tramp_for(&handler);
+        let ctx = self.inner.keep(handler);
+        let m = self.raw;
+        self.inner.call(|api| {
+            let mut id = 0;
+            // SAFETY: a live monitor; `ctx` lives as long as the participant.
+            let rc = unsafe {
+                (api.f.system_monitor_add_participant_status_handler)(m, ctx, h, &mut id)
+            };
+            api.check("SilKit_SystemMonitor_AddParticipantStatusHandler", rc)
+        })?
+    }
+
+    /// Call `handler(name)` whenever another participant disconnects (leaves or dies).
+    pub fn on_participant_disconnected(
+        &self,
+        handler: impl Fn(&str) + Send + Sync + 'static,
+    ) -> Result<(), Error> {
+        let h = disconnected_tramp_for(&handler);
+        let ctx = self.inner.keep(handler);
+        let m = self.raw;
+        self.inner.call(|api| {
+            // SAFETY: a live monitor; `ctx` lives as long as the participant.
+            let rc =
+                unsafe { (api.f.system_monitor_set_participant_disconnected_handler)(m, ctx, h) };
+            api.check("SilKit_SystemMonitor_SetParticipantDisconnectedHandler", rc)
+        })?
+    }
+}
+
+fn status_tramp_for<F: Fn(&str, ParticipantState) + Send + Sync + 'static>(
+    _: &F,
+) -> raw::ParticipantStatusHandler {
+    status_trampoline::<F>
+}
+
+fn disconnected_tramp_for<F: Fn(&str) + Send + Sync + 'static>(
+    _: &F,
+) -> raw::ParticipantDisconnectedHandler {
+    disconnected_trampoline::<F>
 }
 
 /// The time synchronisation service (`SilKit_TimeSyncService`). Cheap to clone.

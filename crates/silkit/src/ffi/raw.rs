@@ -26,6 +26,8 @@ pub type CanController = c_void;
 pub type LifecycleService = c_void;
 /// `SilKit_TimeSyncService`.
 pub type TimeSyncService = c_void;
+/// `SilKit_SystemMonitor`.
+pub type SystemMonitor = c_void;
 /// `SilKit_Experimental_SystemController`.
 pub type SystemController = c_void;
 /// `SilKit_Experimental_NetworkSimulator`.
@@ -143,6 +145,24 @@ pub struct LifecycleConfiguration {
     pub operation_mode: i8,
 }
 
+/// `SilKit_ParticipantStatus` (`capi/Orchestration.h`).
+#[repr(C)]
+pub struct ParticipantStatus {
+    pub header: StructHeader,
+    pub participant_name: *const c_char,
+    pub participant_state: ParticipantState,
+    pub enter_reason: *const c_char,
+    pub enter_time: u64,
+    pub refresh_time: u64,
+}
+
+/// `SilKit_ParticipantConnectionInformation`.
+#[repr(C)]
+pub struct ParticipantConnectionInformation {
+    pub header: StructHeader,
+    pub participant_name: *const c_char,
+}
+
 /// `SilKit_WorkflowConfiguration`.
 #[repr(C)]
 pub struct WorkflowConfiguration {
@@ -160,6 +180,10 @@ pub type CanErrorStateChangeHandler =
     unsafe extern "C" fn(*mut c_void, *mut CanController, *mut CanErrorStateChangeEvent);
 pub type LifecycleHandler = unsafe extern "C" fn(*mut c_void, *mut LifecycleService);
 pub type AbortHandler = unsafe extern "C" fn(*mut c_void, *mut LifecycleService, ParticipantState);
+pub type ParticipantStatusHandler =
+    unsafe extern "C" fn(*mut c_void, *mut SystemMonitor, *const c_char, *mut ParticipantStatus);
+pub type ParticipantDisconnectedHandler =
+    unsafe extern "C" fn(*mut c_void, *mut SystemMonitor, *const ParticipantConnectionInformation);
 pub type StepHandler =
     unsafe extern "C" fn(*mut c_void, *mut TimeSyncService, NanosecondsTime, NanosecondsTime);
 
@@ -247,6 +271,20 @@ pub struct Functions {
     ) -> ReturnCode,
     pub time_sync_now:
         unsafe extern "C" fn(*mut TimeSyncService, *mut NanosecondsTime) -> ReturnCode,
+    pub system_monitor_create:
+        unsafe extern "C" fn(*mut *mut SystemMonitor, *mut Participant) -> ReturnCode,
+    pub system_monitor_add_participant_status_handler: unsafe extern "C" fn(
+        *mut SystemMonitor,
+        *mut c_void,
+        ParticipantStatusHandler,
+        *mut HandlerId,
+    ) -> ReturnCode,
+    pub system_monitor_set_participant_disconnected_handler: unsafe extern "C" fn(
+        *mut SystemMonitor,
+        *mut c_void,
+        ParticipantDisconnectedHandler,
+    )
+        -> ReturnCode,
     pub system_controller_create:
         Option<unsafe extern "C" fn(*mut *mut SystemController, *mut Participant) -> ReturnCode>,
     pub system_controller_set_workflow: Option<
