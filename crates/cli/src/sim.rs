@@ -61,8 +61,22 @@ pub struct Args {
     state_dir: Option<PathBuf>,
     /// Run the scenario's script in virtual time instead, print each expectation's verdict
     /// and exit non-zero on a failure.
-    #[arg(long, conflicts_with_all = ["socketcand", "slcan", "duration", "pcap", "candump", "web"])]
+    #[arg(long, conflicts_with_all = ["socketcand", "slcan", "duration", "pcap", "candump", "web", "silkit"])]
     check: bool,
+    /// Join a Vector SIL Kit simulation through the registry at REGISTRY_URI (e.g.
+    /// silkit://127.0.0.1:8500): each bus is the SIL Kit CAN network of its name. Needs
+    /// libSilKit.so (CANTWIN_SILKIT_LIB, CANTWIN_SILKIT_DIR or the library path).
+    #[arg(long, value_name = "REGISTRY_URI")]
+    silkit: Option<String>,
+    /// The SIL Kit participant name [default: cantwin].
+    #[arg(long, value_name = "NAME", requires = "silkit")]
+    participant: Option<String>,
+    /// Run synchronised with SIL Kit's virtual time, in steps of this many microseconds, as a
+    /// coordinated participant (a system controller must list it); without it cantwin joins
+    /// unsynchronised, paced to the wall clock.
+    #[arg(long, value_name = "MICROSECONDS", requires = "silkit",
+          conflicts_with_all = ["socketcand", "slcan", "pcap", "candump", "web"])]
+    silkit_step: Option<u64>,
 }
 
 /// `[ADDR:]PORT` with ADDR defaulting to loopback.
@@ -107,6 +121,14 @@ pub fn run(args: &Args) -> Result<()> {
         let stop = stop.clone();
         ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
             .context("installing the Ctrl-C handler")?;
+    }
+    let silkit = args.silkit.as_ref().map(|uri| crate::silkit::SimOptions {
+        registry_uri: uri.clone(),
+        participant: args.participant.clone(),
+        step_us: args.silkit_step,
+    });
+    if let Some(options) = silkit.as_ref().filter(|o| o.step_us.is_some()) {
+        return crate::silkit::run_synchronized(options, built, stop, args.duration);
     }
     let mut captures = Captures::new();
     let pcap = args.pcap.as_ref().map(|p| {
@@ -160,6 +182,10 @@ pub fn run(args: &Args) -> Result<()> {
     let paced = PacedSimulation::start(built.sim, PacedConfig::default());
     let handle = paced.handle();
     let connector = Arc::new(PacedBus::new(handle.clone()));
+    let silkit_bridge = match &silkit {
+        Some(options) => Some(crate::silkit::join_paced(options, &handle, &built.buses)?),
+        None => None,
+    };
 
     eprintln!(
         "cantwin sim: {} ({}, {}), paced to the wall clock",
@@ -238,6 +264,9 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(s) = slcan_server {
         s.shutdown();
+    }
+    if let Some(bridge) = silkit_bridge {
+        crate::silkit::leave_paced(bridge)?;
     }
     let slips = handle.slips();
     let sim = paced
