@@ -55,12 +55,17 @@ pub fn pdos() -> PdoObjects {
 /// (servo drive, CiA 402-2 object 1000h).
 pub const DEVICE_TYPE: u32 = 0x0002_0000 | index::PROFILE_NUMBER;
 
-/// The built-in dictionary of a servo drive with `objects`.
-pub fn description(objects: &ServoObjects) -> Result<OdDescription, OdBuildError> {
+/// The built-in dictionary of a servo drive with `objects`, producing heartbeats every
+/// `heartbeat_ms` (0x1017's default; 0: none).
+pub fn description(
+    objects: &ServoObjects,
+    heartbeat_ms: u16,
+) -> Result<OdDescription, OdBuildError> {
     let options = Cia301Options {
         device_type: DEVICE_TYPE,
         device_name: "cantwin servo".into(),
         heartbeat_consumers: 1,
+        heartbeat_time: heartbeat_ms,
         ..Cia301Options::default()
     };
     let b = cia301_defaults(OdBuilder::new(), &options);

@@ -40,6 +40,8 @@ pub struct ServoConfig {
     pub status_period: Duration,
     /// The SDO server's timeout.
     pub sdo_timeout: Duration,
+    /// The default of 0x1017 producer heartbeat time (ms) of the built-in dictionary.
+    pub heartbeat_ms: u16,
 }
 
 impl ServoConfig {
@@ -50,6 +52,7 @@ impl ServoConfig {
             drive: DriveConfig::default(),
             status_period: Duration::from_millis(1),
             sdo_timeout: Duration::from_millis(1000),
+            heartbeat_ms: 0,
         }
     }
 }
@@ -165,7 +168,7 @@ impl Servo {
                 ..Default::default()
             },
         };
-        let desc = Arc::new(crate::od::description(&objects)?);
+        let desc = Arc::new(crate::od::description(&objects, config.heartbeat_ms)?);
         Self::with_description(desc, config)
     }
 

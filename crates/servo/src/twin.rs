@@ -15,11 +15,11 @@
 //! | `load_torque` | a process torque on the shaft | the same | N·m |
 //! | `dc_link` | the DC link voltage (mains sag, loss) | the same | V |
 //!
-//! Faults (kind alarm): `"following_error"` jams the shaft (the position loop then builds
+//! Faults (internal defects, injected by a scenario's `inject` action): `"following_error"` jams the shaft (the position loop then builds
 //! a real following error), `"limit_switch"` holds the positive limit switch active,
 //! `"over_current"` shorts two motor phases (the inverter trips as soon as it switches
 //! on), `"dc_link"` takes the mains away (the DC link falls to 0 V: under-voltage).
-//! Repairing alarms removes them all.
+//! Repairing removes them all.
 
 use cantwin_canopen::od::ObjectDictionary;
 use cantwin_cia402::Mode;
@@ -217,7 +217,7 @@ impl Twin for Servo {
     }
 
     fn inject(&mut self, fault: &Fault, cx: &mut Context<'_>) -> Result<(), FaultError> {
-        if fault.kind != FaultKind::Alarm {
+        if fault.kind != FaultKind::Internal {
             return Err(FaultError::None { kind: fault.kind });
         }
         self.settle(cx.now);
@@ -233,7 +233,7 @@ impl Twin for Servo {
             _ => {
                 return Err(FaultError::Unknown {
                     fault: fault.clone(),
-                    reason: format!("no alarm {:?} (alarms: {FAULTS})", fault.name),
+                    reason: format!("no fault {:?} (faults: {FAULTS})", fault.name),
                 });
             }
         }
@@ -242,7 +242,7 @@ impl Twin for Servo {
     }
 
     fn repair(&mut self, kind: FaultKind, cx: &mut Context<'_>) -> Result<(), FaultError> {
-        if kind != FaultKind::Alarm {
+        if kind != FaultKind::Internal {
             return Err(FaultError::None { kind });
         }
         self.settle(cx.now);
