@@ -51,3 +51,24 @@ fn sim_warns_of_a_store_that_cannot_be_read() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// An LSS slave (`lss = true`) keeps its parameters the same way and warns the same way.
+#[test]
+fn sim_warns_of_an_lss_slaves_store_that_cannot_be_read() {
+    let dir = std::env::temp_dir().join(format!("cantwin-sim-warn-lss-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("fresh")).unwrap();
+    let file = dir.join("fresh").join("parameters.store");
+    std::fs::write(&file, b"not a parameter store at all").unwrap();
+    let err = stderr_of(
+        &["sim", &scenario("lss-commissioning.toml"), "--duration", "0.2"],
+        &dir,
+    );
+    assert!(
+        err.contains("warning: device \"fresh\"")
+            && err.contains(&file.display().to_string())
+            && err.contains("wrong magic"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -139,14 +139,9 @@ impl DeviceKind for Adv200Kind {
         for (k, v) in analog.iter().enumerate() {
             node.set_analog_input(k as u8 + 1, *v);
         }
-        if let Some(dir) = &env.state_dir {
-            let dir = dir.join(&s.device().name);
-            let storage = FileStorage::new(&dir).map_err(|e| {
-                s.error(
-                    "name",
-                    format!("cannot keep the drive parameters in {}: {e}", dir.display()),
-                )
-            })?;
+        if let Some(storage) =
+            super::common::in_state_dir(s, env, "the drive parameters", FileStorage::new)?
+        {
             for problem in storage.check() {
                 s.warn(format!(
                     "{problem}; the drive keeps the parameters it has and raises Param error (EMCY 0xFF2D)"

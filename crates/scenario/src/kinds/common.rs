@@ -46,24 +46,48 @@ pub(crate) fn canopen_device(
         ..DeviceConfig::new(node_id)
     };
     let mut device = Device::new(desc, config).map_err(|e| s.error("node_id", e.to_string()))?;
-    if let Some(dir) = &env.state_dir {
-        let dir = dir.join(&s.device().name);
-        let storage = FileStorage::new(&dir).map_err(|e| {
-            s.error(
-                "name",
-                format!("cannot keep stored parameters in {}: {e}", dir.display()),
-            )
-        })?;
-        // CiA 301 §7.5.2.10: the device runs on its defaults for a group it cannot load and
-        // raises EMCY 0x5000; the user learns which file and why before it runs.
-        for problem in storage.check() {
-            s.warn(format!(
-                "{problem}; the device starts on its defaults and raises EMCY 0x5000"
-            ));
-        }
+    if let Some(storage) = parameter_file(s, env)? {
         device.set_storage(Box::new(storage));
     }
     Ok(device)
+}
+
+/// What the device called `s` stores, in its own folder of the scenario's state directory
+/// (`STATE_DIR/<device name>/`), opened with `open`; `None` without a state directory.
+/// `what` names it in the error when the folder cannot be used.
+pub(crate) fn in_state_dir<T, E: std::fmt::Display>(
+    s: &Settings<'_>,
+    env: &BuildEnv,
+    what: &str,
+    open: impl FnOnce(std::path::PathBuf) -> Result<T, E>,
+) -> Result<Option<T>, ScenarioError> {
+    let Some(dir) = &env.state_dir else {
+        return Ok(None);
+    };
+    let dir = dir.join(&s.device().name);
+    open(dir.clone()).map(Some).map_err(|e| {
+        s.error(
+            "name",
+            format!("cannot keep {what} in {}: {e}", dir.display()),
+        )
+    })
+}
+
+/// The CiA 301 parameter storage (0x1010/0x1011) of the device called `s` under the state
+/// directory, if there is one. CiA 301 §7.5.2.10: the device runs on its defaults for a
+/// group it cannot load and raises EMCY 0x5000; the user learns which file and why before
+/// it runs.
+pub(crate) fn parameter_file(
+    s: &Settings<'_>,
+    env: &BuildEnv,
+) -> Result<Option<FileStorage>, ScenarioError> {
+    let storage = in_state_dir(s, env, "stored parameters", FileStorage::new)?;
+    for problem in storage.iter().flat_map(FileStorage::check) {
+        s.warn(format!(
+            "{problem}; the device starts on its defaults and raises EMCY 0x5000"
+        ));
+    }
+    Ok(storage)
 }
 
 /// Replaces `path` with `bytes` atomically: a temporary file beside it, fsync, rename,

@@ -25,7 +25,7 @@ use cantwin_canopen::lss::{
     Address, FileStore, MemoryStore, Slave, SlaveEvent, Store, UNCONFIGURED, wire,
 };
 use cantwin_canopen::od::ObjectDictionary;
-use cantwin_canopen::storage::{self, FileStorage, Group, MemoryStorage, Storage};
+use cantwin_canopen::storage::{self, Group, MemoryStorage, Storage};
 use cantwin_twin::{
     Context, LiveValue, ObjectError, SignalDescription, SignalError, SignalId, SignalValue,
     SummaryEntry, Twin,
@@ -387,42 +387,21 @@ pub(crate) fn node_id(s: &Settings<'_>, lss: bool) -> Result<Option<u8>, Scenari
 /// The storage of the device's 0x1010 parameters: under the state directory, one folder per
 /// device name, or in memory.
 fn parameter_storage(s: &Settings<'_>, env: &BuildEnv) -> Result<Box<dyn Storage>, ScenarioError> {
-    match &env.state_dir {
-        Some(dir) => {
-            let dir = dir.join(&s.device().name);
-            FileStorage::new(&dir)
-                .map(|f| Box::new(f) as Box<dyn Storage>)
-                .map_err(|e| {
-                    s.error(
-                        "name",
-                        format!("cannot keep stored parameters in {}: {e}", dir.display()),
-                    )
-                })
-        }
-        None => Ok(Box::new(MemoryStorage::new())),
-    }
+    Ok(match super::common::parameter_file(s, env)? {
+        Some(file) => Box::new(file),
+        None => Box::new(MemoryStorage::new()),
+    })
 }
 
 /// Where store configuration keeps the node-ID and bit rate: beside the parameters, or in
 /// memory.
 fn lss_store(s: &Settings<'_>, env: &BuildEnv) -> Result<Box<dyn Store>, ScenarioError> {
-    match &env.state_dir {
-        Some(dir) => {
-            let dir = dir.join(&s.device().name);
-            FileStore::new(&dir)
-                .map(|f| Box::new(f) as Box<dyn Store>)
-                .map_err(|e| {
-                    s.error(
-                        "name",
-                        format!(
-                            "cannot keep the LSS configuration in {}: {e}",
-                            dir.display()
-                        ),
-                    )
-                })
-        }
-        None => Ok(Box::new(MemoryStore::new())),
-    }
+    Ok(
+        match super::common::in_state_dir(s, env, "the LSS configuration", FileStore::new)? {
+            Some(file) => Box::new(file),
+            None => Box::new(MemoryStore::new()),
+        },
+    )
 }
 
 /// The LSS node of a device kind: `make` builds the device for a node-ID; `node_id` is the
