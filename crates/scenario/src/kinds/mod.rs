@@ -1,6 +1,7 @@
 //! The device kinds built into cantwin.
 
 pub mod adv200;
+pub mod cia402;
 pub mod cia301;
 pub mod cia402_master;
 mod common;
@@ -24,6 +25,7 @@ fn builtin_kinds() -> Vec<Box<dyn DeviceKind>> {
         Box::new(adv200::Adv200Kind::default()),
         Box::new(tm3::Tm3Kind::default()),
         Box::new(eds::EdsKind),
+        Box::new(cia402::Cia402Kind),
     ]
 }
 
