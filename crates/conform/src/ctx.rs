@@ -81,6 +81,9 @@ impl std::fmt::Display for Aborted {
     }
 }
 
+/// Every entry of the file with what reading it gave, in file order.
+pub(crate) type Scan = Vec<(u16, u8, Result<Vec<u8>, Aborted>)>;
+
 /// The case context.
 pub(crate) struct Ctx<'a> {
     t: &'a mut dyn Transport,
@@ -93,7 +96,7 @@ pub(crate) struct Ctx<'a> {
     omitted: u64,
     /// Every entry of the file as first read by the EDS area (read once: a real device
     /// answers hundreds of uploads slowly).
-    pub scan: Option<Vec<(u16, u8, Result<Vec<u8>, Aborted>)>>,
+    pub scan: Option<Scan>,
 }
 
 fn id16(base: u16, node: u8) -> Id {
@@ -372,7 +375,7 @@ impl<'a> Ctx<'a> {
             ))),
             Err(a) => Err(Finding::Fail {
                 why: format!("reading {what} (0x{index:04X} sub {sub}): {a}"),
-                abort: Some(a.code),
+                abort: a.by_server.then_some(a.code),
             }),
         }
     }
@@ -383,7 +386,7 @@ impl<'a> Ctx<'a> {
             Ok(()) => Ok(()),
             Err(a) => Err(Finding::Fail {
                 why: format!("writing {what} (0x{index:04X} sub {sub}): {a}"),
-                abort: Some(a.code),
+                abort: a.by_server.then_some(a.code),
             }),
         }
     }

@@ -33,9 +33,10 @@
 //! let eds = cantwin_eds::load("[1000]\nParameterName=Device type\nDataType=0x0007\nAccessType=ro\n").eds;
 //! let options = Options { only: vec![Area::Sdo], ..Options::default() };
 //! let report = run(&mut Silent(Instant::ZERO), 5, &eds, &Profile::from_eds(&eds), &options, &mut |_| {});
-//! // Nobody answers: the mandatory expedited upload fails, and so does the run.
+//! // Nobody answers: the run stops before its first case, and fails.
 //! assert!(!report.passed());
-//! assert_eq!(report.case("sdo.expedited-upload").map(|c| c.verdict), Some(cantwin_conform::Verdict::Fail));
+//! assert!(report.stopped.as_deref().is_some_and(|s| s.contains("does not answer")));
+//! assert_eq!(report.case("sdo.expedited-upload").map(|c| c.verdict), Some(cantwin_conform::Verdict::Skipped));
 //! ```
 #![forbid(unsafe_code)]
 
@@ -112,8 +113,10 @@ fn verdict_of(
     profile: &Profile,
 ) -> (Verdict, String, Option<String>) {
     let dev = profile.deviation(info.id);
+    // A deviation with an abort code matches a refusal with that code; one without
+    // matches a behaviour that is not a refusal (never a device that does not answer).
     let matches = |abort: Option<cantwin_canopen::AbortCode>| {
-        dev.is_some_and(|d| d.abort.is_none() || d.abort == abort.map(|a| a.to_u32()))
+        dev.is_some_and(|d| d.abort == abort.map(|a| a.to_u32()))
     };
     let section = dev.map(|d| d.section.clone());
     match outcome {
@@ -171,6 +174,15 @@ fn verdict_of(
     }
 }
 
+/// Whether the selection needs no bus at all (only the file checks of the EDS area).
+fn only_offline(options: &Options) -> bool {
+    cases::all()
+        .iter()
+        .filter(|c| options.only.is_empty() || options.only.contains(&c.info.area))
+        .filter(|c| !options.skip.iter().any(|s| s == c.info.id))
+        .all(|c| c.info.id == "eds.file-valid")
+}
+
 /// Runs the cases `options` selects against the device `node` described by `eds`, with
 /// the features and deviations of `profile`, reporting each case to `progress` as it ends.
 pub fn run(
@@ -204,6 +216,18 @@ pub fn run(
     };
     let start = ctx.now();
     let bad_node = !(1..=127).contains(&node);
+    if !bad_node && !only_offline(options) {
+        // A device that does not answer at all would take every case to its timeouts.
+        match ctx.upload(0x1000, 0) {
+            Ok(Err(a)) if !a.by_server => {
+                report.stopped = Some(format!(
+                    "node {node} does not answer an SDO upload of 0x1000 ({a}): wrong node-ID, bit rate or bus?"
+                ));
+            }
+            Err(Finding::Transport(e)) => report.stopped = Some(e.to_string()),
+            _ => {}
+        }
+    }
     for (i, case) in selected.into_iter().enumerate() {
         let info = case.info;
         let t0 = ctx.now();

@@ -64,21 +64,6 @@ pub fn summary(report: &Report) -> String {
     s
 }
 
-/// A progress bar line: `[#####.....] 12/60 sdo.abort-toggle`.
-pub fn progress_line(done: usize, total: usize, id: &str) -> String {
-    let width = 30;
-    let filled = if total == 0 {
-        width
-    } else {
-        done * width / total
-    };
-    format!(
-        "[{}{}] {done}/{total} {id}",
-        "#".repeat(filled),
-        ".".repeat(width - filled)
-    )
-}
-
 fn xml(text: &str) -> String {
     // XML 1.0 cannot carry most control characters even escaped.
     escape(text)

@@ -1,4 +1,5 @@
 //! Every area against the shipped CANopen twins in virtual time.
+#![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
 
@@ -20,7 +21,7 @@ fn conform(file: &str, device: &str) -> Report {
 /// As [`conform`]; `profile`: this profile file instead of the shipped one (`Some("")`:
 /// the EDS alone).
 fn conform_with(file: &str, device: &str, profile: Option<&str>, options: &Options) -> Report {
-    let sc = Scenario::load(&scenario(file)).unwrap();
+    let sc = Scenario::load(scenario(file)).unwrap();
     let built = sc
         .build(&Registry::builtin(), &BuildEnv::default())
         .unwrap();

@@ -53,13 +53,28 @@ pub(super) fn cases() -> Vec<Case> {
     ]
 }
 
+/// One entry of the scan.
+type ScanEntry = (u16, u8, Result<Vec<u8>, Aborted>);
+
 /// Reads every entry of the file once, for the cases of this area.
-fn scan<'c>(ctx: &'c mut Ctx<'_>) -> Result<&'c [(u16, u8, Result<Vec<u8>, Aborted>)], Finding> {
+fn scan<'c>(ctx: &'c mut Ctx<'_>) -> Result<&'c [ScanEntry], Finding> {
     if ctx.scan.is_none() {
         let mut out = Vec::new();
+        let mut silent = 0;
         for (index, sub, _) in entries(ctx) {
             let got = ctx.upload(index, sub)?;
+            // A device that stops answering would take every entry to its timeout.
+            silent = match &got {
+                Err(a) if !a.by_server => silent + 1,
+                _ => 0,
+            };
             out.push((index, sub, got));
+            if silent == 5 {
+                ctx.scan = Some(out);
+                return Err(fail(format!(
+                    "the device stopped answering at 0x{index:04X} sub {sub} (5 requests in a row without an answer)"
+                )));
+            }
         }
         ctx.scan = Some(out);
     }
@@ -76,7 +91,7 @@ fn file_valid(ctx: &mut Ctx<'_>) -> Outcome {
             report.warnings().count()
         ))
     } else {
-        Err(fail(errors.join("; ")))
+        Err(fail(super::listing(&errors)))
     }
 }
 
@@ -94,7 +109,7 @@ fn mandatory_objects(ctx: &mut Ctx<'_>) -> Outcome {
     if missing.is_empty() {
         Ok("device type, error register and vendor-ID present".into())
     } else {
-        Err(fail(missing.join("; ")))
+        Err(fail(super::listing(&missing)))
     }
 }
 
@@ -117,7 +132,7 @@ fn entries_exist(ctx: &mut Ctx<'_>) -> Outcome {
         Err(fail(format!(
             "{} of {n} entries missing: {}",
             missing.len(),
-            missing.join("; ")
+            super::listing(&missing)
         )))
     }
 }
@@ -152,7 +167,7 @@ fn access_types(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok("access types agree".into())
     } else {
-        Err(fail(bad.join("; ")))
+        Err(fail(super::listing(&bad)))
     }
 }
 
@@ -178,7 +193,7 @@ fn data_lengths(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok(format!("{checked} entries of fixed size"))
     } else {
-        Err(fail(bad.join("; ")))
+        Err(fail(super::listing(&bad)))
     }
 }
 
@@ -213,6 +228,6 @@ fn default_values(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok(format!("{checked} defaults agree"))
     } else {
-        Err(fail(bad.join("; ")))
+        Err(fail(super::listing(&bad)))
     }
 }

@@ -151,7 +151,7 @@ fn emcy_cob(ctx: &mut Ctx<'_>) -> Result<Option<u32>, Finding> {
     }
     let cob = match ctx.upload(0x1014, 0)? {
         Ok(d) => super::u32_of(&d),
-        Err(_) => u32::from(ctx.emcy_id().as_raw()),
+        Err(_) => ctx.emcy_id().as_raw(),
     };
     Ok((cob & 0x8000_0000 == 0).then_some(cob & 0x7FF))
 }

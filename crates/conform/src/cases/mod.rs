@@ -196,13 +196,16 @@ pub(crate) fn absent_index(ctx: &Ctx<'_>) -> u16 {
         .unwrap_or(0x5FFD)
 }
 
+/// (index, sub-index, size, current value).
+pub(crate) type Writable = (u16, u8, usize, Vec<u8>);
+
 /// A writable entry of the file with a fixed size in `sizes`, outside the objects whose
 /// write has side effects (PDO and SDO parameters, store/restore, COB-IDs with a valid
 /// bit), that reads back now: (index, sub, size, current value).
 pub(crate) fn writable(
     ctx: &mut Ctx<'_>,
     sizes: std::ops::RangeInclusive<usize>,
-) -> Result<Option<(u16, u8, usize, Vec<u8>)>, Finding> {
+) -> Result<Option<Writable>, Finding> {
     // The communication objects whose rewrite is harmless come first, in this order.
     let mut candidates: Vec<(u16, u8, usize)> = Vec::new();
     for (i, s) in [(0x1017u16, 0u8), (0x100C, 0), (0x100D, 0), (0x1015, 0)] {
@@ -232,4 +235,20 @@ pub(crate) fn writable(
         }
     }
     Ok(None)
+}
+
+/// Joins findings for a report, the first ten in full and a count of the rest (a device
+/// can get hundreds of entries wrong the same way).
+pub(crate) fn listing(items: &[String]) -> String {
+    const SHOWN: usize = 10;
+    let mut s = items
+        .iter()
+        .take(SHOWN)
+        .cloned()
+        .collect::<Vec<_>>()
+        .join("; ");
+    if items.len() > SHOWN {
+        s.push_str(&format!("; and {} more", items.len() - SHOWN));
+    }
+    s
 }

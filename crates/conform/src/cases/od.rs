@@ -91,7 +91,7 @@ fn read_all(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok(format!("{read} entries read"))
     } else {
-        Err(fail(bad.join("; ")))
+        Err(fail(super::listing(&bad)))
     }
 }
 
@@ -119,7 +119,7 @@ fn write_back(ctx: &mut Ctx<'_>) -> Outcome {
         Ok(format!("{written} entries written back"))
     } else {
         Err(Finding::Fail {
-            why: bad.join("; "),
+            why: super::listing(&bad),
             abort: None,
         })
     }
@@ -168,13 +168,13 @@ fn limits(ctx: &mut Ctx<'_>) -> Outcome {
         let mut tries: Vec<(i128, bool)> = Vec::new();
         if let Some(l) = lo {
             tries.push((*l, true));
-            if l - 1 >= *min {
+            if l > min {
                 tries.push((l - 1, false));
             }
         }
         if let Some(h) = hi {
             tries.push((*h, true));
-            if h + 1 <= *max {
+            if h < max {
                 tries.push((h + 1, false));
             }
         }
@@ -219,6 +219,6 @@ fn limits(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok(format!("{} entries probed at their limits", probes.len()))
     } else {
-        Err(fail(bad.join("; ")))
+        Err(fail(super::listing(&bad)))
     }
 }

@@ -106,8 +106,11 @@ fn cob_ids(ctx: &mut Ctx<'_>) -> Outcome {
     }
 }
 
+/// (communication index, mapping index, COB-ID, mapping entries).
+type DynamicPdo = (u16, u16, u32, Vec<Vec<u8>>);
+
 /// A valid PDO whose mapping the file says is writable: (comm, mapping, COB-ID, entries).
-fn dynamic_pdo(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u16, u32, Vec<Vec<u8>>)>, Finding> {
+fn dynamic_pdo(ctx: &mut Ctx<'_>) -> Result<Option<DynamicPdo>, Finding> {
     let all: Vec<(u16, u16)> = pdos(ctx, true)
         .into_iter()
         .chain(pdos(ctx, false))

@@ -265,7 +265,7 @@ fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
     let emcy = ctx
         .upload(0x1014, 0)?
         .map(|d| u32_of(&d) & 0x7FF)
-        .unwrap_or(u32::from(ctx.emcy_id().as_raw()));
+        .unwrap_or(ctx.emcy_id().as_raw());
     ctx.nmt(cantwin_canopen::wire::NmtCs::ResetCommunication)?;
     let ec = ctx.ec_id();
     let within = ctx.options.boot_timeout;
