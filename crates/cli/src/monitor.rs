@@ -25,7 +25,8 @@ pub struct Args {
     /// --socketcand to `cantwin sim FILE`); --scenario does it by itself.
     #[arg(long, value_name = "FILE", conflicts_with = "scenario")]
     names: Option<PathBuf>,
-    /// The bus bit rate for the load: default the scenario bus's, else 500k.
+    /// The bus bit rate for the load: default the scenario bus's, else 500k (as `cantwin
+    /// report` assumes; the load panel then says "assumed").
     #[arg(long, value_name = "RATE")]
     bit_rate: Option<BitRate>,
     /// Width of a bus load window, in milliseconds.
@@ -48,13 +49,19 @@ pub struct Declared {
     pub name: String,
     /// Its kind, if the monitor knows how its PDOs read.
     pub kind: Option<DeviceKind>,
+    /// Its device type (0x1000) at power-up, which names its profile.
+    pub device_type: Option<u32>,
+}
+
+fn od_device_type(od: &ObjectDictionary) -> Option<u32> {
+    match od.get(0x1000, 0) {
+        Ok(Value::Unsigned32(v)) => Some(v),
+        _ => None,
+    }
 }
 
 fn od_identity(od: &ObjectDictionary) -> Option<DeviceKind> {
-    let device_type = match od.get(0x1000, 0) {
-        Ok(Value::Unsigned32(v)) => Some(v),
-        _ => None,
-    };
+    let device_type = od_device_type(od);
     let name = match od.get(0x1008, 0) {
         Ok(Value::VisibleString(s)) => Some(s),
         _ => None,
@@ -70,10 +77,16 @@ pub fn declared_nodes(built: &Built) -> Vec<Declared> {
         .iter()
         .filter_map(|d| {
             let (node, kind) = declared_kind(&built.sim, d)?;
+            let device_type = built
+                .sim
+                .twin(d.port)
+                .and_then(|t| t.dictionary())
+                .and_then(od_device_type);
             Some(Declared {
                 node,
                 name: d.name.clone(),
                 kind,
+                device_type,
             })
         })
         .collect()
@@ -144,6 +157,9 @@ pub fn view_for_scenario(
     let mut view = NetworkView::new(config);
     for (d, _) in declared {
         view.declare(d.node, Some(d.name), d.kind);
+        if let Some(t) = d.device_type {
+            view.declare_device_type(d.node, t);
+        }
     }
     Ok((view, built))
 }
@@ -183,7 +199,7 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
     let mut config = Config {
-        bit_rate: args.bit_rate.unwrap_or(BitRate::R500K),
+        bit_rate: args.bit_rate.unwrap_or(cantwin_report::DEFAULT_BIT_RATE),
         window: Duration::from_millis(args.window_ms.max(1)),
         ring: args.keep.max(1),
         ..Config::default()
@@ -208,6 +224,7 @@ pub fn run(args: &Args) -> Result<()> {
     // Connect before taking over the terminal, so that errors print as usual.
     let mut link = Link::open(&args.target)?;
     let mut ui = Ui::new(source);
+    ui.bit_rate_assumed = args.bit_rate.is_none() && names.is_none();
     let mut terminal = ratatui::init();
     let _guard = TerminalGuard;
     let mut last_draw: Option<WallInstant> = None;

@@ -2,13 +2,21 @@
 //! ([`NetworkView`]) and the UI state ([`Ui`]), so tests render it into a test backend;
 //! [`Ui::on_key`] is the only place keys change anything.
 //!
-//! Keys: `q` quits (also Ctrl-C), `↑`/`↓` (or `k`/`j`) select a node, `space` pauses the
-//! frame stream, `PgUp`/`PgDn` scroll it (pausing it), `Home` goes to the oldest frame kept,
-//! `End` back to the live end, `/` edits the filter (`Enter` applies, `Esc` cancels), `c`
-//! clears it.
+//! Keys: `q` quits (also Ctrl-C; `Esc` only leaves the filter editor or the device page),
+//! `↑`/`↓` (or `k`/`j`) select a node, `t` toggles the scrolling and the fixed trace (one
+//! row per identifier, overwritten by each frame, as CANalyzer and PCAN-View show a bus),
+//! `space` pauses either, `PgUp`/`PgDn` scroll (the stream pauses), `Home` goes to the oldest
+//! frame kept or the first row, `End` back to the live end, `/` edits the filter (`Enter`
+//! applies, `Esc` cancels), `c` clears it, `Enter` shows the selected node's page on a
+//! terminal too narrow to show it beside the trace.
+//!
+//! Below [`WIDE`] columns the screen stacks: the node table over the whole width, the load
+//! on one line, the trace (or the device page) under it, so that an 80×24 terminal shows
+//! every column and the decoded text.
 
 use cantwin_can::{Duration, Instant};
-use cantwin_monitor::{Filter, FrameEntry, Led, NetworkView, NodeInfo};
+use cantwin_monitor::fixed_trace::Row as FixedRow;
+use cantwin_monitor::{Filter, FixedTrace, FrameEntry, Led, NetworkView, NodeInfo};
 use cantwin_report::canopen::hex_bytes;
 use ratatui::Frame;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
@@ -19,6 +27,20 @@ use ratatui::widgets::{Block, Cell, Paragraph, Row, Sparkline, Table, TableState
 
 /// Frames a `PgUp`/`PgDn` moves.
 pub const PAGE: usize = 10;
+
+/// The narrowest terminal that shows the load and the device page beside the node table and
+/// the trace; narrower ones stack them.
+pub const WIDE: u16 = 120;
+
+/// Which trace the lower part shows.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum TraceMode {
+    /// Every frame, newest at the bottom.
+    #[default]
+    Scrolling,
+    /// One row per identifier, overwritten in place.
+    Fixed,
+}
 
 /// What the loop does after a key.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,6 +68,16 @@ pub struct Ui {
     pub editing: Option<String>,
     /// A message for the help line (a filter that did not parse).
     pub message: Option<String>,
+    /// The scrolling or the fixed trace.
+    pub mode: TraceMode,
+    /// The fixed trace as it was when paused.
+    pub frozen: Option<FixedTrace>,
+    /// Rows of the fixed trace scrolled past at the top.
+    pub fixed_offset: usize,
+    /// On a narrow terminal, the selected node's page is shown instead of the trace.
+    pub device_page: bool,
+    /// The bit rate of the load is the default, not the scenario's or a given one.
+    pub bit_rate_assumed: bool,
 }
 
 impl Ui {
@@ -82,6 +114,33 @@ impl Ui {
         if self.paused_at.is_none() {
             self.paused_at = view.frames().last().map(|e| e.seq);
         }
+        if self.frozen.is_none() {
+            self.frozen = Some(view.fixed_trace().clone());
+        }
+    }
+
+    fn resume(&mut self) {
+        self.paused_at = None;
+        self.frozen = None;
+        self.scroll = 0;
+    }
+
+    /// Whether the trace is paused.
+    pub fn paused(&self) -> bool {
+        self.paused_at.is_some() || self.frozen.is_some()
+    }
+
+    /// The fixed trace shown: the frozen one while paused, else the live one.
+    pub fn fixed_trace<'a>(&'a self, view: &'a NetworkView) -> &'a FixedTrace {
+        self.frozen.as_ref().unwrap_or(view.fixed_trace())
+    }
+
+    /// The rows of the fixed trace shown in `rows` lines: those passing the filter, from
+    /// `fixed_offset` (kept within the rows).
+    pub fn fixed_rows<'a>(&'a self, view: &'a NetworkView, rows: usize) -> Vec<&'a FixedRow> {
+        let shown: Vec<&FixedRow> = self.fixed_trace(view).filtered(&self.filter).collect();
+        let start = self.fixed_offset.min(shown.len().saturating_sub(rows));
+        shown.into_iter().skip(start).take(rows).collect()
     }
 
     /// Handle a key press.
@@ -96,12 +155,14 @@ impl Ui {
                         Ok(f) => {
                             self.filter = f;
                             self.scroll = 0;
+                            self.fixed_offset = 0;
                             self.message = None;
                         }
                         Err(e) => self.message = Some(format!("filter: {e}")),
                     }
                     self.editing = None;
                 }
+                // Esc leaves the editor and keeps the filter in force; it never quits.
                 KeyCode::Esc => self.editing = None,
                 KeyCode::Backspace => {
                     text.pop();
@@ -112,17 +173,38 @@ impl Ui {
             return Flow::Continue;
         }
         self.message = None;
+        let fixed = self.mode == TraceMode::Fixed;
         match key.code {
-            KeyCode::Char('q') | KeyCode::Esc => return Flow::Quit,
+            KeyCode::Char('q') => return Flow::Quit,
+            // Esc steps back (out of the device page, clears a message); it never quits.
+            KeyCode::Esc => self.device_page = false,
+            KeyCode::Enter => self.device_page = !self.device_page,
             KeyCode::Up | KeyCode::Char('k') => self.move_selection(view, false),
             KeyCode::Down | KeyCode::Char('j') => self.move_selection(view, true),
+            KeyCode::Char('t') => {
+                self.mode = if fixed {
+                    TraceMode::Scrolling
+                } else {
+                    TraceMode::Fixed
+                };
+                self.device_page = false;
+            }
             KeyCode::Char(' ') | KeyCode::Char('p') => {
-                if self.paused_at.is_some() {
-                    self.paused_at = None;
-                    self.scroll = 0;
+                if self.paused() {
+                    self.resume();
                 } else {
                     self.pause(view);
                 }
+            }
+            KeyCode::PageUp if fixed => self.fixed_offset = self.fixed_offset.saturating_sub(PAGE),
+            KeyCode::PageDown if fixed => {
+                let rows = self.fixed_trace(view).filtered(&self.filter).count();
+                self.fixed_offset = (self.fixed_offset + PAGE).min(rows.saturating_sub(1));
+            }
+            KeyCode::Home if fixed => self.fixed_offset = 0,
+            KeyCode::End if fixed => {
+                self.resume();
+                self.fixed_offset = 0;
             }
             KeyCode::PageUp => {
                 self.pause(view);
@@ -133,16 +215,14 @@ impl Ui {
                 self.pause(view);
                 self.scroll = view.frames().len();
             }
-            KeyCode::End => {
-                self.paused_at = None;
-                self.scroll = 0;
-            }
+            KeyCode::End => self.resume(),
             KeyCode::Char('/') | KeyCode::Char('f') => {
                 self.editing = Some(self.filter.to_string());
             }
             KeyCode::Char('c') => {
                 self.filter = Filter::default();
                 self.scroll = 0;
+                self.fixed_offset = 0;
             }
             _ => {}
         }
@@ -194,57 +274,72 @@ fn emcy_text(n: &NodeInfo) -> String {
     }
 }
 
+/// A column as wide as its widest cell (or header), within `min..=max`.
+fn fit<'a>(header: &str, cells: impl Iterator<Item = &'a str>, min: u16, max: u16) -> u16 {
+    let widest = cells
+        .map(|c| c.chars().count())
+        .chain([header.chars().count()])
+        .max()
+        .unwrap_or(0);
+    u16::try_from(widest).unwrap_or(max).clamp(min, max)
+}
+
 fn nodes_table(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     let now = view.now();
-    let header = Row::new([
-        "ID",
-        "name",
-        "kind",
-        "NMT",
-        "HB age",
-        "RUN",
-        "ERR",
-        "ER",
-        "last EMCY",
-    ])
-    .style(Style::default().add_modifier(Modifier::BOLD));
+    // The LED columns need room: on a narrow terminal the device page shows them.
+    let wide = area.width >= WIDE * 68 / 100;
+    let names: Vec<String> = view.nodes().map(|n| n.display_name().to_string()).collect();
+    let kinds: Vec<String> = view
+        .nodes()
+        .map(|n| n.kind_label().unwrap_or_default())
+        .collect();
+    let mut header = vec!["ID", "name", "kind", "NMT", "HB age"];
+    if wide {
+        header.extend(["RUN", "ERR"]);
+    }
+    header.extend(["ER", "last EMCY"]);
     let rows: Vec<Row<'_>> = view
         .nodes()
-        .map(|n| {
+        .zip(names.iter().zip(&kinds))
+        .map(|(n, (name, kind))| {
             let leds = n.leds(now);
-            Row::new(vec![
+            let mut cells = vec![
                 Cell::from(n.id.to_string()),
-                Cell::from(n.display_name().to_string()),
-                Cell::from(n.kind.as_ref().map(|k| k.name.clone()).unwrap_or_default()),
+                Cell::from(name.clone()),
+                Cell::from(kind.clone()),
                 Cell::from(n.state_name()),
                 Cell::from(n.heartbeat_age(now).map(age).unwrap_or_else(|| "-".into())),
-                led_cell(leds.run, Color::Green),
-                led_cell(leds.err, Color::Red),
-                Cell::from(
-                    n.error_register
-                        .map(|r| format!("{r:02X}"))
-                        .unwrap_or_else(|| "-".into()),
-                ),
-                Cell::from(emcy_text(n)),
-            ])
+            ];
+            if wide {
+                cells.push(led_cell(leds.run, Color::Green));
+                cells.push(led_cell(leds.err, Color::Red));
+            }
+            cells.push(Cell::from(
+                n.error_register
+                    .map(|r| format!("{r:02X}"))
+                    .unwrap_or_else(|| "-".into()),
+            ));
+            cells.push(Cell::from(emcy_text(n)));
+            Row::new(cells)
         })
         .collect();
-    let widths = [
+    let mut widths = vec![
         Constraint::Length(3),
-        Constraint::Length(12),
-        Constraint::Length(12),
+        Constraint::Length(fit("name", names.iter().map(String::as_str), 4, 16)),
+        Constraint::Length(fit("kind", kinds.iter().map(String::as_str), 4, 14)),
+        // "pre-operational", the longest state name.
         Constraint::Length(15),
         Constraint::Length(8),
-        Constraint::Length(12),
-        Constraint::Length(12),
-        Constraint::Length(2),
-        Constraint::Min(10),
     ];
+    if wide {
+        widths.extend([Constraint::Length(12), Constraint::Length(12)]);
+    }
+    widths.extend([Constraint::Length(2), Constraint::Min(10)]);
     let selected = ui
         .selected_node(view)
         .and_then(|s| view.nodes().position(|n| n.id == s.id));
     let table = Table::new(rows, widths)
-        .header(header)
+        .header(Row::new(header).style(Style::default().add_modifier(Modifier::BOLD)))
         .block(Block::bordered().title(format!(" nodes ({}) ", view.nodes().len())))
         .row_highlight_style(Style::default().add_modifier(Modifier::REVERSED))
         .highlight_symbol(">");
@@ -252,11 +347,53 @@ fn nodes_table(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     f.render_stateful_widget(table, area, &mut state);
 }
 
-fn load_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView) {
+/// The load and frame rate of the last complete window, the peak load, and the totals.
+fn load_figures(view: &NetworkView) -> (f64, f64, f64) {
+    let load = view.load();
+    let loads = load.load_series();
+    let fps = load.fps_series();
+    // The last window is still filling: the figures are those of the one before.
+    let complete = loads.len().saturating_sub(1);
+    let now_load = complete.checked_sub(1).map(|i| loads[i]).unwrap_or(0.0);
+    let now_fps = complete.checked_sub(1).map(|i| fps[i]).unwrap_or(0.0);
+    let peak = loads[..complete].iter().copied().fold(0.0, f64::max);
+    (now_load, peak, now_fps)
+}
+
+/// The load on one line, for narrow terminals.
+fn load_line(view: &NetworkView, ui: &Ui) -> Line<'static> {
+    let (now_load, peak, fps) = load_figures(view);
+    let load = view.load();
+    Line::from(vec![
+        Span::styled(
+            format!("load {:.1} %", now_load * 100.0),
+            Style::default().fg(Color::Yellow),
+        ),
+        Span::raw(format!("  peak {:.1} %  ", peak * 100.0)),
+        Span::styled(
+            format!("{fps:.0} frames/s"),
+            Style::default().fg(Color::Cyan),
+        ),
+        Span::raw(format!(
+            "  ({} kbit/s{}, {} ms windows)",
+            load.bit_rate().bits_per_second() / 1000,
+            rate_note(ui),
+            load.width().as_nanos() / 1_000_000
+        )),
+    ])
+}
+
+/// What the load's bit rate is based on, when it is no more than the default.
+fn rate_note(ui: &Ui) -> &'static str {
+    if ui.bit_rate_assumed { " assumed" } else { "" }
+}
+
+fn load_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     let load = view.load();
     let block = Block::bordered().title(format!(
-        " bus load ({} kbit/s, {} ms windows) ",
+        " bus load ({} kbit/s{}, {} ms windows) ",
         load.bit_rate().bits_per_second() / 1000,
+        rate_note(ui),
         load.width().as_nanos() / 1_000_000
     ));
     let inner = block.inner(area);
@@ -271,11 +408,8 @@ fn load_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView) {
     let width = usize::from(inner.width);
     let loads = load.load_series();
     let fps = load.fps_series();
-    // The last window is still filling: the figures are those of the one before.
     let complete = loads.len().saturating_sub(1);
-    let now_load = complete.checked_sub(1).map(|i| loads[i]).unwrap_or(0.0);
-    let now_fps = complete.checked_sub(1).map(|i| fps[i]).unwrap_or(0.0);
-    let peak = loads[..complete].iter().copied().fold(0.0, f64::max);
+    let (now_load, peak, now_fps) = load_figures(view);
     f.render_widget(
         Paragraph::new(format!(
             "load {:.1} %  peak {:.1} %",
@@ -313,15 +447,19 @@ fn load_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView) {
     );
 }
 
-fn frame_line(e: &FrameEntry) -> Line<'static> {
-    let colour = match e.service {
+fn service_colour(service: cantwin_monitor::Service) -> Color {
+    match service {
         cantwin_monitor::Service::Emcy => Color::Red,
         cantwin_monitor::Service::Nmt => Color::Magenta,
         cantwin_monitor::Service::Heartbeat => Color::Green,
         cantwin_monitor::Service::Sdo => Color::Blue,
         cantwin_monitor::Service::Pdo => Color::Cyan,
         _ => Color::Reset,
-    };
+    }
+}
+
+fn frame_line(e: &FrameEntry) -> Line<'static> {
+    let colour = service_colour(e.service);
     let id = if e.frame.is_extended() {
         format!("{:08X}", e.frame.id().as_raw())
     } else {
@@ -340,25 +478,162 @@ fn frame_line(e: &FrameEntry) -> Line<'static> {
     ])
 }
 
-fn frames_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
-    let state = if ui.paused_at.is_some() {
-        "PAUSED"
+/// Milliseconds with one decimal, for cycle times.
+fn millis(d: Option<Duration>) -> String {
+    match d {
+        Some(d) => format!("{:.1}", d.as_nanos() as f64 / 1e6),
+        None => "-".to_string(),
+    }
+}
+
+/// The identifier as the frame lines show it: 3 hex digits, 8 for extended ones, `R` after a
+/// remote request's.
+fn id_text(key: &cantwin_monitor::fixed_trace::RowKey) -> String {
+    let id = if key.extended {
+        format!("{:08X}", key.id)
     } else {
-        "LIVE"
+        format!("{:03X}", key.id)
     };
-    let filter = if ui.filter.is_empty() {
+    if key.remote { format!("{id}R") } else { id }
+}
+
+/// Widths of the fixed trace's columns: identifier, count, Δt, min, max, data.
+const FIXED_COLUMNS: [usize; 6] = [9, 7, 8, 8, 8, 23];
+
+/// The inner width below which the fixed trace leaves out the data bytes, so that the
+/// decoded text keeps its room (the scrolling trace shows both).
+const FIXED_DATA_WIDTH: u16 = 100;
+
+fn fixed_header(with_data: bool) -> Line<'static> {
+    let [id, count, dt, min, max, data] = FIXED_COLUMNS;
+    let data = if with_data {
+        format!("{:<data$} ", "last data")
+    } else {
+        String::new()
+    };
+    Line::from(Span::styled(
+        format!(
+            "{:>id$} {:>count$} {:>dt$} {:>min$} {:>max$} {data}decoded",
+            "ID", "count", "Δt ms", "min ms", "max ms"
+        ),
+        Style::default().add_modifier(Modifier::BOLD),
+    ))
+}
+
+/// One row of the fixed trace: the bytes the last frame changed stand out (the delta).
+/// Without room for the data, a frame without decoded text shows its bytes instead.
+fn fixed_line(r: &FixedRow, with_data: bool) -> Line<'static> {
+    let [id, count, dt, min, max, data] = FIXED_COLUMNS;
+    let colour = service_colour(r.service());
+    let mut spans = vec![
+        Span::styled(
+            format!("{:>id$} ", id_text(&r.key)),
+            Style::default().fg(colour),
+        ),
+        Span::raw(format!(
+            "{:>count$} {:>dt$} {:>min$} {:>max$} ",
+            r.count,
+            millis(r.cycle.last),
+            millis(r.cycle.min),
+            millis(r.cycle.max)
+        )),
+    ];
+    let frame = &r.last.frame;
+    if !with_data && !r.last.text.is_empty() {
+        spans.push(Span::styled(
+            r.last.text.clone(),
+            Style::default().fg(colour),
+        ));
+        return Line::from(spans);
+    }
+    let mut used = 0;
+    if frame.is_remote() {
+        let text = format!("R{}", frame.dlc());
+        used = text.len();
+        spans.push(Span::raw(text));
+    } else {
+        for (i, b) in frame.data_bytes().iter().enumerate() {
+            if i > 0 {
+                spans.push(Span::raw(" "));
+                used += 1;
+            }
+            let style = if r.changed & (1 << i) != 0 {
+                Style::default()
+                    .fg(Color::Yellow)
+                    .add_modifier(Modifier::BOLD)
+            } else {
+                Style::default()
+            };
+            spans.push(Span::styled(format!("{b:02X}"), style));
+            used += 2;
+        }
+    }
+    spans.push(Span::raw(" ".repeat(data.saturating_sub(used) + 1)));
+    spans.push(Span::styled(
+        r.last.text.clone(),
+        Style::default().fg(colour),
+    ));
+    Line::from(spans)
+}
+
+fn state_word(ui: &Ui) -> &'static str {
+    if ui.paused() { "PAUSED" } else { "LIVE" }
+}
+
+fn filter_text(ui: &Ui) -> String {
+    if ui.filter.is_empty() {
         String::new()
     } else {
         format!(" filter: {} ·", ui.filter)
+    }
+}
+
+fn fixed_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
+    let trace = ui.fixed_trace(view);
+    let full = if trace.overflow() > 0 {
+        format!(
+            ", {} frames of further identifiers not shown (table full)",
+            trace.overflow()
+        )
+    } else {
+        String::new()
     };
     let block = Block::bordered().title(format!(
-        " frames · {state} ·{filter} {} kept, {} dropped ",
+        " fixed trace · {} ·{} {} identifiers{full} ",
+        state_word(ui),
+        filter_text(ui),
+        trace.rows().len()
+    ));
+    let inner = block.inner(area);
+    let with_data = inner.width >= FIXED_DATA_WIDTH;
+    let rows = usize::from(inner.height).saturating_sub(1);
+    let mut lines = vec![fixed_header(with_data)];
+    lines.extend(
+        ui.fixed_rows(view, rows)
+            .into_iter()
+            .map(|r| fixed_line(r, with_data)),
+    );
+    f.render_widget(Paragraph::new(lines).block(block), area);
+}
+
+fn frames_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
+    let block = Block::bordered().title(format!(
+        " frames · {} ·{} {} kept, {} dropped ",
+        state_word(ui),
+        filter_text(ui),
         view.frames().len(),
         view.dropped_frames()
     ));
     let rows = usize::from(block.inner(area).height);
     let lines: Vec<Line<'_>> = ui.visible(view, rows).into_iter().map(frame_line).collect();
     f.render_widget(Paragraph::new(lines).block(block), area);
+}
+
+fn trace_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
+    match ui.mode {
+        TraceMode::Scrolling => frames_panel(f, area, view, ui),
+        TraceMode::Fixed => fixed_panel(f, area, view, ui),
+    }
 }
 
 fn device_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
@@ -379,10 +654,7 @@ fn device_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
         Span::raw(format!(
             "  {}  {}",
             n.display_name(),
-            n.kind
-                .as_ref()
-                .map(|k| k.name.as_str())
-                .unwrap_or("kind unknown")
+            n.kind_label().unwrap_or_else(|| "kind unknown".into())
         )),
     ])];
     let mut id_parts = Vec::new();
@@ -406,10 +678,12 @@ fn device_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     if !id_parts.is_empty() {
         lines.push(Line::from(id_parts.join("  ")));
     }
+    // Heartbeat and node guarding are different services (CiA 301 §7.2.8.3.2).
+    let service = n.error_control().unwrap_or("heartbeat");
     let heartbeat = match (n.heartbeat_age(now), n.heartbeat_period) {
-        (Some(a), Some(p)) => format!("heartbeat {} ago, every {}", age(a), age(p)),
-        (Some(a), None) => format!("heartbeat {} ago", age(a)),
-        _ => "no heartbeat".into(),
+        (Some(a), Some(p)) => format!("{service} {} ago, every {}", age(a), age(p)),
+        (Some(a), None) => format!("{service} {} ago", age(a)),
+        _ => "no heartbeat or node guarding".into(),
     };
     lines.push(Line::from(format!("NMT {}  {heartbeat}", n.state_name())));
     lines.push(Line::from(format!(
@@ -473,16 +747,20 @@ fn device_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     );
 }
 
-/// The help line's text.
-pub const HELP: &str = "q quit  ↑↓ node  space pause  PgUp/PgDn scroll  Home/End oldest/live  / filter  c clear filter";
+/// The help line's text on a wide terminal.
+pub const HELP: &str = "q quit  ↑↓ node  t fixed/scrolling trace  space pause  PgUp/PgDn scroll  Home/End oldest/live  / filter  c clear filter";
 
-fn help_line(ui: &Ui) -> Line<'static> {
+/// The help line's text on a narrow terminal (at most 80 columns).
+pub const HELP_NARROW: &str =
+    "q quit  ↑↓ node  Enter device  t fixed/scroll  space pause  PgUp/PgDn  / filter";
+
+fn help_line(ui: &Ui, wide: bool) -> Line<'static> {
     if let Some(text) = &ui.editing {
         return Line::from(vec![
             Span::styled("filter: ", Style::default().add_modifier(Modifier::BOLD)),
             Span::raw(format!("{text}▏")),
             Span::styled(
-                "   Enter apply · Esc cancel · e.g. node=5 svc=emcy,hb,pdo,sdo id=0x180-0x1FF",
+                "   Enter apply · Esc cancel · e.g. node=5 svc=emcy,hb,pdo,sdo,lss id=0x180-0x1FF",
                 Style::default().fg(Color::DarkGray),
             ),
         ]);
@@ -490,18 +768,30 @@ fn help_line(ui: &Ui) -> Line<'static> {
     if let Some(m) = &ui.message {
         return Line::from(Span::styled(m.clone(), Style::default().fg(Color::Red)));
     }
-    Line::from(Span::styled(HELP, Style::default().fg(Color::DarkGray)))
+    let help = if wide { HELP } else { HELP_NARROW };
+    Line::from(Span::styled(help, Style::default().fg(Color::DarkGray)))
 }
 
 /// Draw the whole screen.
 pub fn draw(f: &mut Frame<'_>, view: &NetworkView, ui: &Ui) {
-    let [title, top, middle, help] = Layout::vertical([
+    let wide = f.area().width >= WIDE;
+    let table_rows = view.nodes().len() as u16 + 3;
+    let [title, top, load, middle, help] = Layout::vertical([
         Constraint::Length(1),
-        Constraint::Length((view.nodes().len() as u16 + 3).clamp(8, 16)),
+        if wide {
+            Constraint::Length(table_rows.clamp(8, 16))
+        } else {
+            Constraint::Length(table_rows.clamp(4, 9))
+        },
+        Constraint::Length(u16::from(!wide)),
         Constraint::Min(6),
         Constraint::Length(1),
     ])
     .areas(f.area());
+    let mode = match ui.mode {
+        TraceMode::Scrolling => "scrolling trace",
+        TraceMode::Fixed => "fixed trace",
+    };
     f.render_widget(
         Paragraph::new(Line::from(vec![
             Span::styled(
@@ -509,22 +799,33 @@ pub fn draw(f: &mut Frame<'_>, view: &NetworkView, ui: &Ui) {
                 Style::default().add_modifier(Modifier::BOLD),
             ),
             Span::raw(format!(
-                "  {}  bus time {} s",
+                "  {}  bus time {} s  {mode}",
                 ui.source,
                 seconds(view.now())
             )),
         ])),
         title,
     );
-    let [nodes, load] =
-        Layout::horizontal([Constraint::Percentage(68), Constraint::Percentage(32)]).areas(top);
-    nodes_table(f, nodes, view, ui);
-    load_panel(f, load, view);
-    let [frames, device] =
-        Layout::horizontal([Constraint::Percentage(62), Constraint::Percentage(38)]).areas(middle);
-    frames_panel(f, frames, view, ui);
-    device_panel(f, device, view, ui);
-    f.render_widget(Paragraph::new(help_line(ui)), help);
+    if wide {
+        let [nodes, load] =
+            Layout::horizontal([Constraint::Percentage(68), Constraint::Percentage(32)]).areas(top);
+        nodes_table(f, nodes, view, ui);
+        load_panel(f, load, view, ui);
+        let [frames, device] =
+            Layout::horizontal([Constraint::Percentage(62), Constraint::Percentage(38)])
+                .areas(middle);
+        trace_panel(f, frames, view, ui);
+        device_panel(f, device, view, ui);
+    } else {
+        nodes_table(f, top, view, ui);
+        f.render_widget(Paragraph::new(load_line(view, ui)), load);
+        if ui.device_page {
+            device_panel(f, middle, view, ui);
+        } else {
+            trace_panel(f, middle, view, ui);
+        }
+    }
+    f.render_widget(Paragraph::new(help_line(ui, wide)), help);
 }
 
 #[cfg(test)]

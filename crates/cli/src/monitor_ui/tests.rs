@@ -8,6 +8,7 @@ use cantwin_scenario::Scenario;
 use ratatui::Terminal;
 use ratatui::backend::TestBackend;
 use ratatui::crossterm::event::{KeyCode, KeyEvent, KeyModifiers};
+use ratatui::style::{Color, Modifier};
 
 use super::*;
 use crate::monitor::{declared_nodes, view_for_scenario};
@@ -337,4 +338,222 @@ fn small_terminals_get_what_fits() {
         screen.join("\n")
     );
     assert!(screen[23].starts_with("q quit"), "{}", screen[23]);
+}
+
+/// The line of the fixed trace for identifier `id` (as the table prints it).
+fn fixed_row(screen: &[String], id: &str) -> String {
+    screen
+        .iter()
+        .find(|l| l.trim_start_matches(['│', ' ']).split_whitespace().next() == Some(id))
+        .cloned()
+        .unwrap_or_default()
+}
+
+#[test]
+fn t_toggles_the_fixed_trace_one_row_per_identifier() {
+    let view = network(1_700);
+    let mut ui = Ui::new(String::new());
+    assert_eq!(ui.on_key(key(KeyCode::Char('t')), &view), Flow::Continue);
+    assert_eq!(ui.mode, TraceMode::Fixed);
+    let screen = render(&view, &ui);
+    let text = screen.join("\n");
+    let rows = view.fixed_trace().rows().len();
+    assert!(
+        text.contains(&format!("fixed trace · LIVE · {rows} identifiers")),
+        "{text}"
+    );
+    assert!(text.contains("Δt ms") && text.contains("min ms") && text.contains("max ms"));
+    // The drive's heartbeat (0x70C): its count, its cycle times and its last state decoded.
+    let key70c = cantwin_monitor::fixed_trace::RowKey {
+        id: 0x70C,
+        extended: false,
+        remote: false,
+    };
+    let hb = view.fixed_trace().row(&key70c).unwrap();
+    let line = fixed_row(&screen, "70C");
+    let words: Vec<&str> = line
+        .trim_start_matches(['│', ' '])
+        .split_whitespace()
+        .collect();
+    assert_eq!(words[1], hb.count.to_string(), "{line}");
+    assert_eq!(words[2], millis(hb.cycle.last), "{line}");
+    assert_eq!(words[3], millis(hb.cycle.min), "{line}");
+    assert_eq!(words[4], millis(hb.cycle.max), "{line}");
+    assert!(line.contains("HEARTBEAT node 12 operational"), "{line}");
+    // One line per identifier: the 0x70C row appears once although many heartbeats came.
+    assert!(hb.count > 5);
+    assert_eq!(
+        screen
+            .iter()
+            .filter(|l| l.contains("HEARTBEAT node 12"))
+            .count(),
+        1
+    );
+    // t again: the scrolling trace, every frame.
+    ui.on_key(key(KeyCode::Char('t')), &view);
+    let text = render(&view, &ui).join("\n");
+    assert!(text.contains("frames · LIVE"), "{text}");
+    assert!(text.matches("HEARTBEAT node 12").count() > 1, "{text}");
+}
+
+#[test]
+fn the_fixed_trace_marks_the_bytes_the_last_frame_changed_and_pauses() {
+    let mut view = NetworkView::new(Config::default());
+    let f = |d: &[u8]| Frame::data(Id::standard(0x181).unwrap(), d).unwrap();
+    view.push(Instant::from_nanos(0), &f(&[0x11, 0x22, 0x33]));
+    view.push(Instant::from_nanos(10_000_000), &f(&[0x11, 0x99, 0x33]));
+    let mut ui = Ui::new(String::new());
+    ui.on_key(key(KeyCode::Char('t')), &view);
+    let mut terminal = Terminal::new(TestBackend::new(WIDTH, HEIGHT)).unwrap();
+    terminal.draw(|fr| draw(fr, &view, &ui)).unwrap();
+    let buffer = terminal.backend().buffer().clone();
+    let (y, line) = (0..HEIGHT)
+        .map(|y| {
+            let l: String = (0..WIDTH)
+                .map(|x| buffer[(x, y)].symbol().to_string())
+                .collect();
+            (y, l)
+        })
+        .find(|(_, l)| l.contains("11 99 33"))
+        .unwrap();
+    let x = |text: &str| {
+        line.find(text)
+            .map(|i| line[..i].chars().count() as u16)
+            .unwrap()
+    };
+    let changed = &buffer[(x("99"), y)];
+    let same = &buffer[(x("11 99"), y)];
+    assert_eq!(changed.fg, Color::Yellow);
+    assert!(changed.modifier.contains(Modifier::BOLD));
+    assert_ne!(same.fg, Color::Yellow);
+    // Paused, the table stays as it was while frames go on.
+    ui.on_key(key(KeyCode::Char(' ')), &view);
+    view.push(Instant::from_nanos(20_000_000), &f(&[0x00]));
+    let text = render(&view, &ui).join("\n");
+    assert!(text.contains("fixed trace · PAUSED"), "{text}");
+    assert!(text.contains("11 99 33"), "{text}");
+    ui.on_key(key(KeyCode::Char(' ')), &view);
+    let text = render(&view, &ui).join("\n");
+    assert!(
+        !text.contains("11 99 33") && text.contains("LIVE"),
+        "{text}"
+    );
+}
+
+#[test]
+fn esc_leaves_the_filter_editor_and_never_quits() {
+    let view = network(700);
+    let mut ui = Ui::new(String::new());
+    // A rejected filter, then Esc: the monitor goes on.
+    ui.on_key(key(KeyCode::Char('/')), &view);
+    for c in "node=200".chars() {
+        ui.on_key(key(c_code(c)), &view);
+    }
+    ui.on_key(key(KeyCode::Enter), &view);
+    assert!(ui.message.is_some());
+    assert_eq!(ui.on_key(key(KeyCode::Esc), &view), Flow::Continue);
+    // Esc while editing leaves the editor, keeping the filter in force.
+    ui.on_key(key(KeyCode::Char('/')), &view);
+    assert!(ui.editing.is_some());
+    assert_eq!(ui.on_key(key(KeyCode::Esc), &view), Flow::Continue);
+    assert!(ui.editing.is_none());
+    assert_eq!(ui.on_key(key(KeyCode::Esc), &view), Flow::Continue);
+    assert_eq!(ui.on_key(key(KeyCode::Char('q')), &view), Flow::Quit);
+}
+
+fn c_code(c: char) -> KeyCode {
+    KeyCode::Char(c)
+}
+
+#[test]
+fn an_80x24_terminal_shows_whole_names_states_kinds_and_decoded_text() {
+    let view = network(1_700);
+    let mut ui = Ui::new("scenario monitor-network.toml".into());
+    let screen = render_at(&view, &ui, 80, 24);
+    let text = screen.join("\n");
+    for (id, name, kind) in [
+        (3, "island", "TM3"),
+        (5, "node5", "CiA 301"),
+        (12, "drive", "ADV200"),
+    ] {
+        let row = node_row(&screen, id);
+        assert!(
+            row.contains(&format!(" {name} ")),
+            "node {id}: {row:?}\n{text}"
+        );
+        assert!(
+            row.contains(&format!(" {kind} ")),
+            "node {id}: {row:?}\n{text}"
+        );
+        assert!(row.contains(" operational "), "node {id}: {row:?}\n{text}");
+    }
+    assert!(
+        node_row(&screen, 5).contains("0x4210 temperature"),
+        "{text}"
+    );
+    // The load on one line, the decoded frames below it.
+    assert!(text.contains("frames/s"), "{text}");
+    assert!(text.contains("(500 kbit/s, 100 ms windows)"), "{text}");
+    assert!(
+        text.contains("HEARTBEAT node") || text.contains("TPDO1 node"),
+        "{text}"
+    );
+    assert!(screen[23].starts_with("q quit"), "{}", screen[23]);
+    assert!(HELP_NARROW.chars().count() <= 80);
+    assert!(
+        screen[23].trim_end().ends_with("/ filter"),
+        "{}",
+        screen[23]
+    );
+    // The fixed trace fits too, with its decoded text.
+    ui.on_key(key(KeyCode::Char('t')), &view);
+    let screen = render_at(&view, &ui, 80, 24);
+    let line = fixed_row(&screen, "18C");
+    assert!(
+        line.contains("TPDO1 node 12: status word="),
+        "{}",
+        screen.join("\n")
+    );
+    // PgDn scrolls the rows (the last page stays full): the heartbeats come into view.
+    ui.on_key(key(KeyCode::PageDown), &view);
+    ui.on_key(key(KeyCode::PageDown), &view);
+    let screen = render_at(&view, &ui, 80, 24);
+    assert!(
+        fixed_row(&screen, "70C").contains("HEARTBEAT node 12 operational"),
+        "{}",
+        screen.join("\n")
+    );
+    ui.on_key(key(KeyCode::Home), &view);
+    // Enter shows the selected node's page in place of the trace; Esc goes back.
+    ui.on_key(key(KeyCode::Enter), &view);
+    let text = render_at(&view, &ui, 80, 24).join("\n");
+    assert!(text.contains("node 3  island  TM3"), "{text}");
+    assert!(text.contains("DI byte 1"), "{text}");
+    assert!(
+        text.contains("heartbeat") && text.contains(" ago, every "),
+        "{text}"
+    );
+    ui.on_key(key(KeyCode::Esc), &view);
+    assert!(
+        render_at(&view, &ui, 80, 24)
+            .join("\n")
+            .contains("fixed trace")
+    );
+}
+
+#[test]
+fn the_load_says_when_its_bit_rate_is_assumed() {
+    let view = NetworkView::new(Config::default());
+    let mut ui = Ui::new(String::new());
+    ui.bit_rate_assumed = true;
+    let wide = render(&view, &ui).join("\n");
+    assert!(
+        wide.contains("bus load (500 kbit/s assumed, 100 ms windows)"),
+        "{wide}"
+    );
+    let narrow = render_at(&view, &ui, 80, 24).join("\n");
+    assert!(
+        narrow.contains("(500 kbit/s assumed, 100 ms windows)"),
+        "{narrow}"
+    );
 }
