@@ -228,6 +228,10 @@ pub struct Bus {
     idle_at: Instant,
     suspended: Vec<u32>,
     recovering: Vec<u32>,
+    /// What front ends call ports that are no device of their own (a gateway's client:
+    /// `socketcand 127.0.0.1:54012`), by port index; kept after the port is detached, as
+    /// port numbers are never reused.
+    labels: std::collections::BTreeMap<u32, String>,
     stubs: Vec<u32>,
     rules: Vec<FaultRule>,
     rng: SplitMix64,
@@ -280,6 +284,7 @@ impl Bus {
             idle_at: now,
             suspended: Vec::new(),
             recovering: Vec::new(),
+            labels: std::collections::BTreeMap::new(),
             stubs: Vec::new(),
             rules: Vec::new(),
             rng: SplitMix64::new(config.seed),
@@ -420,6 +425,28 @@ impl Bus {
             self.power_up(index);
         }
         self.port_id(index)
+    }
+
+    /// Names `port` for front ends (who sent a frame), e.g. a gateway's client by its
+    /// protocol and address. A port of another bus is ignored.
+    pub fn set_port_label(&mut self, port: PortId, label: impl Into<String>) {
+        if port.bus == self.id {
+            self.labels.insert(port.index, label.into());
+        }
+    }
+
+    /// The name given to `port` with [`Bus::set_port_label`], also after it was detached.
+    pub fn port_label(&self, port: PortId) -> Option<&str> {
+        (port.bus == self.id)
+            .then(|| self.labels.get(&port.index).map(String::as_str))
+            .flatten()
+    }
+
+    /// Every port name given with [`Bus::set_port_label`].
+    pub fn port_labels(&self) -> impl Iterator<Item = (PortId, &str)> + '_ {
+        self.labels
+            .iter()
+            .map(|(i, l)| (self.port_id(*i as usize), l.as_str()))
     }
 
     /// Detach a node and hand it back. A frame it is sending is cut off (receivers see an

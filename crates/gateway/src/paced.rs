@@ -66,6 +66,28 @@ fn port_error(e: BusError) -> PortError {
 
 impl BusConnector for PacedBus {
     fn open(&self, channel: &str, rx_capacity: usize) -> Result<Box<dyn BusPort>, PortError> {
+        self.open_labelled(channel, rx_capacity, None)
+    }
+
+    /// Opens a port named `client` on its bus ([`cantwin_bus::Bus::port_label`]), so front
+    /// ends can say who sent its frames.
+    fn open_for(
+        &self,
+        channel: &str,
+        rx_capacity: usize,
+        client: &str,
+    ) -> Result<Box<dyn BusPort>, PortError> {
+        self.open_labelled(channel, rx_capacity, Some(client))
+    }
+}
+
+impl PacedBus {
+    fn open_labelled(
+        &self,
+        channel: &str,
+        rx_capacity: usize,
+        client: Option<&str>,
+    ) -> Result<Box<dyn BusPort>, PortError> {
         let bus = self
             .handle
             .with(|sim| {
@@ -86,6 +108,16 @@ impl BusConnector for PacedBus {
                 },
             )
             .map_err(port_error)?;
+        if let Some(client) = client {
+            let id = port.port();
+            self.handle
+                .with(|sim| {
+                    if let Some(b) = sim.bus_mut(bus) {
+                        b.set_port_label(id, client);
+                    }
+                })
+                .map_err(port_error)?;
+        }
         Ok(Box::new(PacedPort {
             port,
             handle: self.handle.clone(),

@@ -76,6 +76,19 @@ pub trait BusConnector: Send + Sync {
     /// Attach a new node to the bus called `channel`, with a receive buffer of `rx_capacity`
     /// frames.
     fn open(&self, channel: &str, rx_capacity: usize) -> Result<Box<dyn BusPort>, PortError>;
+
+    /// As [`BusConnector::open`], for `client` (a server's client, named by its protocol
+    /// and address: `socketcand 127.0.0.1:54012`), which a connector may pass on to name
+    /// the port; by default the name is not kept.
+    fn open_for(
+        &self,
+        channel: &str,
+        rx_capacity: usize,
+        client: &str,
+    ) -> Result<Box<dyn BusPort>, PortError> {
+        let _ = client;
+        self.open(channel, rx_capacity)
+    }
 }
 
 impl<T: BusPort + ?Sized> BusPort for Box<T> {
@@ -96,5 +109,13 @@ impl<T: BusPort + ?Sized> BusPort for Box<T> {
 impl<T: BusConnector + ?Sized> BusConnector for std::sync::Arc<T> {
     fn open(&self, channel: &str, rx_capacity: usize) -> Result<Box<dyn BusPort>, PortError> {
         (**self).open(channel, rx_capacity)
+    }
+    fn open_for(
+        &self,
+        channel: &str,
+        rx_capacity: usize,
+        client: &str,
+    ) -> Result<Box<dyn BusPort>, PortError> {
+        (**self).open_for(channel, rx_capacity, client)
     }
 }

@@ -104,6 +104,8 @@ pub struct ServerStats {
 
 /// A wire protocol served over TCP.
 pub(crate) trait Protocol: Send + Sync + 'static {
+    /// The protocol's name, which names its clients' ports (`socketcand 127.0.0.1:54012`).
+    const NAME: &'static str;
     /// One client's protocol state.
     type Session: Session;
     /// The state of a newly connected client.
@@ -129,6 +131,8 @@ pub(crate) struct Link<'a> {
     connector: &'a dyn BusConnector,
     limits: &'a Limits,
     stats: &'a Stats,
+    /// [`Protocol::NAME`].
+    protocol: &'static str,
 }
 
 impl Link<'_> {
@@ -145,7 +149,13 @@ impl Link<'_> {
 
     /// Attach the client to bus `channel`.
     pub(crate) fn open(&mut self, channel: &str) -> Result<(), PortError> {
-        let port = self.connector.open(channel, self.limits.client_queue)?;
+        let client = match self.conn.stream.peer_addr() {
+            Ok(peer) => format!("{} {peer}", self.protocol),
+            Err(_) => format!("{} client", self.protocol),
+        };
+        let port = self
+            .connector
+            .open_for(channel, self.limits.client_queue, &client)?;
         // A port replaced here is dropped (and detached) after the lock is let go: detaching
         // takes the bus's lock, under which the bus may be waiting for this connection.
         let old = self.conn.port().replace(Arc::from(port));
@@ -937,6 +947,7 @@ fn read_loop<P: Protocol>(shared: &Shared<P>, conn: &Conn, handle: &ConnHandle) 
             connector: &*shared.connector,
             limits: &shared.limits,
             stats: &shared.stats,
+            protocol: P::NAME,
         };
         if session.on_bytes(&buf[..n], &mut link).is_err() {
             return;

@@ -78,6 +78,7 @@ pub(crate) struct Slcan {
 }
 
 impl Protocol for Slcan {
+    const NAME: &'static str = "slcan";
     type Session = SlSession;
 
     fn session(&self) -> SlSession {

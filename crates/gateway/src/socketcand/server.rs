@@ -77,6 +77,7 @@ pub(crate) struct Socketcand {
 }
 
 impl Protocol for Socketcand {
+    const NAME: &'static str = "socketcand";
     type Session = ScSession;
 
     fn session(&self) -> ScSession {
