@@ -522,9 +522,9 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
     browser.click(&format!("{load} button.live"));
     browser.click(&format!("{load} button.pause"));
     let frozen = browser.js(&format!("return {chart}.u.data[0].length;"));
-    let kept = format!("return cantwinCharts.store.get('bus/can0/load').t.length;");
-    let stored = browser.js(&kept);
-    browser.wait_for("samples while paused", &kept, |v| v != &stored);
+    let kept = "return cantwinCharts.store.get('bus/can0/load').t.length;";
+    let stored = browser.js(kept);
+    browser.wait_for("samples while paused", kept, |v| v != &stored);
     assert_eq!(
         browser.js(&format!("return {chart}.u.data[0].length;")),
         frozen
@@ -859,4 +859,61 @@ fn web_refuses_a_non_loopback_address_without_allow_remote() {
     ]);
     assert!(!ok);
     assert!(err.contains("--allow-remote"), "{err}");
+}
+
+#[test]
+fn web_names_a_socketcand_client_by_its_address_in_the_from_column() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(["sim", &common::scenario_file("plant.toml")])
+        .args(["--socketcand", "127.0.0.1:0", "--web", "127.0.0.1:0"])
+        .args(["--duration", "20", "--json"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut out = BufReader::new(child.stdout.take().unwrap());
+    let _sim = Killed(child);
+    let (mut gateway, mut web) = (None, None);
+    while web.is_none() {
+        let mut line = String::new();
+        assert!(out.read_line(&mut line).unwrap() > 0, "no web line");
+        let v: Value = serde_json::from_str(&line).unwrap();
+        if v["gateway"] == "socketcand" {
+            gateway = v["addr"].as_str().map(str::to_owned);
+        }
+        web = v["web"].as_str().map(str::to_owned);
+    }
+    let port: u16 = web
+        .unwrap()
+        .trim_start_matches("http://127.0.0.1:")
+        .trim_end_matches('/')
+        .parse()
+        .unwrap();
+    // A socketcand client (socketcand's protocol, rawmode) sends one frame on can0.
+    let mut client = TcpStream::connect(gateway.unwrap()).unwrap();
+    client
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let me = client.local_addr().unwrap();
+    let mut greeting = [0u8; 6];
+    client.read_exact(&mut greeting).unwrap();
+    assert_eq!(&greeting, b"< hi >");
+    write!(client, "< open can0 >< rawmode >").unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    loop {
+        // A snapshot carries the rows since the one before: send until one holds the frame.
+        write!(client, "< send 123 1 AA >").unwrap();
+        std::thread::sleep(Duration::from_millis(100));
+        let (_, s) = http(port, "GET", "/api/snapshot", None);
+        let named = s["frames"].as_array().and_then(|rows| {
+            rows.iter()
+                .find(|r| r["id"] == "123")
+                .map(|r| r["from"].clone())
+        });
+        if let Some(from) = named {
+            assert_eq!(from, json!(format!("socketcand {me}")), "{s}");
+            break;
+        }
+        assert!(Instant::now() < deadline, "{s}");
+    }
 }

@@ -647,12 +647,18 @@ impl Dashboard {
                     }
                 })
                 .collect();
+            let labels = sim
+                .buses()
+                .iter()
+                .flat_map(|b| b.port_labels().map(|(p, l)| (p, l.to_string())))
+                .collect();
             Sample {
                 now,
                 wall: since_start,
                 events,
                 buses,
                 devices: live,
+                labels,
             }
         });
         let Ok(sample) = grabbed else {

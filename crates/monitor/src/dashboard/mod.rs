@@ -125,7 +125,8 @@ pub struct StreamRow {
     pub bus: usize,
     /// The frame; `None` for controller events.
     pub frame: Option<Frame>,
-    /// Who sent it: a device's name, `"dashboard"` for the dashboard's own ports.
+    /// Who sent it: a device's name, `"dashboard"` for the dashboard's own ports, a gateway
+    /// client's name (`socketcand 127.0.0.1:54012`), else `port N`.
     pub from: String,
     /// A one-line decoding (CANopen frames), or what happened.
     pub text: String,
@@ -172,6 +173,9 @@ pub struct Sample {
     pub buses: Vec<BusSample>,
     /// Per device, in the model's order.
     pub devices: Vec<DeviceSample>,
+    /// Names of ports that are no device and no port of the dashboard, as the buses give
+    /// them ([`cantwin_bus::Bus::port_labels`]): a gateway's clients.
+    pub labels: Vec<(PortId, String)>,
 }
 
 /// A bus in a snapshot.
@@ -324,6 +328,9 @@ pub struct Model {
     series: BTreeMap<String, History>,
     /// The wall time and frame counts of the previous snapshot.
     last: Option<(WallDuration, Vec<u64>)>,
+    /// Names of other ports (gateway clients), kept after they leave: port numbers are
+    /// never reused.
+    labels: BTreeMap<PortId, String>,
 }
 
 impl Model {
@@ -358,6 +365,7 @@ impl Model {
             missed_total: 0,
             series: BTreeMap::new(),
             last: None,
+            labels: BTreeMap::new(),
         }
     }
 
@@ -390,7 +398,9 @@ impl Model {
             events,
             buses: bus_stats,
             devices: live,
+            labels,
         } = sample;
+        self.labels.extend(labels);
         // The node-IDs the twins know (before any boot-up is seen, and for nodes that send
         // no heartbeat).
         for (k, l) in live.iter().enumerate() {
@@ -572,8 +582,10 @@ impl Model {
             d.name.clone()
         } else if self.masters.contains(&port) {
             "dashboard".to_string()
+        } else if let Some(label) = self.labels.get(&port) {
+            label.clone()
         } else {
-            format!("{port:?}")
+            format!("port {}", port.index())
         }
     }
 

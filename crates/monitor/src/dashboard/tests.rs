@@ -47,6 +47,7 @@ fn sample(wall_ms: u64, events: Vec<Seen>, frames: u64) -> Sample {
             bit_rate: BitRate::R500K,
         }],
         devices: vec![DeviceSample::default()],
+        labels: Vec::new(),
     }
 }
 
@@ -326,4 +327,29 @@ fn the_fixed_trace_keeps_one_row_per_identifier_of_every_sender_and_skips_droppe
     let hb = fixed.rows().find(|r| r.key.id == 0x705).unwrap();
     assert_eq!((hb.count, hb.cycle.last.unwrap().as_millis()), (2, 100));
     assert!(!hb.last.text.is_empty());
+}
+
+#[test]
+fn a_port_that_is_no_device_is_named_as_its_bus_names_it_and_keeps_the_name_after_it_left() {
+    let (mut m, ..) = model();
+    let mut bus = Bus::new(BusConfig::new("other", BitRate::R500K));
+    bus.attach(ListenOnly, PortConfig::default());
+    bus.attach(ListenOnly, PortConfig::default());
+    let client = bus.attach(ListenOnly, PortConfig::default());
+    let stranger = bus.attach(ListenOnly, PortConfig::default());
+    let from = |at: u64, sender: PortId| Seen::Frame {
+        at: ms(at),
+        frame: frame(0x123, &[1]),
+        sender,
+        dropped: false,
+    };
+    let s = m.update(Sample {
+        labels: vec![(client, "socketcand 127.0.0.1:54012".into())],
+        ..sample(100, vec![from(10, client), from(20, stranger)], 2)
+    });
+    let froms: Vec<&str> = s.frames.iter().map(|r| r.from.as_str()).collect();
+    assert_eq!(froms, ["socketcand 127.0.0.1:54012", "port 3"]);
+    // Later samples need not name it again: its frames keep its name.
+    let s = m.update(sample(200, vec![from(150, client)], 3));
+    assert_eq!(s.frames[0].from, "socketcand 127.0.0.1:54012");
 }

@@ -100,15 +100,18 @@ function refreshPicker(s) {
   if (s.signals.some((g) => g.key === keep)) sel.value = keep;
 }
 
-// The first snapshot opens a load and a frames/s chart per bus.
+// The first snapshot opens the charts the address names (`#charts=KEY,KEY`, kept up to
+// date as charts are added and removed, so a set of charts can be bookmarked), else a load
+// and a frames/s chart per bus.
 let chartsOpened = false;
 function openDefaultCharts(s) {
   if (chartsOpened) return;
   chartsOpened = true;
-  for (const b of s.buses) {
-    cantwinCharts.addChart(`bus/${b.name}/load`);
-    cantwinCharts.addChart(`bus/${b.name}/fps`);
-  }
+  const named = new URLSearchParams(location.hash.slice(1)).get("charts");
+  const keys = named
+    ? named.split(",").filter((k) => k)
+    : s.buses.flatMap((b) => [`bus/${b.name}/load`, `bus/${b.name}/fps`]);
+  keys.forEach((k) => cantwinCharts.addChart(k));
 }
 
 function renderNodes(s) {

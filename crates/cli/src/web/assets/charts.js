@@ -363,12 +363,22 @@ class Chart {
 /** The charts on the page, in order. */
 const charts = [];
 
+/** Writes the charts shown into the address (`#charts=KEY,KEY`), without a new history
+ * entry. */
+function rememberCharts() {
+  const h = new URLSearchParams(location.hash.slice(1));
+  h.set("charts", charts.map((c) => c.key).join(","));
+  history.replaceState(null, "", `#${h.toString()}`);
+}
+
 function addChart(key) {
   if (charts.some((c) => c.key === key)) return;
   const c = new Chart(document.querySelector("#charts"), key, (gone) => {
     charts.splice(charts.indexOf(gone), 1);
+    rememberCharts();
   });
   charts.push(c);
+  rememberCharts();
 }
 
 /** Takes a snapshot's samples and moves the charts. */
