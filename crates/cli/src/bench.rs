@@ -12,6 +12,7 @@ use indicatif::ProgressBar;
 use crate::benchmarks_md;
 
 mod canopen;
+mod cia402;
 mod memory_twins;
 mod process;
 mod python;
@@ -44,6 +45,10 @@ const NAMES: &[(&str, &str)] = &[
     (
         "python",
         "python-canopen round trips and 64 KiB transfers: the twin vs python-canopen's LocalNode",
+    ),
+    (
+        "cia402",
+        "a CiA 402 servo axis in csp at 1 ms SYNC vs bare CiA 301 devices; 64 axes on 64 buses",
     ),
 ];
 
@@ -152,6 +157,7 @@ pub fn run(args: &Args) -> Result<()> {
             "fleet" => bench_fleet(args),
             "sdo" => bench_sdo(args, &spinner),
             "memory" => bench_memory(args),
+            "cia402" => cia402::bench(args),
             twin => bench_twin(args, twin),
         };
         spinner.finish_and_clear();
