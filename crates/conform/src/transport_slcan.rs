@@ -166,4 +166,62 @@ mod tests {
         drop(t);
         adapter.join().unwrap();
     }
+
+    /// The whole path: the SDO area of the runner against the CiA 301 twin of the shipped
+    /// scenario, on the wall clock behind cantwin's slcan gateway (segmented and block
+    /// transfers included, a block of 127 segments back to back through the adapter).
+    #[test]
+    fn the_sdo_area_passes_against_the_cia301_twin_through_slcan() {
+        use cantwin_bus::{PacedConfig, PacedSimulation};
+        use cantwin_gateway::paced::PacedBus;
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenarios/cia301-device.toml");
+        let scenario = cantwin_scenario::Scenario::load(&file).unwrap();
+        let built = scenario
+            .build(
+                &cantwin_scenario::Registry::builtin(),
+                &cantwin_scenario::BuildEnv::default(),
+            )
+            .unwrap();
+        let dev = built.device("node5").unwrap().clone();
+        let desc = built
+            .sim
+            .twin(dev.port)
+            .unwrap()
+            .dictionary()
+            .unwrap()
+            .description()
+            .clone();
+        let eds = cantwin_eds::from_od(
+            &desc,
+            cantwin_eds::DeviceInfo::default(),
+            cantwin_eds::FileInfo::new("node5.eds"),
+        );
+        let paced = PacedSimulation::start(built.sim, PacedConfig::default());
+        let server = cantwin_gateway::slcan::Server::bind(
+            "127.0.0.1:0".parse().unwrap(),
+            Arc::new(PacedBus::new(paced.handle())),
+            "can0",
+            Limits::default(),
+        )
+        .unwrap();
+        let mut t = SlcanTransport::connect(server.local_addr(), None, GUARD).unwrap();
+        let options = crate::Options {
+            only: vec![crate::Area::Sdo],
+            // Waits the twin's whole SDO timeout: its own test runs in virtual time.
+            skip: vec!["sdo.abort-timeout".into()],
+            ..crate::Options::default()
+        };
+        let profile = crate::Profile::from_eds(&eds);
+        let report = crate::run(&mut t, 5, &eds, &profile, &options, &mut |_| {});
+        assert!(report.passed(), "{}", crate::output::summary(&report));
+        assert!(
+            report.case("sdo.block-upload").map(|c| c.verdict) == Some(crate::Verdict::Pass),
+            "{}",
+            crate::output::summary(&report)
+        );
+        drop(t);
+        server.shutdown();
+        paced.stop();
+    }
 }

@@ -108,6 +108,12 @@ pub(crate) fn access(e: &Entry) -> Access {
 pub(crate) fn entries(ctx: &Ctx<'_>) -> Vec<(u16, u8, Entry)> {
     let mut out = Vec::new();
     for (index, obj) in &ctx.eds.objects {
+        // An ARRAY or RECORD that lists no sub-object describes no entry to check.
+        if matches!(obj.object_code(), cantwin_eds::ARRAY | cantwin_eds::RECORD)
+            && obj.subs.is_empty()
+        {
+            continue;
+        }
         if obj.object_code() == cantwin_eds::DOMAIN && obj.subs.is_empty() {
             out.push((*index, 0, obj.entry.clone()));
             continue;

@@ -144,7 +144,9 @@ fn limits(ctx: &mut Ctx<'_>) -> Outcome {
         }
         let lo = e.low_limit.as_ref().and_then(|v| v.evaluate(node));
         let hi = e.high_limit.as_ref().and_then(|v| v.evaluate(node));
-        if lo.is_none() && hi.is_none() {
+        // Limits the wrong way round are a fault of the file (eds.file-valid reports it),
+        // not a range to probe.
+        if (lo.is_none() && hi.is_none()) || lo.zip(hi).is_some_and(|(l, h)| l > h) {
             continue;
         }
         let bits = 8 * size as u32;

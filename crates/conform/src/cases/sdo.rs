@@ -600,6 +600,11 @@ fn beyond_limit(ctx: &Ctx<'_>, high: bool) -> Option<(u16, u8, usize, i128)> {
         ) {
             continue;
         }
+        let lo = e.low_limit.as_ref().and_then(|v| v.evaluate(ctx.node));
+        let hi = e.high_limit.as_ref().and_then(|v| v.evaluate(ctx.node));
+        if lo.zip(hi).is_some_and(|(l, h)| l > h) {
+            continue;
+        }
         let limit = if high { &e.high_limit } else { &e.low_limit };
         let Some(l) = limit.as_ref().and_then(|v| v.evaluate(ctx.node)) else {
             continue;
