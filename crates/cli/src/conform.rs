@@ -17,11 +17,11 @@ use cantwin_scenario::{BuildEnv, Registry, Scenario};
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// The device's node-ID (1–127).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=127))]
-    node_id: u8,
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=127), required_unless_present = "list")]
+    node_id: Option<u8>,
     /// The device's EDS or DCF.
-    #[arg(long, value_name = "FILE")]
-    eds: PathBuf,
+    #[arg(long, value_name = "FILE", required_unless_present = "list")]
+    eds: Option<PathBuf>,
     /// A device profile (TOML): optional features the EDS cannot express and the
     /// deviations the device's manual prescribes (`cantwin eds export` writes one beside a
     /// twin's EDS).
@@ -150,9 +150,12 @@ pub fn run(args: &Args) -> Result<()> {
         }
         return Ok(());
     }
+    let (Some(node_id), Some(eds_path)) = (args.node_id, &args.eds) else {
+        bail!("--node-id and --eds are required");
+    };
     let options = options(args)?;
     let bytes =
-        std::fs::read(&args.eds).with_context(|| format!("reading {}", args.eds.display()))?;
+        std::fs::read(eds_path).with_context(|| format!("reading {}", eds_path.display()))?;
     let eds = cantwin_eds::load_bytes(&bytes).eds;
     let mut profile = Profile::from_eds(&eds);
     if let Some(path) = &args.profile {
@@ -169,7 +172,7 @@ pub fn run(args: &Args) -> Result<()> {
     let pb = crate::output::steps(total as u64, "conform");
     let report: Report = cantwin_conform::run(
         transport.as_mut(),
-        args.node_id,
+        node_id,
         &eds,
         &profile,
         &options,

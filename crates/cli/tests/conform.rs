@@ -1,0 +1,334 @@
+//! `cantwin conform` against every shipped CANopen twin in virtual time: every area, the
+//! EDS and profile `cantwin eds export` writes, JUnit XML, JSON and HTML produced.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("cantwin-conform-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn cantwin(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cantwin"))
+        .args(args)
+        .current_dir(root())
+        .output()
+        .unwrap()
+}
+
+fn text(o: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// The number of cases of the catalogue (`--list`).
+fn catalogue_size() -> usize {
+    let o = cantwin(&["conform", "--list"]);
+    assert!(o.status.success(), "{}", text(&o));
+    String::from_utf8_lossy(&o.stdout).lines().count()
+}
+
+/// Runs every area against `device` of `scenario` with `eds` (and `profile`), and checks
+/// the exit status and the three reports.
+fn conform(dir: &Path, scenario: &str, node: u8, eds: &Path, profile: Option<&Path>) {
+    let junit = dir.join("conform.xml");
+    let html = dir.join("conform.html");
+    let json = dir.join("conform.json");
+    let node = node.to_string();
+    let mut args = vec![
+        "conform",
+        "--scenario",
+        scenario,
+        "--node-id",
+        &node,
+        "--eds",
+        eds.to_str().unwrap(),
+        "--junit",
+        junit.to_str().unwrap(),
+        "--html",
+        html.to_str().unwrap(),
+        "--json-report",
+        json.to_str().unwrap(),
+    ];
+    if let Some(p) = profile {
+        args.extend(["--profile", p.to_str().unwrap()]);
+    }
+    let o = cantwin(&args);
+    assert!(o.status.success(), "{scenario}: {}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("PASSED"),
+        "{}",
+        text(&o)
+    );
+    let n = catalogue_size();
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    assert!(xml.starts_with("<?xml"), "{xml}");
+    assert_eq!(xml.matches("<testcase ").count(), n, "{xml}");
+    assert_eq!(xml.matches("<testsuite ").count(), 8, "one suite per area");
+    assert!(!xml.contains("<failure"), "{xml}");
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.starts_with("<!DOCTYPE html>"));
+    for id in [
+        "sdo.expedited-upload",
+        "nmt.sdo-stopped",
+        "store.wrong-signature",
+    ] {
+        assert!(page.contains(id), "{id} missing from the HTML");
+    }
+    // The stimulus and response frames of the cases, with their clauses.
+    let sdo_rx = format!("{:03X}#", 0x600 + node.parse::<u16>().unwrap());
+    assert!(page.contains(&sdo_rx), "no SDO request frame in the HTML");
+    assert!(page.contains("CiA 301 §7.2.4.3.17"));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(v["cases"].as_array().unwrap().len(), n);
+}
+
+/// Exports `device`'s EDS and profile, then conforms it.
+fn shipped(name: &str, scenario: &str, device: &str, node: u8) {
+    let dir = tmp(name);
+    let eds = dir.join(format!("{device}.eds"));
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        scenario,
+        "--device",
+        device,
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let profile = dir.join(format!("{device}.profile.toml"));
+    assert!(
+        profile.exists(),
+        "eds export writes the profile beside the EDS"
+    );
+    conform(&dir, scenario, node, &eds, Some(&profile));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn cia301_twin_conforms() {
+    shipped("cia301", "scenarios/cia301-device.toml", "node5", 5);
+}
+
+#[test]
+fn tm3_island_conforms() {
+    shipped("tm3", "scenarios/tm3-island.toml", "island", 3);
+}
+
+#[test]
+fn adv200_canopen_conforms_with_its_manuals_deviations() {
+    shipped("adv200", "scenarios/adv200-example.toml", "drive", 12);
+    let dir = tmp("adv200-profile");
+    let eds = dir.join("drive.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/adv200-example.toml",
+        "--device",
+        "drive",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let profile = std::fs::read_to_string(dir.join("drive.profile.toml")).unwrap();
+    assert!(profile.contains("§1.1 item 11"), "{profile}");
+    assert!(profile.contains("segmented = false"), "{profile}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn adv200_ds402_conforms_with_its_manuals_deviations() {
+    shipped("ds402", "scenarios/adv200-ds402.toml", "drive", 2);
+}
+
+#[test]
+fn eds_twin_of_example_io_conforms_to_its_own_file() {
+    let dir = tmp("io6");
+    conform(
+        &dir,
+        "scenarios/eds-device.toml",
+        6,
+        &root().join("scenarios/eds/example-io.eds"),
+        None,
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A scenario of one `eds` twin of `file` at node-ID 9.
+fn eds_scenario(dir: &Path, file: &Path) -> PathBuf {
+    let scenario = dir.join("s.toml");
+    std::fs::write(
+        &scenario,
+        format!(
+            "name = \"t\"\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n[[device]]\nname = \"d\"\nkind = \"eds\"\nbus = \"can0\"\nfile = {:?}\nnode_id = 9\n",
+            file.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    scenario
+}
+
+/// The device description files of the field the eds crate's tests load, each twinned and
+/// tested against itself.
+#[test]
+fn eds_twins_of_real_files_conform_to_their_files() {
+    let corpus = root().join("crates/eds/tests/corpus");
+    for file in [
+        "servo_like.eds",
+        "drive.eds",
+        "io_module.eds",
+        "quirks.eds",
+        "sample_like.dcf",
+        "configured.dcf",
+        "irregular/i04_access_case.eds",
+        "irregular/i13_lely_values.eds",
+        "irregular/i14_bytes.eds",
+    ] {
+        let dir = tmp(&file.replace('/', "-"));
+        let path = corpus.join(file);
+        let scenario = eds_scenario(&dir, &path);
+        conform(&dir, scenario.to_str().unwrap(), 9, &path, None);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+/// Files that are not valid device descriptions fail the case meant for their fault.
+#[test]
+fn eds_files_with_faults_fail_their_case() {
+    let corpus = root().join("crates/eds/tests/corpus");
+    for (file, case) in [
+        ("irregular/i10_limits.eds", "eds.file-valid"),
+        ("datatypes_like.eds", "eds.mandatory-objects"),
+    ] {
+        let dir = tmp(&file.replace('/', "-"));
+        let path = corpus.join(file);
+        let scenario = eds_scenario(&dir, &path);
+        let json = dir.join("r.json");
+        let o = cantwin(&[
+            "conform",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--node-id",
+            "9",
+            "--eds",
+            path.to_str().unwrap(),
+            "--only",
+            "eds",
+            "--json-report",
+            json.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success(), "{file}: {}", text(&o));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        let failed: Vec<&str> = v["cases"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["verdict"] == "fail")
+            .map(|c| c["id"].as_str().unwrap())
+            .collect();
+        assert!(failed.contains(&case), "{file}: {failed:?}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+#[test]
+fn a_mandatory_failure_exits_non_zero_and_fails_in_junit() {
+    let dir = tmp("claims");
+    let eds = dir.join("drive.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/adv200-example.toml",
+        "--device",
+        "drive",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    // A profile that claims segmented transfers the expedited-only card does not offer.
+    let profile = dir.join("claims.toml");
+    std::fs::write(&profile, "[sdo]\nsegmented = true\n").unwrap();
+    let junit = dir.join("j.xml");
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/adv200-example.toml",
+        "--node-id",
+        "12",
+        "--eds",
+        eds.to_str().unwrap(),
+        "--profile",
+        profile.to_str().unwrap(),
+        "--only",
+        "sdo",
+        "--skip",
+        "sdo.abort-timeout",
+        "--junit",
+        junit.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    assert!(xml.contains("<failure"), "{xml}");
+    assert!(xml.contains("name=\"sdo.segmented-download\""), "{xml}");
+    assert!(xml.contains("skipped (--skip)"), "{xml}");
+    assert_eq!(xml.matches("<testsuite ").count(), 1, "--only sdo");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_arguments_are_refused() {
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "5",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+        "--only",
+        "bogus",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("no such area"), "{}", text(&o));
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "5",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+        "--skip",
+        "sdo.nope",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("no such case"), "{}", text(&o));
+    // A node that is not there: the run stops at once, non-zero.
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "77",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("does not answer"), "{}", text(&o));
+}
