@@ -15,7 +15,8 @@ pub struct Args {
 
 #[derive(Debug, clap::Subcommand)]
 enum Command {
-    /// Write the EDS of a CANopen twin of a scenario, generated from its object dictionary.
+    /// Write the EDS of a CANopen twin of a scenario, generated from its object dictionary;
+    /// with -o, the device profile for `cantwin conform` beside it (NAME.profile.toml).
     #[command(
         after_help = "Examples:\n  cantwin eds export --scenario scenarios/cia301-device.toml --device node5 -o node5.eds\n  \
                             cantwin eds export --scenario scenarios/tm3-island.toml --device island"
@@ -129,7 +130,8 @@ fn twin_dictionary(
     sim.twin(port)?.dictionary()
 }
 
-fn export(scenario: &Path, device: &str) -> Result<String> {
+/// The twin's EDS and its kind.
+fn export(scenario: &Path, device: &str) -> Result<(String, String)> {
     let sc = cantwin_scenario::Scenario::load(scenario)?;
     let built = sc.build(&cantwin_scenario::Registry::builtin(), &Default::default())?;
     let dev = built.device(device).with_context(|| {
@@ -200,7 +202,7 @@ fn export(scenario: &Path, device: &str) -> Result<String> {
         info,
         cantwin_eds::FileInfo::new(format!("{device}.eds")),
     );
-    Ok(cantwin_eds::write(&eds))
+    Ok((cantwin_eds::write(&eds), dev.kind.clone()))
 }
 
 pub fn run(args: &Args) -> Result<()> {
@@ -209,7 +211,19 @@ pub fn run(args: &Args) -> Result<()> {
             scenario,
             device,
             output,
-        } => emit(&export(scenario, device)?, output.as_deref()),
+        } => {
+            let (text, kind) = export(scenario, device)?;
+            emit(&text, output.as_deref())?;
+            // Beside the EDS, the device profile `cantwin conform --profile` reads: what
+            // CiA 306 cannot express and the deviations the twin's manual prescribes.
+            if let Some(path) = output {
+                let profile = path.with_extension("profile.toml");
+                let text = cantwin_conform::profile::shipped(&kind).to_toml();
+                std::fs::write(&profile, text)
+                    .with_context(|| format!("writing {}", profile.display()))?;
+            }
+            Ok(())
+        }
         Command::Check { file, strict } => {
             let cantwin_eds::Loaded { eds, report } = load(file)?;
             let count = |sev| report.issues.iter().filter(|i| i.severity == sev).count();
