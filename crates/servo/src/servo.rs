@@ -174,10 +174,12 @@ impl Servo {
 
     /// A servo on `desc` (a vendor's dictionary; its CiA 402 objects must be hooked, see
     /// [`crate::od::hooked`]). The profile's behaviour runs on whatever objects it has:
-    /// the factor group where it has one, the defaults of `config` otherwise.
+    /// where the dictionary states the encoder resolution (0x608F), the supported modes
+    /// (0x6502), the rated torque (0x6076) or the rated current (0x6075), its defaults
+    /// replace those of `config`; the factor group sets the units.
     pub fn with_description(
         desc: Arc<OdDescription>,
-        config: ServoConfig,
+        mut config: ServoConfig,
     ) -> Result<Self, ServoError> {
         for index in [
             CONTROLWORD,
@@ -189,6 +191,27 @@ impl Servo {
                 return Err(ServoError::Missing(index));
             }
         }
+        let defaults = ObjectDictionary::new(Arc::clone(&desc), config.node_id);
+        let get = |index: u16, sub: u8| defaults.get_unsigned(index, sub).filter(|v| *v > 0);
+        if let (Some(inc), Some(rev)) = (
+            get(POSITION_ENCODER_RESOLUTION, 1),
+            get(POSITION_ENCODER_RESOLUTION, 2),
+        ) {
+            config.drive.encoder = u32::try_from((inc / rev).max(1)).unwrap_or(u32::MAX);
+        }
+        if let Some(m) = get(SUPPORTED_DRIVE_MODES, 0) {
+            config.drive.modes = SupportedModes(m as u32);
+        }
+        let m = &mut config.drive.mechanics;
+        if let Some(t) = get(MOTOR_RATED_TORQUE, 0) {
+            let ratio = m.peak_torque / m.rated_torque;
+            m.rated_torque = t as f64 / 1000.0;
+            m.peak_torque = m.rated_torque * ratio;
+        }
+        if let Some(a) = get(MOTOR_RATED_CURRENT, 0) {
+            m.rated_current = a as f64 / 1000.0;
+        }
+        m.torque_constant = m.rated_torque / m.rated_current;
         let hooks = ServoHooks {
             modes: config.drive.modes,
             ..ServoHooks::default()

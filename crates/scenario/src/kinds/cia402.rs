@@ -7,7 +7,7 @@
 //! | key | default | meaning |
 //! |---|---|---|
 //! | `node_id` | required, 1–127 | the node-ID |
-//! | `eds` | none | a vendor's CiA 402 EDS, relative to the scenario file: the dictionary is the file's (its factor group sets the units), the behaviour the profile's |
+//! | `eds` | none | a vendor's CiA 402 EDS, relative to the scenario file: the dictionary is the file's (its factor group sets the units; its 0x608F, 0x6502, 0x6075 and 0x6076 defaults replace `encoder_increments`, `modes`, `rated_current` and `rated_torque`), the behaviour the profile's |
 //! | `modes` | every mode | the supported modes (0x6502), as `["pp", "vl", "pv", "tq", "hm", "ip", "csp", "csv", "cst"]` |
 //! | `encoder_increments` | 4096 | increments per motor revolution (0x608F; one position unit is one increment) |
 //! | `motor_inertia`, `load_inertia` | 0.5e-4, 1.0e-4 | kg·m² |
