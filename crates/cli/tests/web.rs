@@ -480,6 +480,13 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         assert!(y[1].as_f64().unwrap() > 0.0, "{key}: {y}");
         assert!(y[2].as_u64().unwrap() >= 1, "{key} drawn on a canvas: {y}");
     }
+    // Following the samples, not zoomed, until the user zooms.
+    assert_eq!(
+        browser.js(&format!(
+            "return [{chart}.zoomed, document.querySelector(\"{load} .chart-state\").textContent];"
+        )),
+        json!([false, ""])
+    );
     // Zoom: a drag across the plot narrows the x range and stops following.
     let span = format!("const u = {chart}.u; return [u.scales.x.min, u.scales.x.max];");
     let before = browser.js(&span);
@@ -520,6 +527,7 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
     );
     // Pause freezes the picture while the samples keep coming; Live follows again.
     browser.click(&format!("{load} button.live"));
+    assert_eq!(browser.js(&format!("return {chart}.zoomed;")), json!(false));
     browser.click(&format!("{load} button.pause"));
     let frozen = browser.js(&format!("return {chart}.u.data[0].length;"));
     let kept = "return cantwinCharts.store.get('bus/can0/load').t.length;";
@@ -569,6 +577,13 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         "the PDO chart",
         &format!("const c = cantwinCharts.charts.find(c => c.key === '{pdo}'); return c ? c.u.data[0].length : 0;"),
         |v| v.as_u64().is_some_and(|n| n >= 1),
+    );
+    // The charts shown are kept in the page's address, to be bookmarked.
+    let hash = browser.js("return new URLSearchParams(location.hash.slice(1)).get('charts');");
+    assert!(
+        hash.as_str()
+            .is_some_and(|h| h.contains("bus/can0/load") && h.contains(pdo)),
+        "{hash}"
     );
 
     // The scrolling trace is complete: its rows are numbered, and where numbers are missing

@@ -98,7 +98,6 @@ class Chart {
     this.color = COLORS[nextColor++ % COLORS.length];
     this.paused = false;
     this.zoomed = false;
-    this.updating = false;
     this.cursors = { A: null, B: null };
     this.armed = "A";
     this.lastCsv = "";
@@ -162,7 +161,8 @@ class Chart {
       height: 190,
       legend: { show: false },
       scales: {
-        x: { time: false },
+        // The samples' own time span, a second around a single one.
+        x: { time: false, range: (u, min, max) => (min === max ? [min - 1, max + 1] : [min, max]) },
         y: { range: (u, min, max) => yRange(chart.sig().non_negative, min, max) },
       },
       axes: [
@@ -179,22 +179,23 @@ class Chart {
               chart.startPan(e);
               return null;
             }
+            // A drag across the plot is a zoom (uPlot sets the x range at its end): from
+            // then on the chart keeps that range rather than following the samples.
+            const up = (m) => {
+              document.removeEventListener("mouseup", up);
+              if (Math.abs(m.clientX - e.clientX) > 3) chart.setZoomed(true);
+            };
+            document.addEventListener("mouseup", up);
             return handler(e);
           },
           dblclick: () => () => null,
         },
       },
       hooks: {
-        setScale: [(u, key) => {
-          if (key === "x" && !chart.updating) chart.setZoomed(true);
-        }],
         draw: [(u) => chart.drawCursors(u)],
       },
     };
-    // Drawing the first time sets the scales: that is no zoom of the user's.
-    this.updating = true;
     this.u = new uPlot(opts, this.data(), plot);
-    this.updating = false;
     const over = this.u.over;
     over.addEventListener("click", (e) => {
       if (e.shiftKey || Math.abs(e.clientX - (this.downX ?? e.clientX)) > 3) return;
@@ -208,6 +209,7 @@ class Chart {
       if (min == null || max == null) return;
       const at = this.u.posToVal(e.offsetX, "x");
       const k = e.deltaY < 0 ? 0.8 : 1.25;
+      this.setZoomed(true);
       this.u.setScale("x", { min: at - (at - min) * k, max: at + (max - at) * k });
     }, { passive: false });
     this.el.querySelector(".chart-title").textContent = sig.unit ? `${sig.label} (${sig.unit})` : sig.label;
@@ -218,6 +220,7 @@ class Chart {
     if (min == null || max == null) return;
     const x0 = e.clientX;
     const perPx = (max - min) / this.u.over.clientWidth;
+    this.setZoomed(true);
     const move = (m) => {
       const dt = (m.clientX - x0) * perPx;
       this.u.setScale("x", { min: min - dt, max: max - dt });
@@ -316,7 +319,6 @@ class Chart {
   /** Shows the newest samples, keeping a zoomed x range; nothing while paused. */
   update(force) {
     if (this.paused && !force) return;
-    this.updating = true;
     if (this.zoomed) {
       // Keep the user's x range; setting it again fits the y axis to what is in view.
       const { min, max } = this.u.scales.x;
@@ -325,15 +327,12 @@ class Chart {
     } else {
       this.u.setData(this.data(), true);
     }
-    this.updating = false;
     this.readout();
   }
 
   resize() {
     const plot = this.el.querySelector(".chart-plot");
-    this.updating = true;
     this.u.setSize({ width: Math.max(plot.clientWidth, 320), height: 190 });
-    this.updating = false;
   }
 
   /** The samples in view (all when not zoomed) as CSV, saved as a download. */
