@@ -207,13 +207,15 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             loop {
                 let now = started.elapsed().as_nanos() as u64;
                 act(now);
-                let ended = !matches!(
+                let ended = matches!(
                     lc.state(),
-                    Ok(ParticipantState::ServicesCreated
-                        | ParticipantState::CommunicationInitializing
-                        | ParticipantState::CommunicationInitialized
-                        | ParticipantState::ReadyToRun
-                        | ParticipantState::Running)
+                    Ok(ParticipantState::Stopping
+                        | ParticipantState::Stopped
+                        | ParticipantState::ShuttingDown
+                        | ParticipantState::Shutdown
+                        | ParticipantState::Error
+                        | ParticipantState::Aborting)
+                        | Err(_)
                 );
                 if stopped.load(Ordering::SeqCst) || ended {
                     break;

@@ -275,20 +275,57 @@ pub fn run_synchronized(
     let lifecycle = participant.lifecycle(OperationMode::Coordinated)?;
     start_controllers_when_ready(&lifecycle, &controllers, &rates)?;
     let time_sync = lifecycle.time_sync()?;
-    let stop_requested = Arc::new(AtomicBool::new(false));
     {
         let (s, controllers) = (Arc::clone(&shared), controllers.clone());
         time_sync.on_step(step.as_nanos(), move |now, _duration| {
             s.step(now, &controllers);
         })?;
     }
+    let (participant, final_state, left) =
+        run_coordinated(participant, &lifecycle, &config.participant, stop)?;
+    // Destroying the participant frees the handlers, the last holders of `shared` but this.
+    drop(time_sync);
+    drop(lifecycle);
+    drop(controllers);
+    drop(participant);
+    let shared = Arc::try_unwrap(shared).map_err(|_| {
+        BridgeError::SilKit(Error::Call {
+            function: "SilKit_Participant_Destroy",
+            code: 1,
+            message: "a handler outlived its participant".into(),
+        })
+    })?;
+    let counters = shared.counters.snapshot();
+    Ok(SyncedOutcome {
+        sim: shared
+            .sim
+            .into_inner()
+            .unwrap_or_else(PoisonError::into_inner),
+        final_state,
+        counters,
+        left,
+    })
+}
+
+/// Start a coordinated lifecycle and block until it ends: stop it when `stop` is set, and
+/// when a participant that ran with us leaves mid-run (a synchronised participant that
+/// disconnects while running stalls everyone's time, since SIL Kit waits for its next step
+/// for ever). Returns the participant (for the caller to destroy), the final state and who
+/// left.
+pub(crate) fn run_coordinated(
+    participant: Participant,
+    lifecycle: &Lifecycle,
+    me: &str,
+    stop: &AtomicBool,
+) -> Result<(Participant, ParticipantState, Vec<String>), BridgeError> {
+    let stop_requested = AtomicBool::new(false);
     // Who ran with us and left: a synchronised participant that disconnects while running
     // stalls everyone's time, since SIL Kit waits for its next step for ever.
     let running_peers = Arc::new(Mutex::new(Vec::<String>::new()));
     let left = Arc::new(Mutex::new(Vec::<String>::new()));
     let monitor = participant.system_monitor()?;
     {
-        let (peers, me) = (Arc::clone(&running_peers), config.participant.clone());
+        let (peers, me) = (Arc::clone(&running_peers), me.to_string());
         monitor.on_participant_status(move |name, state| {
             let mut peers = peers.lock().unwrap_or_else(PoisonError::into_inner);
             if state == ParticipantState::Running && name != me && !peers.iter().any(|p| p == name)
@@ -296,13 +333,24 @@ pub fn run_synchronized(
                 peers.push(name.to_string());
             }
         })?;
-        let (peers, left) = (Arc::clone(&running_peers), Arc::clone(&left));
+        let (peers, left, lc) = (
+            Arc::clone(&running_peers),
+            Arc::clone(&left),
+            lifecycle.clone(),
+        );
         monitor.on_participant_disconnected(move |name| {
-            if peers
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .iter()
-                .any(|p| p == name)
+            // Only a departure while we run is one mid-run: at the end, participants leave
+            // once their own lifecycle is over (ours is stopping by then).
+            let running = matches!(
+                lc.state(),
+                Ok(ParticipantState::Running | ParticipantState::Paused)
+            );
+            if running
+                && peers
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .iter()
+                    .any(|p| p == name)
             {
                 left.lock()
                     .unwrap_or_else(PoisonError::into_inner)
@@ -373,29 +421,9 @@ pub fn run_synchronized(
         })
     })?;
     let final_state = result?;
-    // Destroying the participant frees the handlers, the last holders of `shared` but this.
-    drop(time_sync);
     drop(monitor);
-    drop(lifecycle);
-    drop(controllers);
-    drop(participant);
-    let shared = Arc::try_unwrap(shared).map_err(|_| {
-        BridgeError::SilKit(Error::Call {
-            function: "SilKit_Participant_Destroy",
-            code: 1,
-            message: "a handler outlived its participant".into(),
-        })
-    })?;
-    let counters = shared.counters.snapshot();
-    Ok(SyncedOutcome {
-        sim: shared
-            .sim
-            .into_inner()
-            .unwrap_or_else(PoisonError::into_inner),
-        final_state,
-        counters,
-        left: std::mem::take(&mut *left.lock().unwrap_or_else(PoisonError::into_inner)),
-    })
+    let left = std::mem::take(&mut *left.lock().unwrap_or_else(PoisonError::into_inner));
+    Ok((participant, final_state, left))
 }
 
 /// Set the bit rates and start the controllers once communication is ready (SIL Kit's rule:

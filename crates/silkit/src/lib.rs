@@ -34,13 +34,16 @@ pub mod bridge;
 mod error;
 #[allow(unsafe_code)]
 mod ffi;
+pub mod netsim;
 mod types;
 
 pub use bridge::{BridgeConfig, BridgeError, PacedBridge, run_synchronized};
 pub use error::Error;
 pub use ffi::{
-    CanController, LIBRARY_NAME, Lifecycle, Participant, SilKit, SystemMonitor, TimeSync,
+    CanController, CanEventProducer, LIBRARY_NAME, Lifecycle, Participant, SilKit,
+    SimulatedCanNetwork, SystemMonitor, TimeSync,
 };
+pub use netsim::{CanNetworkModel, NetsimConfig, NetsimOutcome, run_network_simulator};
 pub use types::{
     CanFrame, ControllerState, Direction, DirectionMask, ErrorState, ErrorStateChangeEvent,
     FLAG_BRS, FLAG_ESI, FLAG_FDF, FLAG_IDE, FLAG_RTR, FLAG_SEC, FLAG_XLF, FrameConversionError,

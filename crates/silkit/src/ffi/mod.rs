@@ -1153,3 +1153,317 @@ impl TimeSync {
 fn step_tramp_for<F: Fn(u64, u64) + Send + Sync + 'static>(_: &F) -> raw::StepHandler {
     step_trampoline::<F>
 }
+
+/// A CAN network simulated by this participant (SIL Kit's experimental network simulator
+/// API, `capi/NetworkSimulator.h`): SIL Kit calls it for every controller on the network, on
+/// its communication thread, and it answers through the [`CanEventProducer`] it is handed.
+pub trait SimulatedCanNetwork: Send + Sync + 'static {
+    /// A controller appeared on the network (`ProvideSimulatedController`); descriptors are
+    /// unique and start at 1.
+    fn controller_added(&self, descriptor: u64);
+    /// The participant owning a controller left (`SimulatedControllerRemoved`).
+    fn controller_removed(&self, descriptor: u64);
+    /// How to send events to the controllers (`SetEventProducer`, once).
+    fn event_producer(&self, producer: CanEventProducer);
+    /// `SilKit_CanController_SetBaudRate` of a controller.
+    fn baud_rate(&self, descriptor: u64, rate: u32, fd_rate: u32, xl_rate: u32);
+    /// `SilKit_CanController_SendFrame` of a controller.
+    fn frame_request(&self, descriptor: u64, frame: CanFrame, user_context: usize);
+    /// `Start`, `Stop`, `Sleep` or `Reset` of a controller: the requested state, whether the
+    /// error counters are to be reset and whether pending transmissions are cancelled.
+    fn controller_mode(
+        &self,
+        descriptor: u64,
+        state: ControllerState,
+        reset_error_handling: bool,
+        cancel_transmit_requests: bool,
+    );
+}
+
+/// `SilKit_Experimental_NetSim_CanControllerModeFlags`: bit 0 resets error handling, bit 1
+/// cancels transmit requests.
+const MODE_RESET_ERROR_HANDLING: i32 = 1;
+const MODE_CANCEL_TRANSMIT_REQUESTS: i32 = 2;
+
+/// What SIL Kit gets as a simulated network's context.
+struct NetworkContext {
+    network: Arc<dyn SimulatedCanNetwork>,
+    inner: Arc<Inner>,
+    produce: ProduceFn,
+}
+
+type ProduceFn = unsafe extern "C" fn(
+    *mut raw::CanEventProducer,
+    *const raw::StructHeader,
+    *const raw::EventReceivers,
+) -> raw::ReturnCode;
+
+/// What SIL Kit gets as a simulated controller's context.
+struct ControllerContext {
+    network: Arc<dyn SimulatedCanNetwork>,
+    descriptor: u64,
+}
+
+/// The network function table; SIL Kit keeps a pointer to it, so it is static.
+static NETWORK_FUNCTIONS: raw::SimulatedNetworkFunctions = raw::SimulatedNetworkFunctions {
+    header: raw::StructHeader::new(raw::SIMULATED_NETWORK_FUNCTIONS_ID),
+    provide_simulated_controller: provide_controller,
+    simulated_controller_removed: controller_removed,
+    set_event_producer,
+};
+
+/// The CAN controller function table, static for the same reason.
+static CAN_CONTROLLER_FUNCTIONS: raw::SimulatedCanControllerFunctions =
+    raw::SimulatedCanControllerFunctions {
+        header: raw::StructHeader::new(raw::SIMULATED_CAN_CONTROLLER_FUNCTIONS_ID),
+        on_set_baudrate,
+        on_frame_request,
+        on_set_controller_mode,
+    };
+
+unsafe extern "C" fn provide_controller(
+    out_controller: *mut *mut c_void,
+    out_functions: *mut *const c_void,
+    descriptor: u64,
+    network: *mut c_void,
+) {
+    if out_controller.is_null() || out_functions.is_null() || network.is_null() {
+        return;
+    }
+    // SAFETY: `network` is the `NetworkContext` kept by the participant.
+    let net = unsafe { &*(network as *const NetworkContext) };
+    let ctx = net.inner.keep(ControllerContext {
+        network: Arc::clone(&net.network),
+        descriptor,
+    });
+    // SAFETY: valid out-pointers; the controller context lives as long as the participant
+    // and the function table is static (SIL Kit stores both pointers).
+    unsafe {
+        *out_controller = ctx;
+        *out_functions = &CAN_CONTROLLER_FUNCTIONS as *const _ as *const c_void;
+    }
+    guarded(|| net.network.controller_added(descriptor));
+}
+
+unsafe extern "C" fn controller_removed(descriptor: u64, network: *mut c_void) {
+    if network.is_null() {
+        return;
+    }
+    // SAFETY: `network` is the `NetworkContext` kept by the participant.
+    let net = unsafe { &*(network as *const NetworkContext) };
+    guarded(|| net.network.controller_removed(descriptor));
+}
+
+unsafe extern "C" fn set_event_producer(producer: *mut c_void, network: *mut c_void) {
+    if producer.is_null() || network.is_null() {
+        return;
+    }
+    // SAFETY: `network` is the `NetworkContext` kept by the participant.
+    let net = unsafe { &*(network as *const NetworkContext) };
+    let producer = CanEventProducer {
+        inner: Arc::clone(&net.inner),
+        raw: producer,
+        produce: net.produce,
+    };
+    guarded(|| net.network.event_producer(producer));
+}
+
+unsafe extern "C" fn on_set_baudrate(
+    controller: *mut c_void,
+    msg: *const raw::NetSimCanConfigureBaudrate,
+) {
+    if controller.is_null() || msg.is_null() {
+        return;
+    }
+    // SAFETY: `controller` is a `ControllerContext` kept by the participant; `msg` is valid
+    // during the call.
+    let (c, m) = unsafe { (&*(controller as *const ControllerContext), &*msg) };
+    let (rate, fd, xl) = (m.rate, m.fd_rate, m.xl_rate);
+    guarded(|| c.network.baud_rate(c.descriptor, rate, fd, xl));
+}
+
+unsafe extern "C" fn on_frame_request(
+    controller: *mut c_void,
+    msg: *const raw::NetSimCanFrameRequest,
+) {
+    if controller.is_null() || msg.is_null() {
+        return;
+    }
+    // SAFETY: as in `on_set_baudrate`; the frame is on SIL Kit's stack and copied here.
+    let (c, m) = unsafe { (&*(controller as *const ControllerContext), &*msg) };
+    // SAFETY: the frame pointer of a valid request.
+    let Some(frame) = (unsafe { copy_frame(m.frame) }) else {
+        return;
+    };
+    let tag = m.user_context as usize;
+    guarded(|| c.network.frame_request(c.descriptor, frame, tag));
+}
+
+unsafe extern "C" fn on_set_controller_mode(
+    controller: *mut c_void,
+    msg: *const raw::NetSimCanControllerMode,
+) {
+    if controller.is_null() || msg.is_null() {
+        return;
+    }
+    // SAFETY: as in `on_set_baudrate`.
+    let (c, m) = unsafe { (&*(controller as *const ControllerContext), &*msg) };
+    let flags = m.can_controller_mode_flags;
+    let state = ControllerState::from_raw(m.state);
+    guarded(|| {
+        c.network.controller_mode(
+            c.descriptor,
+            state,
+            flags & MODE_RESET_ERROR_HANDLING != 0,
+            flags & MODE_CANCEL_TRANSMIT_REQUESTS != 0,
+        )
+    });
+}
+
+/// Sends simulated events to controllers (`SilKit_Experimental_CanEventProducer_Produce`).
+/// Cheap to clone.
+#[derive(Clone)]
+pub struct CanEventProducer {
+    inner: Arc<Inner>,
+    raw: *mut raw::CanEventProducer,
+    produce: ProduceFn,
+}
+
+// SAFETY: see `Inner`; the producer is owned by the participant's network simulator.
+unsafe impl Send for CanEventProducer {}
+// SAFETY: as above.
+unsafe impl Sync for CanEventProducer {}
+
+impl core::fmt::Debug for CanEventProducer {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("CanEventProducer").finish_non_exhaustive()
+    }
+}
+
+impl CanEventProducer {
+    fn send(&self, header: *const raw::StructHeader, receivers: &[u64]) -> Result<(), Error> {
+        let rx = raw::EventReceivers {
+            header: raw::StructHeader::new(raw::EVENT_RECEIVERS_ID),
+            num_receivers: receivers.len(),
+            controller_descriptors: receivers.as_ptr(),
+        };
+        let (p, produce) = (self.raw, self.produce);
+        self.inner.call(|api| {
+            // SAFETY: the producer of a live participant; the event and the receiver list
+            // live across the call.
+            let rc = unsafe { produce(p, header, &rx) };
+            api.check("SilKit_Experimental_CanEventProducer_Produce", rc)
+        })?
+    }
+
+    /// Deliver a frame to `receivers` (controller descriptors).
+    pub fn frame(&self, event: &FrameEvent, receivers: &[u64]) -> Result<(), Error> {
+        let mut frame = c_frame(&event.frame);
+        let ev = raw::CanFrameEvent {
+            header: raw::StructHeader::new(raw::CAN_FRAME_EVENT_ID),
+            timestamp: event.timestamp,
+            frame: &mut frame,
+            direction: match event.direction {
+                Direction::Send => 1,
+                Direction::Receive => 2,
+            },
+            user_context: event.user_context as *mut c_void,
+        };
+        self.send(&ev.header, receivers)
+    }
+
+    /// Deliver a transmit acknowledgement to `receivers`.
+    pub fn transmit(&self, event: &TransmitEvent, receivers: &[u64]) -> Result<(), Error> {
+        let ev = raw::CanFrameTransmitEvent {
+            header: raw::StructHeader::new(raw::CAN_FRAME_TRANSMIT_EVENT_ID),
+            user_context: event.user_context as *mut c_void,
+            timestamp: event.timestamp,
+            status: event.status.raw(),
+            can_id: event.can_id,
+        };
+        self.send(&ev.header, receivers)
+    }
+
+    /// Deliver a controller state change to `receivers`.
+    pub fn state(&self, event: &StateChangeEvent, receivers: &[u64]) -> Result<(), Error> {
+        let ev = raw::CanStateChangeEvent {
+            header: raw::StructHeader::new(raw::CAN_STATE_CHANGE_EVENT_ID),
+            timestamp: event.timestamp,
+            state: event.state.raw(),
+        };
+        self.send(&ev.header, receivers)
+    }
+
+    /// Deliver an error state change to `receivers`.
+    pub fn error_state(
+        &self,
+        event: &ErrorStateChangeEvent,
+        receivers: &[u64],
+    ) -> Result<(), Error> {
+        let ev = raw::CanErrorStateChangeEvent {
+            header: raw::StructHeader::new(raw::CAN_ERROR_STATE_CHANGE_EVENT_ID),
+            timestamp: event.timestamp,
+            error_state: event.error_state.raw(),
+        };
+        self.send(&ev.header, receivers)
+    }
+}
+
+impl Participant {
+    /// Act as the network simulator of the CAN networks `networks` (name and model). Call
+    /// before the lifecycle starts: it blocks until every connected participant has answered
+    /// (`SilKit_Experimental_NetworkSimulator_Start`, which detects a second simulator).
+    pub fn simulate_can_networks(
+        &self,
+        networks: &[(&str, Arc<dyn SimulatedCanNetwork>)],
+    ) -> Result<(), Error> {
+        let f = &self.inner.api.f;
+        let create = f.network_simulator_create.ok_or(Error::NoExperimental(
+            "SilKit_Experimental_NetworkSimulator_Create",
+        ))?;
+        let simulate = f
+            .network_simulator_simulate_network
+            .ok_or(Error::NoExperimental(
+                "SilKit_Experimental_NetworkSimulator_SimulateNetwork",
+            ))?;
+        let start = f.network_simulator_start.ok_or(Error::NoExperimental(
+            "SilKit_Experimental_NetworkSimulator_Start",
+        ))?;
+        let produce = f.can_event_producer_produce.ok_or(Error::NoExperimental(
+            "SilKit_Experimental_CanEventProducer_Produce",
+        ))?;
+        let p = self.inner.raw;
+        let mut ns: *mut raw::NetworkSimulator = core::ptr::null_mut();
+        self.inner.call(|api| {
+            // SAFETY: the participant is alive; the simulator is owned by it.
+            let rc = unsafe { create(&mut ns, p) };
+            api.check("SilKit_Experimental_NetworkSimulator_Create", rc)
+        })??;
+        for (name, network) in networks {
+            let c_name = cstring("network name", name)?;
+            let ctx = self.inner.keep(NetworkContext {
+                network: Arc::clone(network),
+                inner: Arc::clone(&self.inner),
+                produce,
+            });
+            self.inner.call(|api| {
+                // SAFETY: `ctx` lives as long as the participant; the table is static.
+                let rc = unsafe {
+                    simulate(
+                        ns,
+                        c_name.as_ptr(),
+                        raw::NETWORK_TYPE_CAN,
+                        ctx,
+                        &NETWORK_FUNCTIONS,
+                    )
+                };
+                api.check("SilKit_Experimental_NetworkSimulator_SimulateNetwork", rc)
+            })??;
+        }
+        self.inner.call(|api| {
+            // SAFETY: the simulator of this live participant.
+            let rc = unsafe { start(ns) };
+            api.check("SilKit_Experimental_NetworkSimulator_Start", rc)
+        })?
+    }
+}

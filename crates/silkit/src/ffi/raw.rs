@@ -73,6 +73,18 @@ const SERVICE_PARTICIPANT: u8 = 7;
 pub const CAN_FRAME_ID: u64 = struct_id(SERVICE_CAN, 1, 1);
 pub const LIFECYCLE_CONFIGURATION_ID: u64 = struct_id(SERVICE_PARTICIPANT, 2, 1);
 pub const WORKFLOW_CONFIGURATION_ID: u64 = struct_id(SERVICE_PARTICIPANT, 3, 3);
+const SERVICE_NETSIM: u8 = 8;
+pub const CAN_FRAME_TRANSMIT_EVENT_ID: u64 = struct_id(SERVICE_CAN, 2, 2);
+pub const CAN_FRAME_EVENT_ID: u64 = struct_id(SERVICE_CAN, 3, 1);
+pub const CAN_STATE_CHANGE_EVENT_ID: u64 = struct_id(SERVICE_CAN, 4, 1);
+pub const CAN_ERROR_STATE_CHANGE_EVENT_ID: u64 = struct_id(SERVICE_CAN, 5, 1);
+pub const EVENT_RECEIVERS_ID: u64 = struct_id(SERVICE_NETSIM, 1, 1);
+pub const SIMULATED_NETWORK_FUNCTIONS_ID: u64 = struct_id(SERVICE_NETSIM, 2, 1);
+pub const SIMULATED_CAN_CONTROLLER_FUNCTIONS_ID: u64 = struct_id(SERVICE_NETSIM, 3, 1);
+
+/// `SilKit_Experimental_SimulatedNetworkType` CAN.
+pub const NETWORK_TYPE_CAN: u32 = 1;
+
 /// `SilKit_ByteVector`.
 #[repr(C)]
 #[derive(Clone, Copy)]
@@ -168,6 +180,65 @@ pub struct ParticipantConnectionInformation {
 pub struct WorkflowConfiguration {
     pub header: StructHeader,
     pub required_participant_names: *mut StringList,
+}
+
+/// `SilKit_Experimental_EventReceivers` (`capi/EventProducer.h`).
+#[repr(C)]
+pub struct EventReceivers {
+    pub header: StructHeader,
+    pub num_receivers: usize,
+    pub controller_descriptors: *const u64,
+}
+
+/// `SilKit_Experimental_NetSim_CanConfigureBaudrate` (`capi/NetworkSimulator.h`).
+#[repr(C)]
+pub struct NetSimCanConfigureBaudrate {
+    pub header: StructHeader,
+    pub rate: u32,
+    pub fd_rate: u32,
+    pub xl_rate: u32,
+}
+
+/// `SilKit_Experimental_NetSim_CanControllerMode`.
+#[repr(C)]
+pub struct NetSimCanControllerMode {
+    pub header: StructHeader,
+    pub can_controller_mode_flags: i32,
+    pub state: i32,
+}
+
+/// `SilKit_Experimental_NetSim_CanFrameRequest`.
+#[repr(C)]
+pub struct NetSimCanFrameRequest {
+    pub header: StructHeader,
+    pub frame: *mut CanFrame,
+    pub user_context: *mut c_void,
+}
+
+/// `SilKit_Experimental_SimulatedNetworkFunctions`.
+#[repr(C)]
+pub struct SimulatedNetworkFunctions {
+    pub header: StructHeader,
+    pub provide_simulated_controller: unsafe extern "C" fn(
+        out_controller: *mut *mut c_void,
+        out_functions: *mut *const c_void,
+        descriptor: u64,
+        network: *mut c_void,
+    ),
+    pub simulated_controller_removed: unsafe extern "C" fn(descriptor: u64, network: *mut c_void),
+    pub set_event_producer: unsafe extern "C" fn(producer: *mut c_void, network: *mut c_void),
+}
+
+/// `SilKit_Experimental_SimulatedCanControllerFunctions`.
+#[repr(C)]
+pub struct SimulatedCanControllerFunctions {
+    pub header: StructHeader,
+    pub on_set_baudrate:
+        unsafe extern "C" fn(controller: *mut c_void, msg: *const NetSimCanConfigureBaudrate),
+    pub on_frame_request:
+        unsafe extern "C" fn(controller: *mut c_void, msg: *const NetSimCanFrameRequest),
+    pub on_set_controller_mode:
+        unsafe extern "C" fn(controller: *mut c_void, msg: *const NetSimCanControllerMode),
 }
 
 pub type CanFrameHandler =
@@ -298,7 +369,7 @@ pub struct Functions {
             *const c_char,
             u32,
             *mut c_void,
-            *const c_void,
+            *const SimulatedNetworkFunctions,
         ) -> ReturnCode,
     >,
     pub network_simulator_start: Option<unsafe extern "C" fn(*mut NetworkSimulator) -> ReturnCode>,
@@ -306,7 +377,7 @@ pub struct Functions {
         unsafe extern "C" fn(
             *mut CanEventProducer,
             *const StructHeader,
-            *const c_void,
+            *const EventReceivers,
         ) -> ReturnCode,
     >,
 }

@@ -227,7 +227,13 @@ pub fn example_participant() -> PathBuf {
         .parent()
         .and_then(Path::parent)
         .expect("target profile dir");
-    profile_dir.join("examples").join("can_participant")
+    let exe = profile_dir.join("examples").join("can_participant");
+    assert!(
+        exe.exists(),
+        "{} is missing: `cargo test -p cantwin-silkit` builds it (a `--test` filter alone does not)",
+        exe.display()
+    );
+    exe
 }
 
 /// A participant configuration that logs nothing (stdout carries the participants' reports).

@@ -1,0 +1,160 @@
+//! cantwin as SIL Kit's CAN network simulator, across processes: the simulator in this
+//! process, foreign participants (the example program, plain SIL Kit) in others. Every
+//! time asserted is computed from cantwin's bus model: frame lengths with stuff bits at
+//! 500 kbit/s (2 µs a bit).
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration as WallDuration;
+
+use cantwin_bus::{BusConfig, PortConfig, Simulation};
+use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
+use cantwin_silkit::{BridgeConfig, NetsimConfig, ParticipantState, SilKit, run_network_simulator};
+use common::{Lines, QUIET_CONFIG, Registry, example_participant, silkit_dir, system_controller};
+
+const BIT_NS: u64 = 2_000;
+
+fn participant(dir: &Path, uri: &str, name: &str, extra: &[&str]) -> Lines {
+    let mut cmd = Command::new(example_participant());
+    cmd.env("CANTWIN_SILKIT_DIR", dir)
+        .args(["--registry", uri, "--name", name, "--network", "can0"])
+        .args(["--step", "1000000", "--bit-rate", "500000"])
+        .args(extra);
+    Lines::spawn(cmd)
+}
+
+fn netsim(dir: &Path, uri: &str) -> std::thread::JoinHandle<cantwin_silkit::NetsimOutcome> {
+    let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
+    let bridge = BridgeConfig {
+        registry_uri: uri.to_string(),
+        participant: "cantwin".into(),
+        configuration: QUIET_CONFIG.into(),
+    };
+    std::thread::spawn(move || {
+        let stop = AtomicBool::new(false);
+        // Steps of 2 ms against the participants' 1 ms: frames sent in odd milliseconds
+        // always reach the bus at the next even one (see the netsim module documentation).
+        let config = NetsimConfig {
+            step: Duration::from_millis(2),
+            ..NetsimConfig::default()
+        };
+        run_network_simulator(&kit, &bridge, &["can0".to_string()], config, &stop)
+            .expect("network simulator")
+    })
+}
+
+#[test]
+fn two_foreign_participants_arbitrate_through_cantwins_bus_with_exact_frame_times() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
+    let sim = netsim(&dir, &registry.uri);
+    let mut a = participant(
+        &dir,
+        &registry.uri,
+        "A",
+        &["--send", "5000000:200#11", "--stop-at", "20000000"],
+    );
+    let mut b = participant(&dir, &registry.uri, "B", &["--send", "5000000:100#2233"]);
+    let a_lines = a.finish(WallDuration::from_secs(30));
+    let b_lines = b.finish(WallDuration::from_secs(30));
+    let out = sim.join().expect("simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+
+    // Both requests reach the bus at 6 ms; 0x100 wins arbitration (ISO 11898-1 §10.4.4.2),
+    // 0x200 starts when the bus is idle after it (3 bits of intermission included in the
+    // length), each delivered at the end of its EOF.
+    let f100 = Frame::std(0x100, &[0x22, 0x33]).expect("frame");
+    let f200 = Frame::std(0x200, &[0x11]).expect("frame");
+    let (n100, n200) = (u64::from(f100.bit_length()), u64::from(f200.bit_length()));
+    let end100 = 6_000_000 + (n100 - 3) * BIT_NS;
+    let end200 = 6_000_000 + n100 * BIT_NS + (n200 - 3) * BIT_NS;
+    for (lines, want) in [
+        (
+            &a_lines,
+            [
+                format!("rx {end100} 100#2233"),
+                format!("ack {end200} Transmitted 200"),
+            ],
+        ),
+        (
+            &b_lines,
+            [
+                format!("ack {end100} Transmitted 100"),
+                format!("rx {end200} 200#11"),
+            ],
+        ),
+    ] {
+        for w in &want {
+            assert!(lines.contains(w), "{w:?} missing: {lines:#?}");
+        }
+        // Detailed simulation: the controllers' states come from the simulator.
+        assert!(lines.iter().any(|l| l.ends_with(" Started")), "{lines:#?}");
+        assert!(
+            lines.iter().any(|l| l.ends_with(" ErrorActive")),
+            "{lines:#?}"
+        );
+    }
+    let counters = out.networks[0].counters();
+    assert_eq!((counters.frames, counters.refused), (2, 0));
+}
+
+/// A node on a bus of its own, recording its controller's events (the reference).
+struct Lone(Vec<(ControllerEvent, Instant)>);
+
+impl Node for Lone {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+    fn on_controller_event(&mut self, e: ControllerEvent, now: Instant, _: &mut Outbox) {
+        self.0.push((e, now));
+    }
+}
+
+#[test]
+fn a_lone_participant_gets_no_ack_and_goes_error_passive() {
+    let Some(dir) = silkit_dir() else { return };
+    // cantwin's bus model, alone: when does a lone sender go error-passive?
+    let frame = Frame::std(0x123, &[0x01]).expect("frame");
+    let mut reference = Simulation::new();
+    let bus = reference.add_bus(BusConfig::new("can0", BitRate::R500K));
+    let port = reference
+        .attach(bus, Lone(Vec::new()), PortConfig::DEFAULT)
+        .expect("attach");
+    reference.run_until(Instant::from_nanos(6_000_000));
+    reference.transmit(port, frame).expect("transmit");
+    reference.run_until(Instant::from_nanos(20_000_000));
+    let passive = reference
+        .node::<Lone>(port)
+        .expect("node")
+        .0
+        .iter()
+        .find(|(e, _)| *e == ControllerEvent::ErrorPassive)
+        .map(|(_, t)| t.as_nanos())
+        .expect("the reference goes error-passive");
+
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
+    let sim = netsim(&dir, &registry.uri);
+    let mut a = participant(
+        &dir,
+        &registry.uri,
+        "A",
+        &["--send", "5000000:123#01", "--stop-at", "20000000"],
+    );
+    let lines = a.finish(WallDuration::from_secs(30));
+    let out = sim.join().expect("simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+    assert!(
+        lines.contains(&format!("error-state {passive} ErrorPassive")),
+        "ErrorPassive at {passive} missing: {lines:#?}"
+    );
+    // Never acknowledged, so never reported transmitted.
+    assert!(!lines.iter().any(|l| l.starts_with("ack ")), "{lines:#?}");
+    assert_eq!(out.networks[0].counters().frames, 0);
+}
