@@ -6,10 +6,16 @@
 //! slave grants on it; a wider class or instance (the ADV200 card's Parameter object with
 //! instance = PAR above 255, EXP-CAN/DN-ADV manual §3.4.2 note 1) opens a UCMM connection
 //! asking for 8/16 or 16/16 and closes it afterwards.
+//!
+//! A node coming on line first runs the duplicate MAC ID check (two requests 1 s apart, no
+//! answer allowed, ODVA DeviceNet specification, Volume 3): every one-shot command spends
+//! those 2 s, `cantwin dnet shell` spends them once for many commands.
 
 use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
+use cantwin_adv200::params::{def, par};
+use cantwin_adv200::pdc::{self, Dir, Format, Item};
 use cantwin_can::{Duration, Node, Outbox};
 use cantwin_devicenet::eds::{EdsDate, EdsTime};
 use cantwin_devicenet::scanner::explicit::{self, Outcome};
@@ -134,7 +140,18 @@ enum Command {
         /// Poll period in ms (also the expected packet rate set on the connection).
         #[arg(long, default_value_t = 100)]
         period_ms: u16,
+        /// Print the bytes only: do not read an ADV200's PDC configuration to name its
+        /// words.
+        #[arg(long)]
+        raw: bool,
     },
+    /// Go on line once and read commands from standard input, one a line (browse, get,
+    /// set, poll as above, without `cantwin dnet`; `help`; `quit` or end of input): the
+    /// duplicate MAC ID check's 2 s are spent once.
+    #[command(after_help = "Examples:
+  cantwin dnet --socketcand 127.0.0.1:29536 shell
+                              printf 'get 12 1 1 7 --type short-string\npoll 12 --out 0300E803\n' | cantwin dnet --scenario scenarios/adv200-devicenet.toml shell")]
+    Shell,
     /// Print the ODVA EDS of a scenario's DeviceNet device (the ADV200 card with PAR 4000 =
     /// DeviceNet), generated from its object model: identity, polled I/O sizes, parameters.
     #[command(
@@ -267,6 +284,9 @@ struct Session {
     scanner: Scanner,
     timeout: f64,
 }
+
+/// Why a node waits before it talks, said when the wait is felt.
+const DUPLICATE_MAC_NOTE: &str = "going on line: the duplicate MAC ID check takes 2 s (a DeviceNet node sends two Duplicate MAC ID Check requests 1 s apart and may talk only if nobody answers, as the ODVA specification requires of every node coming on line)";
 
 impl Session {
     fn open(args: &Args) -> Result<Session> {
@@ -531,10 +551,150 @@ fn browse(s: &mut Session, from: u8, to: u8) -> Result<()> {
     Ok(())
 }
 
-fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16) -> Result<()> {
+/// One word of an ADV200's process data: the channel placed there and what it carries.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Word {
+    /// The placement (channel, width, signedness, fill).
+    item: Item,
+    /// The parameter it carries (`ipa`), with its name and unit, if any.
+    name: Option<(String, &'static str)>,
+}
+
+/// The words of one direction of an ADV200's Process Data Channel, from its channels'
+/// formats and `ipa` parameters (manual §1.3: the same placement as the PDOs; DeviceNet
+/// polled I/O carries the words of all of them in a row, §3.5).
+fn pdc_words(dir: Dir, channels: &[(Format, u16)]) -> Result<Vec<Word>> {
+    let layout = pdc::place(dir, channels).map_err(|e| anyhow::anyhow!("the PDC: {e:?}"))?;
+    Ok(layout
+        .items()
+        .map(|item| {
+            let ipa = channels[usize::from(item.channel) - 1].1;
+            let d = (!item.fill && ipa != 0).then(|| def(ipa)).flatten();
+            let signed = match dir {
+                Dir::M2S => item.signed,
+                Dir::S2M => d.is_some_and(|d| d.ty.signed()),
+            };
+            // An M2S channel's `ipa` is the src parameter it feeds ("Ramp ref 1 src"): the
+            // word is the value of what that src sets.
+            let name = d.map(|d| {
+                let name = match dir {
+                    Dir::M2S => d.name.strip_suffix(" src").unwrap_or(&d.name),
+                    Dir::S2M => &d.name,
+                };
+                (name.to_string(), d.unit)
+            });
+            Word {
+                item: Item { signed, ..item },
+                name,
+            }
+        })
+        .collect())
+}
+
+/// `data` read as `words`: `name = value unit` per word (a fill as `fill`, a channel with no
+/// parameter by its number), or why it does not fit.
+fn describe_words(words: &[Word], data: &[u8]) -> String {
+    let mut at = 0;
+    let mut parts = Vec::new();
+    for w in words {
+        let n = usize::from(w.item.bits / 8);
+        let Some(bytes) = data.get(at..at + n) else {
+            return format!(
+                "{} bytes, the PDC configuration has {}",
+                data.len(),
+                words
+                    .iter()
+                    .map(|w| usize::from(w.item.bits / 8))
+                    .sum::<usize>()
+            );
+        };
+        at += n;
+        let raw = bytes
+            .iter()
+            .rev()
+            .fold(0u64, |acc, b| (acc << 8) | u64::from(*b));
+        let value = match (w.item.signed, n) {
+            (true, 2) => i64::from(raw as u16 as i16),
+            (true, _) => i64::from(raw as u32 as i32),
+            (false, _) => raw as i64,
+        };
+        parts.push(match &w.name {
+            _ if w.item.fill => "fill".to_string(),
+            // Words without a unit are bit fields or codes (the status word): in hex.
+            Some((name, "")) if !w.item.signed => {
+                format!("{name} = 0x{raw:0width$X}", width = n * 2)
+            }
+            Some((name, "")) => format!("{name} = {value}"),
+            Some((name, unit)) => format!("{name} = {value} {unit}"),
+            None => format!("channel {} = {value}", w.item.channel),
+        });
+    }
+    parts.join(", ")
+}
+
+/// Whether MAC ID `slave` is an ADV200 card (Identity attribute 7, product name).
+fn is_adv200(s: &mut Session, slave: MacId) -> bool {
+    matches!(
+        s.request(slave, service::GET_ATTRIBUTE_SINGLE, 1, 1, &[7]),
+        Ok(name) if name.get(1..).is_some_and(|n| n.starts_with(b"ADV200"))
+    )
+}
+
+/// A drive parameter's value through the Parameter object (class 0x0F, instance = PAR,
+/// attribute 1; every value a DWORD, manual §3.4.1).
+fn read_param(s: &mut Session, slave: MacId, number: u16) -> Result<i64> {
+    let data = s.request(slave, service::GET_ATTRIBUTE_SINGLE, 0x0F, number, &[1])?;
+    let bytes: [u8; 4] = data
+        .as_slice()
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("PAR {number}: {} bytes, not a DWORD", data.len()))?;
+    Ok(i64::from(i32::from_le_bytes(bytes)))
+}
+
+/// Reads an ADV200's channel formats and `ipa` parameters of one direction, up to the first
+/// channel Not assigned (where the PDC ends, §1.3).
+fn read_channels(s: &mut Session, slave: MacId, dir: Dir) -> Result<Vec<(Format, u16)>> {
+    let mut channels = Vec::new();
+    for n in 1..=cantwin_adv200::params::CHANNELS {
+        let (sys, ipa) = match dir {
+            Dir::M2S => (par::m2s_sys(n), par::m2s_ipa(n)),
+            Dir::S2M => (par::s2m_sys(n), par::s2m_ipa(n)),
+        };
+        let format = Format::from_value(read_param(s, slave, sys)?);
+        if format == Format::NotAssigned {
+            channels.push((format, 0));
+            break;
+        }
+        let ipa = u16::try_from(read_param(s, slave, ipa)?).unwrap_or(0);
+        channels.push((format, ipa));
+    }
+    Ok(channels)
+}
+
+/// The words of an ADV200's polled I/O (inputs, outputs), or `None` for another device.
+fn adv200_words(s: &mut Session, slave: MacId) -> Result<Option<(Vec<Word>, Vec<Word>)>> {
+    if !is_adv200(s, slave) {
+        return Ok(None);
+    }
+    let inputs = pdc_words(Dir::S2M, &read_channels(s, slave, Dir::S2M)?)?;
+    let outputs = pdc_words(Dir::M2S, &read_channels(s, slave, Dir::M2S)?)?;
+    Ok(Some((inputs, outputs)))
+}
+
+fn poll(
+    s: &mut Session,
+    slave: MacId,
+    output: &[u8],
+    count: u32,
+    period_ms: u16,
+    raw: bool,
+) -> Result<()> {
     if period_ms == 0 {
         bail!("--period-ms must be at least 1");
     }
+    // Read before the poll connection exists: the card's explicit messages and the PDC
+    // configuration (parameters take effect at a drive reset, so they are what it runs).
+    let words = if raw { None } else { adv200_words(s, slave)? };
     let sc = &mut s.scanner;
     sc.allocate(slave, choice::EXPLICIT | choice::POLLED)?;
     // Connection instance 2 is the polled I/O connection; attribute 7 its produced size.
@@ -607,6 +767,9 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
             output.len(),
             epr.unwrap_or(period_ms)
         );
+        if let Some((_, outputs)) = &words {
+            println!("output: {}", describe_words(outputs, output));
+        }
     }
     let now = s.link.now();
     s.scanner.start_polling(
@@ -630,13 +793,21 @@ fn poll(s: &mut Session, slave: MacId, output: &[u8], count: u32, period_ms: u16
                     && seen < count
                 {
                     seen += 1;
+                    let decoded = words
+                        .as_ref()
+                        .map(|(inputs, _)| describe_words(inputs, &data));
                     if json {
-                        println!(
-                            "{}",
-                            serde_json::json!({"input": seen, "data": crate::output::hex(&data)})
-                        );
+                        let mut v =
+                            serde_json::json!({"input": seen, "data": crate::output::hex(&data)});
+                        if let Some(text) = &decoded {
+                            v["decoded"] = serde_json::json!(text);
+                        }
+                        println!("{v}");
                     } else {
                         println!("input {seen}: {}", hex(&data));
+                        if let Some(text) = decoded {
+                            println!("  {text}");
+                        }
                     }
                 }
             }
@@ -671,9 +842,21 @@ pub fn run(args: &Args) -> Result<()> {
             }
         };
     }
+    if matches!(args.command, Command::Shell) {
+        return shell(args);
+    }
+    // The wait is felt at a terminal: say why, and how to spend it once.
+    if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+        eprintln!("{DUPLICATE_MAC_NOTE}; `cantwin dnet shell` spends them once for many commands");
+    }
     let mut s = Session::open(args)?;
-    match &args.command {
-        Command::Browse { from, to } => browse(&mut s, *from, *to),
+    execute(&mut s, &args.command)
+}
+
+/// One command on a scanner that is on line.
+fn execute(s: &mut Session, command: &Command) -> Result<()> {
+    match command {
+        Command::Browse { from, to } => browse(s, *from, *to),
         Command::Get {
             slave,
             class,
@@ -731,13 +914,127 @@ pub fn run(args: &Args) -> Result<()> {
             out,
             count,
             period_ms,
+            raw,
         } => {
             let slave = mac(*slave, "MAC ID")?;
             let output = parse_hex(out)?;
-            poll(&mut s, slave, &output, *count, *period_ms)
+            poll(s, slave, &output, *count, *period_ms, *raw)
         }
-        Command::Eds { .. } => Ok(()),
+        Command::Shell => bail!("the shell is already running"),
+        Command::Eds { .. } => bail!(
+            "eds reads a scenario file, not the bus: run `cantwin dnet eds` outside the shell"
+        ),
     }
+}
+
+/// A command line of the shell, parsed with the subcommands' own parser.
+#[derive(Debug, clap::Parser)]
+#[command(
+    name = "dnet",
+    no_binary_name = true,
+    disable_help_subcommand = true,
+    override_usage = "<COMMAND> [ARGS]…"
+)]
+struct ShellLine {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// `line` split into words: blanks separate them, double quotes group (a short string with
+/// spaces), a backslash escapes the next character.
+fn words(line: &str) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    let mut word: Option<String> = None;
+    let mut quoted = false;
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '\\' => {
+                let next = chars.next().context("a backslash at the end of the line")?;
+                word.get_or_insert_with(String::new).push(next);
+            }
+            '"' => {
+                quoted = !quoted;
+                word.get_or_insert_with(String::new);
+            }
+            c if c.is_whitespace() && !quoted => {
+                if let Some(w) = word.take() {
+                    out.push(w);
+                }
+            }
+            c => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    if quoted {
+        bail!("a quote is not closed");
+    }
+    out.extend(word);
+    Ok(out)
+}
+
+/// The help of the shell.
+const SHELL_HELP: &str = "commands: browse [--from N --to N] | get MAC CLASS INSTANCE ATTRIBUTE [--type T] | set MAC CLASS INSTANCE ATTRIBUTE VALUE --type T | poll MAC --out HEX [--count N] [--period-ms MS] [--raw] | help [COMMAND] | quit";
+
+/// `cantwin dnet shell`: one node on line, many commands from standard input.
+fn shell(args: &Args) -> Result<()> {
+    use std::io::{BufRead, IsTerminal, Write};
+    let interactive = std::io::stdin().is_terminal();
+    eprintln!("{DUPLICATE_MAC_NOTE}; this shell stays on line, so its commands do not wait");
+    let mut s = Session::open(args)?;
+    eprintln!("on line as MAC ID {}; {SHELL_HELP}", s.scanner_mac);
+    let stdin = std::io::stdin();
+    let mut failed = 0u32;
+    let mut lines = stdin.lock().lines();
+    loop {
+        if interactive {
+            print!("dnet> ");
+            std::io::stdout().flush().ok();
+        }
+        let Some(line) = lines.next() else { break };
+        let line = line.context("reading standard input")?;
+        let words = match words(&line) {
+            Ok(w) => w,
+            Err(e) => {
+                eprintln!("error: {e}");
+                failed += 1;
+                continue;
+            }
+        };
+        match words.first().map(String::as_str) {
+            None => continue,
+            Some("quit" | "exit") => break,
+            Some("help") if words.len() == 1 => {
+                println!("{SHELL_HELP}");
+                continue;
+            }
+            Some("help") => {
+                let mut w = words[1..].to_vec();
+                w.push("--help".into());
+                if let Err(e) = <ShellLine as clap::Parser>::try_parse_from(w) {
+                    print!("{e}");
+                }
+                continue;
+            }
+            _ => {}
+        }
+        match <ShellLine as clap::Parser>::try_parse_from(&words) {
+            Ok(parsed) => {
+                if let Err(e) = execute(&mut s, &parsed.command) {
+                    eprintln!("error: {e:#}");
+                    failed += 1;
+                }
+            }
+            Err(e) => {
+                eprint!("{}", e.render());
+                failed += 1;
+            }
+        }
+        std::io::stdout().flush().ok();
+    }
+    if failed > 0 {
+        bail!("{failed} command(s) failed");
+    }
+    Ok(())
 }
 
 /// Days since 1970-01-01 to a (year, month, day) civil date (the proleptic Gregorian
@@ -844,6 +1141,64 @@ mod tests {
         assert_eq!(decode(&[0xFE, 0xFF, 0xFF, 0xFF], ValueType::I32), "-2");
         assert_eq!(decode(&[2, b'a', b'b'], ValueType::ShortString), "\"ab\"");
         assert_eq!(decode(&[1], ValueType::U16), "01 (1 bytes, not a U16)");
+    }
+
+    /// The manual's worked example (§1.6): S2M channels Word comp mon (status word), Motor
+    /// speed and Analog inp 2 mon, all 16 bits; M2S Word decomp and Ramp ref 1.
+    #[test]
+    fn manual_1_6_pdc_words_are_named_from_the_channel_parameters() {
+        let ipa = |name: &str| {
+            cantwin_adv200::params::catalog()
+                .iter()
+                .find(|d| d.name == name)
+                .map(|d| d.par)
+                .unwrap()
+        };
+        let s2m = [
+            (Format::Eu, ipa("Word comp mon")),
+            (Format::Eu, ipa("Motor speed")),
+            (Format::Count16, ipa("Analog inp 2 mon")),
+            (Format::NotAssigned, 0),
+        ];
+        let words = pdc_words(Dir::S2M, &s2m).unwrap();
+        assert_eq!(words.len(), 3);
+        assert_eq!(
+            describe_words(&words, &[0x03, 0x01, 0xDC, 0x05, 0x00, 0x10]),
+            "Word comp mon = 0x0103, Motor speed = 1500 rpm, Analog inp 2 mon = 4096 cnt"
+        );
+        // A negative speed is signed as its parameter is.
+        assert!(
+            describe_words(&words, &[0, 0, 0x24, 0xFA, 0, 0]).contains("Motor speed = -1500 rpm")
+        );
+        assert_eq!(
+            describe_words(&words, &[0x03, 0x01]),
+            "2 bytes, the PDC configuration has 6"
+        );
+        let m2s = [
+            (Format::Count16, ipa("Word decomp src")),
+            (Format::Count16, ipa("Ramp ref 1 src")),
+            (Format::NotAssigned, 0),
+        ];
+        let words = pdc_words(Dir::M2S, &m2s).unwrap();
+        assert_eq!(
+            describe_words(&words, &[0x03, 0x00, 0xE8, 0x03]),
+            "Word decomp = 3, Ramp ref 1 = 1000"
+        );
+    }
+
+    #[test]
+    fn shell_words_split_on_blanks_and_group_quotes() {
+        assert_eq!(
+            words("  get 12 1 1 7 ").unwrap(),
+            ["get", "12", "1", "1", "7"]
+        );
+        assert_eq!(
+            words(r#"set 12 1 1 7 "a b" --type short-string"#).unwrap(),
+            ["set", "12", "1", "1", "7", "a b", "--type", "short-string"]
+        );
+        assert_eq!(words(r#"x \"y"#).unwrap(), ["x", "\"y"]);
+        assert!(words(r#"set "a"#).is_err());
+        assert!(words("end \\").is_err());
     }
 
     #[test]
