@@ -73,9 +73,12 @@ enum Command {
                             web http://plant.lan:8080/?token=5f0c…"
     )]
     Sim(sim::Args),
-    /// Print a capture (pcap, pcapng or candump log), one frame a line.
+    /// Print a capture (pcap, pcapng or candump log), one frame a line, decoded with --decode.
     #[command(
-        after_help = "Examples:\n  cantwin dump capture.pcap\n  cantwin dump candump-2024-01-01.log"
+        after_help = "Examples:\n  cantwin dump capture.pcap\n  cantwin dump candump-2024-01-01.log\n  \
+                            cantwin dump run.log --decode --eds 5=device.eds\n  \
+                            cantwin dump dnet.log --decode --protocol devicenet\n  \
+                            cantwin dump run.log --decode --scenario scenarios/opendrive.toml"
     )]
     Dump(dump::Args),
     /// Check, document and commission CiA 306 EDS/DCF files.
@@ -91,9 +94,11 @@ enum Command {
                             cantwin cal --socketcand 127.0.0.1:29536 events watch"
     )]
     Cal(cal::Args),
-    /// A DeviceNet scanner: browse devices, get and set attributes, polled I/O.
+    /// A DeviceNet scanner: browse devices, get and set attributes, polled I/O, a shell that
+    /// stays on line.
     #[command(
         after_help = "Examples:\n  cantwin dnet --socketcand 127.0.0.1:29536 browse\n  \
+                            cantwin dnet --socketcand 127.0.0.1:29536 shell\n  \
                             cantwin dnet --socketcand 127.0.0.1:29536 get 12 1 1 7 --type short-string\n  \
                             cantwin dnet --scenario scenarios/adv200-devicenet.toml poll 12 --out 0300E803"
     )]
@@ -149,14 +154,16 @@ enum Command {
         after_help = "Examples:\n  cantwin monitor --scenario scenarios/monitor-network.toml\n  \
                             cantwin monitor --socketcand 127.0.0.1:29536 --names scenarios/monitor-network.toml\n  \
                             cantwin monitor --socketcand 127.0.0.1:29536 --bit-rate 250k --eds 5=device.eds\n\n\
-                            Keys: q quit, up/down select a node, space pause, PgUp/PgDn scroll,\n\
-                            Home/End oldest/live, / filter (node=5 svc=emcy,hb id=0x180-0x1FF), c clear filter"
+                            Keys: q quit (Esc only leaves the filter editor), up/down select a node,\n\
+                            t fixed/scrolling trace, space pause, PgUp/PgDn scroll, Home/End oldest/live,\n\
+                            / filter (node=5 svc=emcy,hb,lss id=0x180-0x1FF), c clear filter,\n\
+                            Enter device page (below 120 columns)"
     )]
     Monitor(monitor::Args),
     /// A CiA 309-3 ASCII gateway (CANopenNode/cocomm syntax) on stdin/stdout or TCP.
     #[command(
-        after_help = "Examples:\n  echo '[1] 5 read 0x1008 0 vs' | cantwin gateway --ascii --socketcand 127.0.0.1:29536\n  \
-                            cantwin gateway --ascii --listen 6000 --scenario scenarios/cia301-device.toml"
+        after_help = "Examples:\n  echo '[1] 5 read 0x1008 0 vs' | cantwin gateway --socketcand 127.0.0.1:29536\n  \
+                            cantwin gateway --listen 6000 --scenario scenarios/cia301-device.toml"
     )]
     Gateway(ascii_gateway::GatewayArgs),
     /// Write one self-contained HTML page about a capture: bus load, identifiers, decoded timeline, anomalies.
