@@ -12,10 +12,6 @@ use cantwin_scenario::{BuildEnv, Registry, Scenario};
 use cantwin_twin::FileDate;
 
 #[derive(Debug, clap::Args)]
-#[command(after_help = "Examples:\n  cantwin dump run.pcapng\n  \
-                        cantwin dump run.log --decode --eds 5=device.eds\n  \
-                        cantwin dump dnet.log --decode --protocol devicenet\n  \
-                        cantwin dump run.log --decode --scenario scenarios/opendrive.toml")]
 pub struct Args {
     /// The capture: pcap or pcapng with LINKTYPE_CAN_SOCKETCAN, or a candump log; the format
     /// is recognised from its content.
