@@ -195,6 +195,13 @@ enum Command {
         after_long_help = replay::LONG_HELP
     )]
     Replay(replay::Args),
+    /// Vector SIL Kit: be the CAN network simulator of a SIL Kit co-simulation (twins join
+    /// one with `cantwin sim --silkit`).
+    #[command(
+        after_help = "Examples:\n  cantwin silkit netsim --registry silkit://127.0.0.1:8500 --network can0\n  \
+                            cantwin silkit netsim --registry silkit://10.0.0.5:8500 --network CAN1 --network CAN2 --bit-rate 250k"
+    )]
+    Silkit(silkit::Args),
     /// Run the CiA 301/306 conformance cases against one device: EDS, SDO, OD, PDO,
     /// SYNC/EMCY/TIME, error control, NMT, store/restore; JUnit, JSON and HTML reports.
     #[command(
@@ -227,6 +234,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Report(args) => report::run(&args),
         Command::Scenario(args) => scenario_cmd::run(&args),
         Command::Replay(args) => replay::run(&args),
+        Command::Silkit(args) => silkit::run(&args),
         Command::Conform(args) => conform::run(&args),
     }
 }
