@@ -135,18 +135,8 @@ pub fn run(args: &Args) -> Result<()> {
         Ok(())
     })();
     out.flush().ok();
-    match result {
-        // A closed pipe (`| head`) ends the listing quietly.
-        Err(e)
-            if e.downcast_ref::<std::io::Error>()
-                .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe) =>
-        {
-            return Ok(());
-        }
-        r => {
-            r.with_context(|| format!("reading {} after {records} records", args.file.display()))?
-        }
-    }
+    // A closed pipe (`| head`) ends the process quietly in `main`, as for every command.
+    result.with_context(|| format!("reading {} after {records} records", args.file.display()))?;
     if reader.skipped() > 0 && !json {
         writeln!(
             std::io::stdout(),
