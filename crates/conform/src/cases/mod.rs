@@ -214,7 +214,13 @@ pub(crate) fn writable(
 ) -> Result<Option<Writable>, Finding> {
     // The communication objects whose rewrite is harmless come first, in this order.
     let mut candidates: Vec<(u16, u8, usize)> = Vec::new();
-    for (i, s) in [(0x1017u16, 0u8), (0x100C, 0), (0x100D, 0), (0x1015, 0)] {
+    for (i, s) in [
+        (0x1017u16, 0u8),
+        (0x100C, 0),
+        (0x100D, 0),
+        (0x1015, 0),
+        (0x1006, 0),
+    ] {
         if let Some(e) = eds_entry(ctx, i, s)
             && access(e).writable()
             && let Some(size) = data_type(e).and_then(|d| d.fixed_size())

@@ -216,43 +216,84 @@ fn count_pdo(ctx: &mut Ctx<'_>, cob: u32, during: Duration) -> Result<usize, Fin
         .len())
 }
 
+/// How the case makes the TPDO due: its event timer, or SYNCs at transmission type 1.
+enum Stimulus {
+    EventTimer(Vec<u8>),
+    Sync(cantwin_can::Id),
+}
+
+/// TPDO frames during `during`, sending a SYNC every 50 ms when `stimulus` says so.
+fn pdos_during(
+    ctx: &mut Ctx<'_>,
+    cob: u32,
+    stimulus: &Stimulus,
+    during: Duration,
+) -> Result<usize, Finding> {
+    match stimulus {
+        Stimulus::EventTimer(_) => count_pdo(ctx, cob, during),
+        Stimulus::Sync(id) => {
+            let mut n = 0;
+            for _ in 0..during.as_millis() / 50 {
+                ctx.send(Frame::data(*id, &[]).map_err(|e| fail(e.to_string()))?)?;
+                n += count_pdo(ctx, cob, Duration::from_millis(50))?;
+            }
+            Ok(n)
+        }
+    }
+}
+
 fn pdo_operational_only(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, cob)) = first_tpdo(ctx)? else {
         return Err(Finding::NotApplicable(
             "no valid TPDO with a mapping".into(),
         ));
     };
-    if !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
-        return Err(Finding::NotApplicable(format!(
-            "0x{comm:04X} has no writable event timer (sub 5)"
-        )));
-    }
     let tt = ctx
         .upload(comm, 2)?
         .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
-    let et = ctx
-        .upload(comm, 5)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
-    ctx.write(comm, 2, &[0xFF], "the transmission type")?;
-    ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
-    let pre = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    let stimulus = if eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
+        let et = ctx
+            .upload(comm, 5)?
+            .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+        ctx.write(comm, 2, &[0xFF], "the transmission type")?;
+        ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
+        Stimulus::EventTimer(et)
+    } else if ctx.eds.objects.contains_key(&0x1005) {
+        let cob_sync = ctx.read_u32(0x1005, 0, "the COB-ID SYNC")? & 0x7FF;
+        ctx.write(comm, 2, &[1], "the transmission type")?;
+        Stimulus::Sync(
+            cantwin_can::Id::standard(u16::try_from(cob_sync).unwrap_or(0x80))
+                .map_err(|e| fail(e.to_string()))?,
+        )
+    } else {
+        return Err(Finding::NotApplicable(format!(
+            "0x{comm:04X} has no event timer and the device no SYNC to make it due"
+        )));
+    };
+    let pre = pdos_during(ctx, cob, &stimulus, Duration::from_millis(300))?;
     ctx.nmt(NmtCs::Start)?;
-    let op = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    let op = pdos_during(ctx, cob, &stimulus, Duration::from_millis(300))?;
     ctx.nmt(NmtCs::Stop)?;
     ctx.idle(Duration::from_millis(10))?;
-    let stopped = count_pdo(ctx, cob, Duration::from_millis(300))?;
+    let stopped = pdos_during(ctx, cob, &stimulus, Duration::from_millis(300))?;
     ctx.nmt(NmtCs::EnterPreOperational)?;
     ctx.idle(Duration::from_millis(10))?;
-    ctx.write(comm, 5, &et, "the event timer")?;
+    if let Stimulus::EventTimer(et) = &stimulus {
+        ctx.write(comm, 5, et, "the event timer")?;
+    }
     ctx.write(comm, 2, &tt, "the transmission type")?;
+    let how = match stimulus {
+        Stimulus::EventTimer(_) => "event timer 50 ms",
+        Stimulus::Sync(_) => "type 1, SYNC every 50 ms",
+    };
     if pre != 0 || stopped != 0 || op == 0 {
         return Err(fail(format!(
-            "TPDO 0x{:03X} in 300 ms: {pre} in PRE-OPERATIONAL, {op} in OPERATIONAL, {stopped} in STOPPED",
+            "TPDO 0x{:03X} ({how}) in 300 ms: {pre} in PRE-OPERATIONAL, {op} in OPERATIONAL, {stopped} in STOPPED",
             cob & 0x7FF
         )));
     }
     Ok(format!(
-        "TPDO 0x{:03X}: {op} frames in 300 ms of OPERATIONAL, none otherwise",
+        "TPDO 0x{:03X} ({how}): {op} frames in 300 ms of OPERATIONAL, none otherwise",
         cob & 0x7FF
     ))
 }

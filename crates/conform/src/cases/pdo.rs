@@ -40,10 +40,31 @@ pub(super) fn cases() -> Vec<Case> {
             transmission_sync,
         ),
         m(
+            "pdo.transmission-acyclic",
+            A,
+            "CiA 301 §7.2.2.2, §7.5.2.36 table 71 (type 0)",
+            "with transmission type 0 a TPDO goes out only after a SYNC, at most one per SYNC",
+            transmission_acyclic,
+        ),
+        m(
+            "pdo.rtr",
+            A,
+            "CiA 301 §7.2.2.2, §7.5.2.36 (COB-ID bit 30)",
+            "a TPDO whose COB-ID allows RTR answers a remote frame",
+            rtr,
+        ),
+        m(
+            "pdo.sync-start-value",
+            A,
+            "CiA 301 §7.5.2.36 (sub 6), §7.2.5.2",
+            "with SYNC start value 3 and type 2, the TPDO starts at the SYNC counting 3",
+            sync_start_value,
+        ),
+        m(
             "pdo.event-timer",
             A,
             "CiA 301 §7.5.2.36 (sub 5)",
-            "transmission type 255 with a 50 ms event timer sends every 50 ms",
+            "transmission type 254 (or 255) with a 50 ms event timer sends every 50 ms",
             event_timer,
         ),
         m(
@@ -277,7 +298,13 @@ fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     let et = ctx
         .upload(comm, 5)?
         .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
-    ctx.write(comm, 2, &[0xFF], "the transmission type")?;
+    // Type 254 (manufacturer-specific event) if the device offers it, else 255.
+    let ty = if ctx.download(comm, 2, &[0xFE])?.is_ok() {
+        0xFE
+    } else {
+        0xFF
+    };
+    ctx.write(comm, 2, &[ty], "the transmission type")?;
     ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
     ctx.nmt(NmtCs::Start)?;
     ctx.wait_for(Duration::from_millis(100), |f| is_pdo(f, cob))?;
@@ -419,4 +446,212 @@ fn rpdo_length(ctx: &mut Ctx<'_>) -> Outcome {
             len - 1
         ))),
     }
+}
+
+/// Sets transmission type `ty` on `comm`; `Ok(false)` when the device refuses it as an
+/// invalid value (it need not offer every type, §7.5.2.36).
+fn set_type(ctx: &mut Ctx<'_>, comm: u16, ty: u8) -> Result<bool, Finding> {
+    match ctx.download(comm, 2, &[ty])? {
+        Ok(()) => Ok(true),
+        Err(a) if a.code == cantwin_canopen::AbortCode::INVALID_VALUE => Ok(false),
+        Err(a) => Err(fail(format!(
+            "writing type {ty} to 0x{comm:04X} sub 2: {a}"
+        ))),
+    }
+}
+
+fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
+    }
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    if !set_type(ctx, comm, 0)? {
+        return Err(not_supported("transmission type 0 refused with 0x06090030"));
+    }
+    let sync = sync_id(ctx)?;
+    ctx.nmt(NmtCs::Start)?;
+    // Without SYNC nothing goes out.
+    let idle = ctx
+        .collect(Duration::from_millis(200), |f| is_pdo(f, cob))?
+        .len();
+    let mut per_sync = Vec::new();
+    for _ in 0..5 {
+        ctx.send(Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?)?;
+        per_sync.push(
+            ctx.collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
+                .len(),
+        );
+    }
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    if idle != 0 {
+        return Err(fail(format!(
+            "{idle} TPDOs in 200 ms without SYNC at type 0"
+        )));
+    }
+    if per_sync.iter().any(|n| *n > 1) {
+        return Err(fail(format!("TPDOs per SYNC at type 0: {per_sync:?}")));
+    }
+    Ok(format!("none without SYNC; per SYNC {per_sync:?}"))
+}
+
+fn rtr(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if cob & 0x4000_0000 != 0 {
+        if ctx.profile.features.pdo_rtr == Some(true) {
+            return Err(fail(format!(
+                "the profile claims RTR, 0x{comm:04X} sub 1 = 0x{cob:08X} forbids it (bit 30)"
+            )));
+        }
+        return Err(not_supported(format!(
+            "0x{comm:04X} sub 1 = 0x{cob:08X}: no RTR (bit 30 set)"
+        )));
+    }
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let et = match eds_entry(ctx, comm, 5) {
+        Some(_) => ctx.upload(comm, 5)?.ok(),
+        None => None,
+    };
+    // Type 253 (RTR only) where offered, else 255 without an event timer: the answer is
+    // then the only TPDO.
+    let ty = if set_type(ctx, comm, 253)? { 253 } else { 255 };
+    ctx.write(comm, 2, &[ty], "the transmission type")?;
+    if et.is_some() {
+        ctx.write(comm, 5, &0u16.to_le_bytes(), "the event timer")?;
+    }
+    ctx.nmt(NmtCs::Start)?;
+    ctx.idle(Duration::from_millis(50))?;
+    let id =
+        Id::standard(u16::try_from(cob & 0x7FF).unwrap_or(0)).map_err(|e| fail(e.to_string()))?;
+    // The remote frame's DLC is the TPDO's length (the sum of its mapped bits).
+    let map = comm + 0x200;
+    let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+    let mut bits = 0u32;
+    for s in 1..=u8::try_from(n).unwrap_or(0) {
+        bits += ctx.read_u32(map, s, "a mapping entry")? & 0xFF;
+    }
+    let len = u8::try_from(bits.div_ceil(8).min(8)).unwrap_or(8);
+    ctx.send(Frame::remote(id, len).map_err(|e| fail(e.to_string()))?)?;
+    let got = ctx.wait_for(Duration::from_millis(100), |f| is_pdo(f, cob))?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    if let Some(et) = et {
+        ctx.write(comm, 5, &et, "the event timer")?;
+    }
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    match got {
+        Some((_, f)) => Ok(format!("type {ty}: a remote frame answered with {f}")),
+        None => Err(fail(format!(
+            "0x{comm:04X} sub 1 = 0x{cob:08X} allows RTR (bit 30 clear), but a remote frame got no TPDO within 100 ms (type {ty})"
+        ))),
+    }
+}
+
+fn sync_start_value(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
+    }
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if !eds_entry(ctx, comm, 6).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(format!(
+            "0x{comm:04X} has no writable SYNC start value (sub 6)"
+        )));
+    }
+    // A SYNC carries a counter only where 0x1019 says so (§7.5.2.22): a device whose
+    // overflow value is 0 takes a SYNC with data for a length error.
+    if !eds_entry(ctx, 0x1019, 0).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(
+            "no synchronous counter overflow value (0x1019)",
+        ));
+    }
+    let overflow = ctx
+        .upload(0x1019, 0)?
+        .map_err(|a| fail(format!("reading 0x1019: {a}")))?;
+    let period = match ctx.upload(0x1006, 0)? {
+        Ok(p) => {
+            // 0x1019 changes only while the communication cycle period is 0.
+            ctx.write(
+                0x1006,
+                0,
+                &0u32.to_le_bytes(),
+                "the communication cycle period",
+            )?;
+            Some(p)
+        }
+        Err(_) => None,
+    };
+    ctx.write(0x1019, 0, &[8], "the synchronous counter overflow value")?;
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+    let sv = ctx
+        .upload(comm, 6)?
+        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 6: {a}")))?;
+    // The start value changes only while the PDO is invalid (§7.5.2.36).
+    ctx.write(
+        comm,
+        1,
+        &(cob | 0x8000_0000).to_le_bytes(),
+        "the COB-ID with bit 31 set",
+    )?;
+    ctx.write(comm, 6, &[3], "the SYNC start value")?;
+    ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
+    ctx.write(comm, 2, &[2], "the transmission type")?;
+    let sync = sync_id(ctx)?;
+    ctx.nmt(NmtCs::Start)?;
+    ctx.idle(Duration::from_millis(20))?;
+    let mut after = Vec::new();
+    for counter in 1..=8u8 {
+        ctx.send(Frame::data(sync, &[counter]).map_err(|e| fail(e.to_string()))?)?;
+        if !ctx
+            .collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
+            .is_empty()
+        {
+            after.push(counter);
+        }
+    }
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    ctx.write(
+        comm,
+        1,
+        &(cob | 0x8000_0000).to_le_bytes(),
+        "the COB-ID with bit 31 set",
+    )?;
+    ctx.write(comm, 6, &sv, "the SYNC start value")?;
+    ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
+    ctx.write(
+        0x1019,
+        0,
+        &overflow,
+        "the synchronous counter overflow value",
+    )?;
+    if let Some(p) = period {
+        ctx.write(0x1006, 0, &p, "the communication cycle period")?;
+    }
+    if after != [3, 5, 7] {
+        return Err(fail(format!(
+            "TPDOs after the SYNCs counting {after:?}; start value 3, every second SYNC: expected [3, 5, 7]"
+        )));
+    }
+    Ok("TPDOs after the SYNCs counting 3, 5, 7".into())
 }

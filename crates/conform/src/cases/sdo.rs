@@ -29,6 +29,13 @@ pub(super) fn cases() -> Vec<Case> {
             expedited_download,
         ),
         m(
+            "sdo.expedited-download-no-size",
+            A,
+            "CiA 301 §7.2.4.3.3 (e = 1, s = 0)",
+            "expedited download of a 4-byte entry without size indication",
+            expedited_download_no_size,
+        ),
+        m(
             "sdo.segmented-upload",
             A,
             "CiA 301 §7.2.4.3.5, §7.2.4.3.7",
@@ -252,6 +259,29 @@ fn expedited_download(ctx: &mut Ctx<'_>) -> Outcome {
     if let Some(code) = abort_of(&b) {
         return Err(fail_abort(
             format!("writing 0x{index:04X} sub {sub} with its own value"),
+            code,
+        ));
+    }
+    if b[0] != 0x60 || b[1..4] != mux_bytes(index, sub) {
+        return Err(fail(format!(
+            "answer {b:02X?} is not an initiate download response"
+        )));
+    }
+    Ok(format!("0x{index:04X} sub {sub} written with {value:02X?}"))
+}
+
+fn expedited_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, _, value)) = writable(ctx, 4..=4)? else {
+        return Err(Finding::NotApplicable("no writable 4-byte entry".into()));
+    };
+    let mut d = [0u8; 4];
+    d.copy_from_slice(&value);
+    let Some(b) = ctx.sdo_raw(req(0x22, index, sub, d))? else {
+        return Err(fail("no answer to an expedited download without size"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(fail_abort(
+            format!("writing 0x{index:04X} sub {sub} with its own value, no size indicated"),
             code,
         ));
     }

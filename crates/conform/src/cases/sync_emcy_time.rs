@@ -45,6 +45,13 @@ pub(super) fn cases() -> Vec<Case> {
             emcy_history,
         ),
         m(
+            "emcy.inhibit",
+            A,
+            "CiA 301 §7.2.7.1, §7.5.2.21",
+            "with 0x1015 = 300 ms, two EMCYs of the device are at least 300 ms apart",
+            emcy_inhibit,
+        ),
+        m(
             "emcy.after-boot-up",
             A,
             "CiA 301 §7.2.7.1, §7.2.8.3.2.4",
@@ -298,4 +305,61 @@ fn time_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
         super::recovered(ctx, "a TIME message")?;
     }
     Ok(format!("0x1012 = 0x{v:08X}"))
+}
+
+fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.emcy_inhibit == Some(false) {
+        return Err(not_supported(
+            "no inhibit time EMCY (0x1015 not in the file)",
+        ));
+    }
+    if ctx.profile.features.heartbeat_consumer == Some(false) {
+        return Err(Finding::NotApplicable(
+            "no heartbeat consumer to raise and end an error with".into(),
+        ));
+    }
+    let emcy = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+    if emcy & 0x8000_0000 != 0 {
+        return Err(Finding::NotApplicable("the EMCY producer is off".into()));
+    }
+    let emcy = emcy & 0x7FF;
+    let inhibit = ctx
+        .upload(0x1015, 0)?
+        .map_err(|a| fail(format!("reading 0x1015: {a}")))?;
+    // 300 ms in units of 100 µs; the error is raised by a consumed heartbeat that stops
+    // (EMCY 0x8130) and ended by its return (an EMCY of the error reset), at once.
+    ctx.write(0x1015, 0, &3000u16.to_le_bytes(), "the inhibit time EMCY")?;
+    let other = if ctx.node >= 127 { 1 } else { ctx.node + 1 };
+    let hb = Id::standard(0x700 + u16::from(other)).map_err(|e| fail(e.to_string()))?;
+    ctx.write(
+        0x1016,
+        1,
+        &((u32::from(other) << 16) | 100).to_le_bytes(),
+        "a heartbeat consumer entry",
+    )?;
+    ctx.send(Frame::data_array(hb, [0x05]))?;
+    let is_emcy = |f: &Frame| f.id().as_raw() == emcy && f.len() == 8 && !f.is_remote();
+    let first = ctx.wait_for(Duration::from_millis(400), is_emcy)?;
+    ctx.send(Frame::data_array(hb, [0x05]))?;
+    let second = ctx.wait_for(Duration::from_millis(800), is_emcy)?;
+    ctx.write(0x1016, 1, &0u32.to_le_bytes(), "a heartbeat consumer entry")?;
+    ctx.write(0x1015, 0, &inhibit, "the inhibit time EMCY")?;
+    let Some((t1, f1)) = first else {
+        return Err(Finding::NotApplicable(
+            "the heartbeat consumer timeout raised no EMCY to space".into(),
+        ));
+    };
+    let Some((t2, f2)) = second else {
+        return Err(Finding::NotApplicable(format!(
+            "after {f1} the device sent no second EMCY to space"
+        )));
+    };
+    let gap = t2.saturating_duration_since(t1);
+    if gap + ctx.options.slack < Duration::from_millis(300) {
+        return Err(fail(format!(
+            "{f1} then {f2} {} µs later, inhibit time 300 ms",
+            gap.as_micros()
+        )));
+    }
+    Ok(format!("{f1} then {f2} {} ms later", gap.as_millis()))
 }
