@@ -130,7 +130,7 @@ fn changed_bytes(old: &[u8], new: &[u8]) -> u8 {
 }
 
 /// Rows by identifier, bounded.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FixedTrace {
     rows: BTreeMap<RowKey, Row>,
     capacity: usize,
