@@ -764,6 +764,32 @@ fn web_controls_answer_bad_requests_with_4xx_and_a_message() {
         r#"{"device":"node5","index":"0x1008","sub":0,"op":"erase","type":"vs"}"#,
     );
     assert_eq!(status, 400, "{v}");
+    // `auto` writes a value as the type the device's dictionary gives the object; an object
+    // it does not have needs the type given.
+    let (status, v) = post(
+        "/api/sdo",
+        r#"{"device":"node5","index":"0x1017","sub":0,"type":"auto","value":"250"}"#,
+    );
+    assert_eq!(status, 200, "{v}");
+    assert!(
+        v["message"]
+            .as_str()
+            .unwrap()
+            .ends_with("1017sub0 \"Producer heartbeat time\" = 250 (0x00FA, UNSIGNED16): done"),
+        "{v}"
+    );
+    let (status, v) = post(
+        "/api/sdo",
+        r#"{"device":"node5","index":"0x5FFF","sub":0,"type":"auto","value":"1"}"#,
+    );
+    assert_eq!(status, 400, "{v}");
+    assert!(
+        v["message"]
+            .as_str()
+            .unwrap()
+            .contains("give the value's type"),
+        "{v}"
+    );
     // The charts' window so far, for a page that opens late: every signal's samples.
     let deadline = Instant::now() + Duration::from_secs(5);
     loop {

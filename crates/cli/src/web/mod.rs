@@ -521,7 +521,8 @@ impl Dashboard {
                 let v = OdValue::parse(ty, text.trim())
                     .map_err(|e| Refusal::BadRequest(format!("{text:?} as {ty}: {e}")))?;
                 let bytes = v.to_le_bytes();
-                (Some(bytes), format!("{v}"), None)
+                let shown = show_value(Some(ty), &bytes);
+                (Some(bytes), shown, None)
             }
             None => (None, String::new(), Some(ty.or(dictionary_type))),
         };
