@@ -30,6 +30,7 @@
 //! ```
 #![deny(unsafe_code)]
 
+pub mod bench;
 pub mod bridge;
 mod error;
 #[allow(unsafe_code)]
