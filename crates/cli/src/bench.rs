@@ -23,6 +23,10 @@ mod twins;
 /// The benchmarks `cantwin bench` knows.
 const NAMES: &[(&str, &str)] = &[
     (
+        "silkit",
+        "CAN frames per second and latency through cantwin as SIL Kit's network simulator, 2 and 8 participants, vs SIL Kit alone",
+    ),
+    (
         "bus",
         "127 nodes on a saturated 1 Mbit/s bus, one mailbox each, 60 s of bus time",
     ),
@@ -158,6 +162,7 @@ pub fn run(args: &Args) -> Result<()> {
             "sdo" => bench_sdo(args, &spinner),
             "memory" => bench_memory(args),
             "cia402" => cia402::bench(args),
+            "silkit" => crate::silkit::bench(args.write, &args.file, !args.names.is_empty()),
             twin => bench_twin(args, twin),
         };
         spinner.finish_and_clear();

@@ -303,3 +303,161 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// Steps of 1 ms each participant sends a frame in, per measurement.
+const BENCH_STEPS: u64 = 2000;
+
+/// `cantwin bench silkit`: frames per second and latency through cantwin as network
+/// simulator with 2 and 8 participants, each against SIL Kit without a network simulator in
+/// the same run; with `write`, recorded in `file`. When it was not named and SIL Kit is not
+/// there, it is skipped with the reason.
+pub fn bench(write: bool, file: &std::path::Path, named: bool) -> Result<()> {
+    let kit = match SilKit::load() {
+        Ok(kit) => kit,
+        Err(e) if !named => {
+            eprintln!("bench silkit: skipped: {e}");
+            return Ok(());
+        }
+        Err(e) => return Err(e).context("bench silkit needs Vector SIL Kit"),
+    };
+    let registry_exe = std::env::var_os("CANTWIN_SILKIT_REGISTRY")
+        .map(std::path::PathBuf::from)
+        .or_else(|| kit.path().parent().map(|d| d.join("sil-kit-registry")))
+        .filter(|p| p.exists())
+        .context(
+            "bench silkit needs sil-kit-registry beside libSilKit.so or named by CANTWIN_SILKIT_REGISTRY",
+        )?;
+    let mut rows = Vec::new();
+    for participants in [2usize, 8] {
+        let mut pair = Vec::new();
+        for netsim in [false, true] {
+            let registry = BenchRegistry::start(&registry_exe)?;
+            let r = cantwin_silkit::bench::run(
+                &kit,
+                &registry.uri,
+                cantwin_silkit::bench::BenchConfig {
+                    participants,
+                    steps: BENCH_STEPS,
+                    netsim,
+                },
+            )
+            .with_context(|| format!("bench silkit: {participants} participants"))?;
+            let expected = participants as u64 * BENCH_STEPS;
+            if r.frames != expected {
+                bail!(
+                    "bench silkit: {} of {expected} frames acknowledged with {participants} participants{}",
+                    r.frames,
+                    if netsim { " through cantwin" } else { "" }
+                );
+            }
+            pair.push(r);
+        }
+        rows.push((participants, pair[0], pair[1]));
+    }
+    let mut table = String::from(
+        "| participants | SIL Kit alone: frames/s | through cantwin: frames/s | ratio (floor ≥ 0.5 at 8) | SIL Kit alone: latency | through cantwin: latency | ratio (floor ≤ 2 at 8) |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    for (n, alone, net) in &rows {
+        table.push_str(&format!(
+            "| {n} | {:.0} | {:.0} | {:.2} | {:.0} µs | {:.0} µs | {:.2} |\n",
+            alone.frames_per_second,
+            net.frames_per_second,
+            net.frames_per_second / alone.frames_per_second,
+            alone.latency_us,
+            net.latency_us,
+            net.latency_us / alone.latency_us
+        ));
+    }
+    if crate::output::json() {
+        crate::output::emit(&serde_json::json!({
+            "bench": "silkit",
+            "rows": rows.iter().map(|(n, a, b)| serde_json::json!({
+                "participants": n,
+                "alone_frames_per_second": a.frames_per_second,
+                "netsim_frames_per_second": b.frames_per_second,
+                "alone_latency_us": a.latency_us,
+                "netsim_latency_us": b.latency_us,
+            })).collect::<Vec<_>>(),
+        }))?;
+    } else {
+        println!("{table}");
+    }
+    if write {
+        let body = format!(
+            "## silkit — CAN frames through SIL Kit, with cantwin as network simulator\n\n\
+             {table}\n\
+             Each participant (a SIL Kit participant of its own, all in one process, on loopback) \
+             sends one 5-byte frame in each of {BENCH_STEPS} synchronised 1 ms steps at 1 Mbit/s; \
+             the first also measures, for every frame of the others, the wall time from \
+             `SendFrame` to its reception. frames/s counts frames acknowledged `Transmitted` per \
+             wall second. \"Through cantwin\" adds `cantwin silkit netsim` (steps of 1 ms) as the \
+             network's simulator: arbitration, bit timing and ACK on cantwin's bus, one more \
+             synchronised participant, and a frame reaches the others in the simulator's step \
+             after it was sent. SIL Kit {}; {}; {}.\n\n\
+             Reproduce: `scripts/fetch-silkit.sh`, then \
+             `CANTWIN_SILKIT_DIR=target/silkit/silkit-py-1.0.5 cargo run --release --bin cantwin -- bench silkit --write`.\n",
+            kit.version().unwrap_or_default(),
+            crate::benchmarks_md::machine_description(),
+            crate::benchmarks_md::today()
+        );
+        crate::benchmarks_md::write_section(file, "silkit", &body)?;
+    }
+    Ok(())
+}
+
+/// A registry on 127.0.0.1 with a port the system picks, for the bench; killed when dropped.
+struct BenchRegistry {
+    uri: String,
+    child: std::process::Child,
+    dir: std::path::PathBuf,
+}
+
+impl BenchRegistry {
+    fn start(exe: &std::path::Path) -> Result<BenchRegistry> {
+        let dir = std::env::temp_dir().join(format!(
+            "cantwin-bench-silkit-{}-{}",
+            std::process::id(),
+            WallInstant::now().elapsed().as_nanos()
+        ));
+        std::fs::create_dir_all(&dir).context("creating a temporary directory")?;
+        let cfg = dir.join("registry.yaml");
+        let child = std::process::Command::new(exe)
+            .args(["-u", "silkit://127.0.0.1:0", "-g"])
+            .arg(&cfg)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .with_context(|| format!("starting {}", exe.display()))?;
+        let mut reg = BenchRegistry {
+            uri: String::new(),
+            child,
+            dir,
+        };
+        // The registry writes the file, naming the port it listens on, once it listens.
+        let until = WallInstant::now() + WallDuration::from_secs(20);
+        loop {
+            if let Ok(text) = std::fs::read_to_string(&cfg)
+                && let Some(uri) = text
+                    .lines()
+                    .find_map(|l| l.trim().strip_prefix("RegistryUri:"))
+            {
+                reg.uri = uri.trim().trim_matches(['\'', '"']).to_string();
+                return Ok(reg);
+            }
+            if WallInstant::now() >= until {
+                bail!("{} did not start in 20 s", exe.display());
+            }
+            std::thread::sleep(WallDuration::from_millis(10));
+        }
+    }
+}
+
+impl Drop for BenchRegistry {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
