@@ -304,6 +304,7 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         std::thread::sleep(Duration::from_millis(50));
     }
     let profile = common::temp_dir("web-chromium-profile");
+    let downloads = common::temp_dir("web-chromium-downloads");
     let (status, v) = http(
         port,
         "POST",
@@ -319,6 +320,10 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
                     "--window-size=1400,1000",
                     format!("--user-data-dir={}", profile.display()),
                 ],
+                "prefs": {
+                    "download.default_directory": downloads.display().to_string(),
+                    "download.prompt_for_download": false,
+                },
             },
             "goog:loggingPrefs": { "browser": "ALL" },
         }}})),
@@ -511,6 +516,17 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         v.as_str().is_some_and(|t| !t.is_empty())
     });
     let csv = csv.as_str().unwrap();
+    // The browser saved it as a file, a blob: download the policy lets through.
+    let saved = downloads.join("bus_can0_load.csv");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while std::fs::read_to_string(&saved).ok().as_deref() != Some(csv) {
+        assert!(
+            Instant::now() < deadline,
+            "{} not saved as exported",
+            saved.display()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
     let mut lines = csv.lines();
     assert_eq!(lines.next(), Some("time_s,can0 bus load (%)"), "{csv}");
     let rows: Vec<(f64, f64)> = lines
@@ -668,6 +684,7 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
 
     browser.call("DELETE", "", None);
     let _ = std::fs::remove_dir_all(&profile);
+    let _ = std::fs::remove_dir_all(&downloads);
     let took = started.elapsed();
     assert!(took < Duration::from_secs(30), "took {took:?}");
 }
