@@ -8,8 +8,9 @@ use anyhow::{Context, Result, bail};
 use cantwin_can::{Duration, Outbox};
 use cantwin_canopen::master::MasterEvent;
 use cantwin_canopen::master::cia402::{
-    AxisConfig, DriveError, DriveEvent, DriveMaster, DriveState, Homing, MODES_OF_OPERATION,
-    OpMode, PositionMove, PowerTarget, Snapshot, VelocityMove, mode_name, state_name,
+    AxisConfig, DriveError, DriveEvent, DriveMaster, DriveState, HOMING_METHOD, Homing,
+    MODES_OF_OPERATION, OpMode, PositionMove, PowerTarget, Snapshot, VelocityMove, mode_name,
+    state_name,
 };
 use cantwin_canopen::wire::NmtCs;
 use serde_json::json;
@@ -306,6 +307,12 @@ impl Session {
             )) => bail!(
                 "node {node}: {what}: {e}: the drive does not take this mode (0x6502 lists the modes it supports)"
             ),
+            Some(Err(
+                e @ DriveError::Sdo {
+                    index: HOMING_METHOD,
+                    ..
+                },
+            )) => bail!("node {node}: {what}: {e}: the drive does not run this homing method"),
             Some(Err(e)) if self.emcy.is_empty() => bail!("node {node}: {what}: {e}"),
             Some(Err(e)) => {
                 let seen: Vec<String> = self

@@ -129,3 +129,81 @@ fn drive_commands_refuse_bad_input_clearly() {
         assert!(err.contains(wanted), "{args:?}: {err}");
     }
 }
+
+/// One `cia402` servo at node 3 with its home switch above 20000 increments.
+fn servo_scenario() -> String {
+    let dir = temp_dir("drive-servo");
+    let path = dir.join("servo.toml");
+    std::fs::write(
+        &path,
+        "name = \"servo\"\n[[bus]]\nname = \"can0\"\nbit_rate = \"1M\"\n\n\
+         [[device]]\nname = \"servo\"\nkind = \"cia402\"\nbus = \"can0\"\nnode_id = 3\nhome_switch = 20000\n",
+    )
+    .unwrap();
+    path.to_string_lossy().into_owned()
+}
+
+#[test]
+fn cia402_pp_pv_and_hm_drive_commands_against_the_servo_twin() {
+    let s = servo_scenario();
+    let run = |args: &[&str]| {
+        let mut full = vec!["drive", "--scenario", s.as_str()];
+        full.extend_from_slice(args);
+        cantwin(&full)
+    };
+    // pp: the set-point handshake, then target reached within the position window.
+    let (ok, out, err) = run(&[
+        "--json",
+        "move",
+        "pp",
+        "3",
+        "8192",
+        "--enable",
+        "--velocity",
+        "40960",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["mode_name"], "pp");
+    assert!(
+        (v["position"].as_i64().unwrap() - 8192).abs() <= 10,
+        "{out}"
+    );
+    // Relative moves need a target to add to; without --enable the drive is not enabled.
+    let (ok, _, err) = run(&["move", "pp", "3", "100", "--relative"]);
+    assert!(!ok);
+    assert!(
+        err.contains("not operation enabled") && err.contains("--enable"),
+        "{err}"
+    );
+    // pv: target velocity reached (bit 10, within the velocity window).
+    let (ok, out, err) = run(&["move", "pv", "3", "4096", "--enable"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.starts_with("node 3: target velocity reached, velocity "),
+        "{out}"
+    );
+    // hm: method 19 on the home switch; the home position is 0.
+    let (ok, out, err) = run(&[
+        "--json",
+        "home",
+        "3",
+        "19",
+        "--enable",
+        "--switch-speed",
+        "40960",
+        "--zero-speed",
+        "4096",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["statusword"].as_u64().unwrap() & 0x1400, 0x1400, "{out}");
+    assert!(v["position"].as_i64().unwrap().abs() < 50, "{out}");
+    // A method the drive does not run is refused with its abort code.
+    let (ok, _, err) = run(&["home", "3", "7", "--enable"]);
+    assert!(!ok);
+    assert!(
+        err.contains("0x06090030") && err.contains("does not run this homing method"),
+        "{err}"
+    );
+}
