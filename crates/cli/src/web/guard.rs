@@ -362,6 +362,14 @@ mod tests {
         );
         assert_eq!(read(&remote, "/events", Some("a=1&token=t0k")), Ok(()));
         assert_eq!(read(&remote, "/app.js", None), Ok(()));
+        // The charts' script and library carry no secret; their samples are the run's.
+        for public in ["/charts.js", "/vendor/uplot.js", "/vendor/uplot.css"] {
+            assert_eq!(read(&remote, public, None), Ok(()), "{public}");
+        }
+        assert_eq!(
+            read(&remote, "/api/history", None),
+            Err(StatusCode::FORBIDDEN)
+        );
     }
 
     #[test]
