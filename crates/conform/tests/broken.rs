@@ -24,6 +24,8 @@ fn case_for(fault: Fault) -> Option<(&'static str, Area)> {
         Fault::WrongBlockUploadCrc => ("sdo.block-upload", Area::Sdo),
         Fault::HeartbeatAtTwiceThePeriod => ("error-control.heartbeat-period", Area::ErrorControl),
         Fault::StoreWithoutSignature => ("store.wrong-signature", Area::StoreRestore),
+        Fault::PdoCobIdChangeWhileValid => ("pdo.cob-id-change-valid", Area::Pdo),
+        Fault::ErrorHistoryWriteAccepted => ("emcy.history", Area::SyncEmcyTime),
         // `emcy.cob-id` reads 0x1014 and does not try to change it while valid.
         Fault::EmcyCobIdChangeWhileValid => return None,
     })
@@ -104,7 +106,7 @@ fn cia301_7_2_8_3_2_1_no_boot_up_after_reset_communication_is_caught() {
 }
 
 #[test]
-fn cia301_7_5_2_36_mapping_change_on_a_valid_pdo_is_caught() {
+fn cia301_7_5_2_38_mapping_change_on_a_valid_pdo_is_caught() {
     caught(Fault::MappingChangeOnValidPdo);
 }
 
@@ -154,6 +156,16 @@ fn cia301_7_5_2_20_emcy_cob_id_change_while_valid_is_the_broken_devices_only_dif
 #[test]
 fn cia301_7_5_2_13_store_without_signature_is_caught() {
     caught(Fault::StoreWithoutSignature);
+}
+
+#[test]
+fn cia301_7_5_2_37_pdo_cob_id_change_while_valid_is_caught() {
+    caught(Fault::PdoCobIdChangeWhileValid);
+}
+
+#[test]
+fn cia301_7_5_2_3_error_history_write_of_1_accepted_is_caught() {
+    caught(Fault::ErrorHistoryWriteAccepted);
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.

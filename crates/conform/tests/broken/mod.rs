@@ -44,11 +44,17 @@ pub enum Fault {
     /// Stores (0x1010) whatever is written, where §7.5.2.13 requires the signature "save"
     /// and an abort 0x08000020 for anything else.
     StoreWithoutSignature,
+    /// Accepts a new CAN-ID in a PDO's COB-ID (sub 1) while the PDO is valid, which
+    /// §7.5.2.35 – §7.5.2.38 forbid.
+    PdoCobIdChangeWhileValid,
+    /// Answers a write of a value other than 0 to 0x1003 sub 0 as a success (and ignores
+    /// it), where §7.5.2.3 allows only 0 and requires abort 0x06090030 otherwise.
+    ErrorHistoryWriteAccepted,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 8] = [
+    pub const ALL: [Fault; 10] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -57,6 +63,8 @@ impl Fault {
         Fault::HeartbeatAtTwiceThePeriod,
         Fault::EmcyCobIdChangeWhileValid,
         Fault::StoreWithoutSignature,
+        Fault::PdoCobIdChangeWhileValid,
+        Fault::ErrorHistoryWriteAccepted,
     ];
 }
 
@@ -321,6 +329,40 @@ impl Broken {
                     .err()
                     .map(|a| a.to_u32());
                 self.answer(out, data, abort);
+                None
+            }
+            Some(Fault::PdoCobIdChangeWhileValid) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                let comm = (0x1400..=0x15FF).contains(&index) || (0x1800..=0x19FF).contains(&index);
+                let cob = self
+                    .device
+                    .od()
+                    .get_unsigned(index, 1)
+                    .unwrap_or(0x8000_0000) as u32;
+                let new = u32::from_le_bytes(value);
+                if !comm
+                    || sub != 1
+                    || cob & 0x8000_0000 != 0
+                    || new & 0x8000_0000 != 0
+                    || new & 0x1FFF_FFFF == cob & 0x1FFF_FFFF
+                {
+                    return Some(*frame);
+                }
+                let abort = self
+                    .device
+                    .write(index, 1, &(cob | 0x8000_0000).to_le_bytes())
+                    .and_then(|()| self.device.write(index, 1, &new.to_le_bytes()))
+                    .err()
+                    .map(|a| a.to_u32());
+                self.answer(out, data, abort);
+                None
+            }
+            Some(Fault::ErrorHistoryWriteAccepted) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                if (index, sub) != (0x1003, 0) || value[0] == 0 {
+                    return Some(*frame);
+                }
+                self.answer(out, data, None);
                 None
             }
             Some(Fault::StoreWithoutSignature) if is_expedited_download(byte0) => {
