@@ -11,6 +11,7 @@
 //! | `step_timeout_ms` | 1000 | one state transition, mode switch or set-point acknowledge |
 //! | `move_timeout_ms` | 30000 | a profile move to its target, a homing run |
 //! | `poll_ms` | 10 | between SDO reads of a statusword waited for |
+//! | `statusword_tpdo` | none | 1–4: waits take the statusword from that TPDO (COB-ID 0x180 + 0x100 × (n − 1) + node, the statusword in its first two bytes, as CiA 402-3's pre-defined TPDOs have it) instead of polling; it runs in OPERATIONAL only, so `nmt_start` comes first |
 //!
 //! A step applies to every axis (or to the `axes` it lists) and ends when every axis has
 //! finished it; a failure stops the program. Steps (`op`):
@@ -597,6 +598,10 @@ impl DeviceKind for Cia402MasterKind {
             }
             Ok(Duration::from_millis(v))
         };
+        let tpdo: Option<u16> = s.get("statusword_tpdo")?;
+        if tpdo.is_some_and(|n| !(1..=4).contains(&n)) {
+            return Err(s.error("statusword_tpdo", "`statusword_tpdo` is 1–4"));
+        }
         let config = AxisConfig {
             step_timeout: ms("step_timeout_ms", 1000)?,
             move_timeout: ms("move_timeout_ms", 30_000)?,
@@ -605,6 +610,10 @@ impl DeviceKind for Cia402MasterKind {
         };
         let mut drives = DriveMaster::new();
         for n in &nodes {
+            let config = AxisConfig {
+                statusword_pdo: tpdo.map(|t| pdo_cob_id(false, t, *n)),
+                ..config
+            };
             drives
                 .add_axis(*n, config)
                 .map_err(|e| s.error("axes", e.to_string()))?;
@@ -682,6 +691,33 @@ mod tests {
         e += &expect(2000, 0x5000, 2, 2);
         let r = run(&scenario(steps, &e));
         assert!(r.passed(), "{r}");
+    }
+
+    /// A `cia402` servo at node 3 driven by the master (`extra`: more master keys).
+    fn servo(extra: &str, steps: &str, expect: &str) -> String {
+        format!(
+            "[[bus]]\nname = \"can0\"\nbit_rate = \"1M\"\n\n\
+             [[device]]\nname = \"servo\"\nkind = \"cia402\"\nbus = \"can0\"\nnode_id = 3\n\n\
+             [[device]]\nname = \"master\"\nkind = \"cia402_master\"\nbus = \"can0\"\n\
+             axes = [3]\n{extra}\nsteps = [{steps}]\n\n{expect}"
+        )
+    }
+
+    #[test]
+    fn cia402_pp_and_pv_steps_on_the_servo_twin_by_sdo_poll_and_by_tpdo() {
+        let steps = "{ op = \"nmt_start\" }, { op = \"enable\" }, { op = \"mode\", mode = \"pp\" }, \
+                     { op = \"pp\", targets = [8192] }, { op = \"pp\", targets = [-4096], relative = true }, \
+                     { op = \"mode\", mode = \"pv\" }, { op = \"pv\", targets = [4096] }, \
+                     { op = \"pv\", targets = [0] }, { op = \"disable\" }";
+        let mut e = expect(3000, 0x5000, 0, 1);
+        e += &expect(3000, 0x5000, 1, 9);
+        e += &expect(3000, 0x5001, 1, 0x0240);
+        e += &expect(3000, 0x5001, 4, 3);
+        e += "[[expect]]\nat_ms = 3000\nsignal = { device = \"servo\", name = \"position\", equals = 4096, tolerance = 2000 }\n";
+        for extra in ["", "statusword_tpdo = 1"] {
+            let r = run(&servo(extra, steps, &e));
+            assert!(r.passed(), "{extra}: {r}");
+        }
     }
 
     #[test]
