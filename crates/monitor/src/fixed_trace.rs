@@ -310,6 +310,51 @@ mod tests {
         assert_eq!((t.rows().len(), t.overflow()), (0, 0));
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+
+        /// Any frames: rows stay within the capacity, every frame is counted in a row or in
+        /// the overflow, a row's cycle times order as min ≤ last ≤ max and its last frame is
+        /// the newest of its key.
+        #[test]
+        fn rows_count_every_frame_and_stay_bounded(
+            frames in proptest::collection::vec(
+                (0u16..0x20, proptest::collection::vec(proptest::prelude::any::<u8>(), 0..=8),
+                 0u64..50, proptest::prelude::any::<bool>()),
+                0..300,
+            ),
+            capacity in 1usize..12,
+        ) {
+            let mut t = FixedTrace::new(capacity);
+            let mut at = 0;
+            for (i, (id, data, gap, remote)) in frames.iter().enumerate() {
+                at += gap;
+                let id = Id::standard(*id).unwrap();
+                let frame = if *remote {
+                    Frame::remote(id, data.len() as u8).unwrap()
+                } else {
+                    Frame::data(id, data).unwrap()
+                };
+                t.record(&entry(i as u64, at, frame));
+            }
+            proptest::prop_assert!(t.rows().len() <= capacity);
+            let counted: u64 = t.rows().map(|r| r.count).sum();
+            proptest::prop_assert_eq!(counted + t.overflow(), frames.len() as u64);
+            for r in t.rows() {
+                match (r.cycle.min, r.cycle.last, r.cycle.max) {
+                    (Some(min), Some(last), Some(max)) => {
+                        proptest::prop_assert!(min <= last && last <= max);
+                        proptest::prop_assert!(r.count > 1);
+                    }
+                    (None, None, None) => proptest::prop_assert_eq!(r.count, 1),
+                    other => proptest::prop_assert!(false, "{:?}", other),
+                }
+                proptest::prop_assert_eq!(RowKey::of(&r.last.frame), r.key);
+                proptest::prop_assert!(r.first <= r.last.at);
+            }
+        }
+    }
+
     #[test]
     fn the_filter_applies_to_rows() {
         let mut t = FixedTrace::default();

@@ -42,3 +42,31 @@ proptest! {
         prop_assert!(html.ends_with("</html>\n"));
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// CiA 305 §4.2: every frame on the LSS identifiers gets a line (a message, or why it is
+    /// none), and the listing decoder takes any frame of any protocol without panicking.
+    #[test]
+    fn lss_identifiers_always_get_a_line_and_the_decoder_never_panics(
+        frames in proptest::collection::vec(
+            (prop_oneof![Just(0x7E4u16), Just(0x7E5u16), 0u16..0x800],
+             proptest::collection::vec(any::<u8>(), 0..=8), 0usize..3),
+            0..100,
+        )
+    ) {
+        let mut opts = Options::default();
+        opts.protocols.insert("dnet".into(), Protocol::DeviceNet);
+        opts.protocols.insert("cal".into(), Protocol::Cal);
+        let mut decoder = cantwin_report::Decoder::new(&opts);
+        for (id, data, ch) in frames {
+            let frame = Frame::data(Id::standard(id).unwrap(), &data).unwrap();
+            if id == 0x7E4 || id == 0x7E5 {
+                let line = cantwin_report::lss::describe(&frame).unwrap();
+                prop_assert!(line.starts_with("LSS "), "{}", line);
+            }
+            let _ = decoder.describe(["can0", "dnet", "cal"][ch], &frame);
+        }
+    }
+}
