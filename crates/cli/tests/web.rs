@@ -594,6 +594,16 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         &format!("const c = cantwinCharts.charts.find(c => c.key === '{pdo}'); return c ? c.u.data[0].length : 0;"),
         |v| v.as_u64().is_some_and(|n| n >= 1),
     );
+    // A click on a device's live value charts it too (in one script: the panels are drawn
+    // anew with each snapshot).
+    browser.js(
+        "document.querySelector(\".panel[data-device=drive] [data-signal='device/drive/speed']\").click();",
+    );
+    browser.wait_for(
+        "the drive speed chart",
+        "return cantwinCharts.charts.some(c => c.key === 'device/drive/speed') && document.querySelectorAll(\".chart-card[data-signal='device/drive/speed'] canvas\").length > 0;",
+        |v| v == &json!(true),
+    );
     // The charts shown are kept in the page's address, to be bookmarked.
     let hash = browser.js("return new URLSearchParams(location.hash.slice(1)).get('charts');");
     assert!(
