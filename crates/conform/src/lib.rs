@@ -269,11 +269,13 @@ pub fn run(
             frames_omitted,
             duration_us: t1.saturating_duration_since(t0).as_micros(),
         });
+        report.duration_us = ctx.now().saturating_duration_since(start).as_micros();
         if let Some(case) = report.cases.last() {
             progress(Progress {
                 done: i + 1,
                 total,
                 case,
+                report: &report,
             });
         }
     }

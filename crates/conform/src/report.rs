@@ -217,4 +217,6 @@ pub struct Progress<'a> {
     pub total: usize,
     /// The case just finished.
     pub case: &'a CaseReport,
+    /// The report so far (its last case is [`Progress::case`]).
+    pub report: &'a Report,
 }

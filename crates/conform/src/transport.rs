@@ -212,16 +212,22 @@ impl<P: BusPort> Transport for PortTransport<P> {
         let wait = WallDuration::from_nanos(deadline.saturating_duration_since(now).as_nanos());
         match self.port.recv_timeout(wait) {
             Ok(Some(rx)) => {
-                // The bus's own timestamp, where the transport gives one after the start;
-                // else the time of reception.
+                // The bus's own timestamp, where the transport gives one from this run's
+                // clock (in the last second, not ahead); else the time of reception. A
+                // remote server's clock may be set differently.
+                let received = self.now();
                 let at = rx
                     .timestamp
                     .duration_since(self.start_system)
                     .ok()
                     .and_then(|d| u64::try_from(d.as_nanos()).ok())
                     .map(Instant::from_nanos)
-                    .filter(|t| *t <= self.now())
-                    .unwrap_or_else(|| self.now());
+                    .filter(|t| {
+                        *t <= received
+                            && received.saturating_duration_since(*t)
+                                < cantwin_can::Duration::from_secs(1)
+                    })
+                    .unwrap_or(received);
                 Ok(Some((at, rx.frame)))
             }
             Ok(None) => Ok(None),
