@@ -70,6 +70,20 @@ fn write(path: &Path, text: &str) -> Result<()> {
     std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
 }
 
+/// Writes the reports `args` asks for.
+fn write_reports(args: &Args, report: &Report) -> Result<()> {
+    if let Some(path) = &args.junit {
+        write(path, &cantwin_conform::output::junit(report))?;
+    }
+    if let Some(path) = &args.json_report {
+        write(path, &cantwin_conform::output::json(report))?;
+    }
+    if let Some(path) = &args.html {
+        write(path, &cantwin_conform::output::html(report))?;
+    }
+    Ok(())
+}
+
 fn options(args: &Args) -> Result<Options> {
     let mut only = Vec::new();
     for a in &args.only {
@@ -170,6 +184,10 @@ pub fn run(args: &Args) -> Result<()> {
         .filter(|c| options.only.is_empty() || options.only.contains(&c.area))
         .count();
     let pb = crate::output::steps(total as u64, "conform");
+    // The reports are written as the run goes, at most once a second of wall time, marked
+    // as interrupted: a killed run leaves the cases it ran.
+    let mut written = std::time::Instant::now();
+    let mut write_error = None;
     let report: Report = cantwin_conform::run(
         transport.as_mut(),
         node_id,
@@ -179,18 +197,22 @@ pub fn run(args: &Args) -> Result<()> {
         &mut |p| {
             pb.set_position(p.done as u64);
             pb.set_message(p.case.id.clone());
+            if p.done < p.total && written.elapsed() >= WallDuration::from_secs(1) {
+                written = std::time::Instant::now();
+                let mut partial = p.report.clone();
+                partial.stopped =
+                    Some(format!("interrupted after {} of {} cases", p.done, p.total));
+                if let Err(e) = write_reports(args, &partial) {
+                    write_error.get_or_insert(e);
+                }
+            }
         },
     );
     pb.finish_and_clear();
-    if let Some(path) = &args.junit {
-        write(path, &cantwin_conform::output::junit(&report))?;
+    if let Some(e) = write_error {
+        return Err(e);
     }
-    if let Some(path) = &args.json_report {
-        write(path, &cantwin_conform::output::json(&report))?;
-    }
-    if let Some(path) = &args.html {
-        write(path, &cantwin_conform::output::html(&report))?;
-    }
+    write_reports(args, &report)?;
     if crate::output::json() {
         println!("{}", cantwin_conform::output::json(&report));
     } else {

@@ -5,6 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod common;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -331,4 +333,114 @@ fn bad_arguments_are_refused() {
     ]);
     assert!(!o.status.success());
     assert!(text(&o).contains("does not answer"), "{}", text(&o));
+}
+
+/// Over a socketcand connection on the wall clock (here to `cantwin sim`; a socketcand
+/// daemon in front of a real device the same way): the NMT area passes, with frames.
+#[test]
+fn conform_over_socketcand_on_the_wall_clock() {
+    let (_sim, addr) =
+        common::sim_with_socketcand(&common::scenario_file("cia301-device.toml"), "60");
+    let dir = tmp("socketcand");
+    let eds = dir.join("node5.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--device",
+        "node5",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let json = dir.join("r.json");
+    let o = cantwin(&[
+        "conform",
+        "--socketcand",
+        &addr,
+        "--node-id",
+        "5",
+        "--eds",
+        eds.to_str().unwrap(),
+        "--only",
+        "nmt",
+        "--json-report",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(
+        v["transport"].as_str().unwrap().starts_with("socketcand"),
+        "{v}"
+    );
+    let cases = v["cases"].as_array().unwrap();
+    assert!(cases.iter().all(|c| c["verdict"] == "pass"), "{}", text(&o));
+    assert!(
+        cases.iter().any(|c| c["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|f| f["frame"] == "705#00")),
+        "a boot-up logged"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A run that is killed leaves its reports with the cases it ran, marked as interrupted.
+#[test]
+fn a_killed_run_leaves_its_reports_so_far() {
+    let (_sim, addr) =
+        common::sim_with_socketcand(&common::scenario_file("cia301-device.toml"), "60");
+    let dir = tmp("killed");
+    let eds = dir.join("node5.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--device",
+        "node5",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let json = dir.join("r.json");
+    let mut run = common::Killed(
+        Command::new(env!("CARGO_BIN_EXE_cantwin"))
+            .args([
+                "conform",
+                "--socketcand",
+                &addr,
+                "--node-id",
+                "5",
+                "--eds",
+                eds.to_str().unwrap(),
+                "--json-report",
+                json.to_str().unwrap(),
+            ])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    // The reports are rewritten at most once a second of wall time while the run goes.
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while !json.exists() && std::time::Instant::now() < until {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    run.0.kill().unwrap();
+    run.0.wait().unwrap();
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(
+        v["stopped"]
+            .as_str()
+            .unwrap()
+            .starts_with("interrupted after"),
+        "{v}"
+    );
+    assert!(!v["cases"].as_array().unwrap().is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
 }
