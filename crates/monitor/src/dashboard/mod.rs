@@ -742,12 +742,19 @@ fn pdo_field<'a>(kind: Option<&'a DeviceKind>, v: &crate::LiveValue) -> Option<&
 }
 
 /// PDO value `v` as a number to chart: its field's number (sign-extended where the field is
-/// signed), else its raw bits; `None` for values that are no number of at most 64 bits.
+/// signed); without a field (a value mapped from a dictionary, whose text is the typed value)
+/// the number its text reads as, else its raw bits; `None` for values that are no number of
+/// at most 64 bits.
 fn pdo_number(kind: Option<&DeviceKind>, v: &crate::LiveValue) -> Option<f64> {
     let raw = v.raw?;
     Some(match pdo_field(kind, v) {
         Some(f) => f.number(raw) as f64,
-        None => raw as f64,
+        None => v
+            .text
+            .parse::<f64>()
+            .ok()
+            .filter(|n| n.is_finite())
+            .unwrap_or(raw as f64),
     })
 }
 

@@ -353,3 +353,41 @@ fn a_port_that_is_no_device_is_named_as_its_bus_names_it_and_keeps_the_name_afte
     let s = m.update(sample(200, vec![from(150, client)], 3));
     assert_eq!(s.frames[0].from, "socketcand 127.0.0.1:54012");
 }
+
+#[test]
+fn a_pdo_value_charts_as_its_fields_number_or_as_its_typed_text() {
+    use crate::kind::{Field, Format, PdoLayout};
+    use cantwin_canopen::wire::PdoKind;
+    let kind = DeviceKind {
+        name: "test".into(),
+        pdos: vec![PdoLayout {
+            pdo: PdoKind::Transmit(1),
+            fields: vec![Field::new(
+                "torque",
+                0,
+                16,
+                Format::Signed(Some("%".into())),
+            )],
+        }],
+        emcy: Vec::new(),
+    };
+    let value = |name: &str, raw: Option<u64>, text: &str| crate::LiveValue {
+        name: name.into(),
+        pdo: PdoKind::Transmit(1),
+        raw,
+        text: text.into(),
+    };
+    // The kind's signed field: 0xFFFE is -2.
+    let torque = value("torque", Some(0xFFFE), "-2 %");
+    assert_eq!(pdo_number(Some(&kind), &torque), Some(-2.0));
+    assert_eq!(pdo_unit(Some(&kind), &torque), "%");
+    assert!(!pdo_unsigned(Some(&kind), &torque));
+    // Mapped from a dictionary: an INTEGER16 -1 is its text, not its 65535 raw bits.
+    assert_eq!(
+        pdo_number(None, &value("x", Some(0xFFFF), "-1")),
+        Some(-1.0)
+    );
+    assert_eq!(pdo_number(None, &value("b", Some(1), "true")), Some(1.0));
+    assert_eq!(pdo_number(None, &value("s", None, "abc")), None);
+    assert!(!pdo_unsigned(None, &value("x", Some(1), "1")));
+}
