@@ -760,6 +760,7 @@ fn poll(
             "input_bytes": input_size,
             "period_ms": period_ms,
             "expected_packet_rate_ms": epr.unwrap_or(period_ms),
+            "output_decoded": words.as_ref().map(|(_, outputs)| describe_words(outputs, output)),
         }))?;
     } else {
         println!(

@@ -454,6 +454,7 @@ fn service_colour(service: cantwin_monitor::Service) -> Color {
         cantwin_monitor::Service::Heartbeat => Color::Green,
         cantwin_monitor::Service::Sdo => Color::Blue,
         cantwin_monitor::Service::Pdo => Color::Cyan,
+        cantwin_monitor::Service::Lss => Color::Yellow,
         _ => Color::Reset,
     }
 }

@@ -90,6 +90,32 @@ fn poll_names_the_adv200_pdc_words_of_the_worked_example() {
         assert!(d.contains(", Motor speed = "), "{d}");
         assert!(d.ends_with(" rpm, Analog inp 2 mon = 4096 cnt"), "{d}");
     }
+    // JSON Lines carry the words beside the bytes.
+    let (ok, out, err) = cantwin(&[
+        "--json",
+        "dnet",
+        "--socketcand",
+        &addr,
+        "poll",
+        "12",
+        "--out",
+        "0300E803",
+    ]);
+    assert!(ok, "{err}");
+    let head: serde_json::Value = serde_json::from_str(out.lines().next().unwrap()).unwrap();
+    assert_eq!(
+        head["output_decoded"], "Word decomp = 3, Ramp ref 1 = 1000",
+        "{out}"
+    );
+    let input: serde_json::Value = serde_json::from_str(out.lines().nth(1).unwrap()).unwrap();
+    assert_eq!(input["input"], 1, "{out}");
+    assert!(
+        input["decoded"]
+            .as_str()
+            .unwrap()
+            .starts_with("Word comp mon = 0x0"),
+        "{out}"
+    );
     // --raw prints the bytes only.
     let (ok, out, err) = cantwin(&[
         "dnet",
