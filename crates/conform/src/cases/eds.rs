@@ -33,7 +33,7 @@ pub(super) fn cases() -> Vec<Case> {
             "eds.access-types",
             A,
             "CiA 306 §4.6.3 AccessType",
-            "write-only entries refuse a read with 0x06010001, readable ones are read",
+            "write-only entries refuse a read with 0x06010001, read-only ones a write with 0x06010002, readable ones are read",
             access_types,
         ),
         m(
@@ -161,6 +161,21 @@ fn access_types(ctx: &mut Ctx<'_>) -> Outcome {
                 hex(a.code),
                 hex(AbortCode::WRITE_ONLY)
             )),
+            // A read-only entry refuses a write, even of its own value (§7.2.4.3.17).
+            (true, Ok(value)) if !acc.writable() && !value.is_empty() => {
+                match ctx.download(index, sub, value)? {
+                    Err(a) if a.by_server && a.code == AbortCode::READ_ONLY => {}
+                    Err(a) => bad.push(format!(
+                        "0x{index:04X} sub {sub} ({}): a write of its own value gave {a}, not {}",
+                        acc.eds_name(),
+                        hex(AbortCode::READ_ONLY)
+                    )),
+                    Ok(()) => bad.push(format!(
+                        "0x{index:04X} sub {sub} is {} in the file, the device took a write",
+                        acc.eds_name()
+                    )),
+                }
+            }
             _ => {}
         }
     }

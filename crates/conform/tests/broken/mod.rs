@@ -15,6 +15,7 @@ use cantwin_canopen::nmt::State;
 use cantwin_canopen::objects::{Cia301Options, cia301_defaults};
 use cantwin_canopen::od::{Access, DataType, OdBuilder, OdDescription, SubObject, Value};
 use cantwin_canopen::pdo::PdoObjects;
+use cantwin_canopen::sdo::crc::Crc16;
 use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 
 /// The one fault of a broken device.
@@ -50,11 +51,15 @@ pub enum Fault {
     /// Answers a write of a value other than 0 to 0x1003 sub 0 as a success (and ignores
     /// it), where §7.5.2.3 allows only 0 and requires abort 0x06090030 otherwise.
     ErrorHistoryWriteAccepted,
+    /// Does not check the CRC of a block download (§7.2.4.3.11): the end request reaches
+    /// the device with the CRC of the data it took, so a wrong one is never aborted with
+    /// 0x05040004.
+    BlockDownloadCrcNotChecked,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 10] = [
+    pub const ALL: [Fault; 11] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -65,6 +70,7 @@ impl Fault {
         Fault::StoreWithoutSignature,
         Fault::PdoCobIdChangeWhileValid,
         Fault::ErrorHistoryWriteAccepted,
+        Fault::BlockDownloadCrcNotChecked,
     ];
 }
 
@@ -212,7 +218,18 @@ pub struct Broken {
     reset_communication: bool,
     /// Heartbeats the device produced so far.
     heartbeats: u64,
+    /// The block download under way: the segments of the current sub-block taken in
+    /// sequence, the data of the sub-blocks the server acknowledged, the sequence number of
+    /// the last segment (c = 1) once sent, and whether the client's end request comes next.
+    block_segments: Vec<[u8; 7]>,
+    block_data: Vec<u8>,
+    block_last: Option<u8>,
+    block_end_next: bool,
 }
+
+/// The most block download data the node keeps to compute a CRC: the DOMAIN and then some
+/// (a longer download is aborted by the device anyway).
+const MAX_BLOCK_DATA: usize = 2 * DOMAIN_SIZE;
 
 impl Broken {
     /// `device` with `fault` (none: the device as it is).
@@ -224,6 +241,10 @@ impl Broken {
             toggle: 0,
             reset_communication: false,
             heartbeats: 0,
+            block_segments: Vec::new(),
+            block_data: Vec::new(),
+            block_last: None,
+            block_end_next: false,
         }
     }
 
@@ -365,6 +386,19 @@ impl Broken {
                 self.answer(out, data, None);
                 None
             }
+            Some(Fault::BlockDownloadCrcNotChecked)
+                if self.transfer == Transfer::BlockDownload
+                    && self.block_end_next
+                    && byte0 & 0xE3 == 0xC1 =>
+            {
+                // The end request (ccs 6, cs 1): n bytes of the last segment carry no data.
+                let n = usize::from((byte0 >> 2) & 0x07);
+                let len = self.block_data.len().saturating_sub(n);
+                let crc = Crc16::of(&self.block_data[..len]).to_le_bytes();
+                let mut d: [u8; 8] = data.try_into().unwrap();
+                d[1..3].copy_from_slice(&crc);
+                Some(Frame::std(id, &d).unwrap())
+            }
             Some(Fault::StoreWithoutSignature) if is_expedited_download(byte0) => {
                 let (index, sub, _) = expedited(data);
                 if index != 0x1010 || sub == 0 {
@@ -413,7 +447,13 @@ impl Broken {
         match self.transfer {
             Transfer::Idle => match byte0 >> 5 {
                 // Block download initiate (ccs 6, cs 0).
-                6 if byte0 & 0x01 == 0 => self.transfer = Transfer::BlockDownload,
+                6 if byte0 & 0x01 == 0 => {
+                    self.transfer = Transfer::BlockDownload;
+                    self.block_segments.clear();
+                    self.block_data.clear();
+                    self.block_last = None;
+                    self.block_end_next = false;
+                }
                 // Block upload initiate (ccs 5, cs 0).
                 5 if byte0 & 0x03 == 0 => {
                     self.transfer = Transfer::BlockUpload {
@@ -424,7 +464,17 @@ impl Broken {
                 }
                 _ => {}
             },
-            // Segments carry no command specifier; only an abort ends the transfer early.
+            // Segments carry no command specifier; only an abort ends the transfer early. A
+            // segment is taken when it is the next in sequence (§7.2.4.3.10).
+            Transfer::BlockDownload if !self.block_end_next && byte0 != 0x80 => {
+                let seq = byte0 & 0x7F;
+                if usize::from(seq) == self.block_segments.len() + 1 {
+                    self.block_segments.push(data[1..8].try_into().unwrap());
+                    if byte0 & 0x80 != 0 {
+                        self.block_last = Some(seq);
+                    }
+                }
+            }
             Transfer::BlockDownload => {}
             Transfer::BlockUpload { last, .. } => match byte0 {
                 // Start upload (ccs 5, cs 3).
@@ -485,6 +535,20 @@ impl Broken {
         match self.transfer {
             Transfer::BlockDownload if byte0 == 0xA1 || byte0 == 0x80 => {
                 self.transfer = Transfer::Idle;
+            }
+            // Block acknowledgement (scs 5, ss 2) of the sequence number in byte 1.
+            Transfer::BlockDownload if byte0 == 0xA2 => {
+                let acked = usize::from(data[1]).min(self.block_segments.len());
+                if self.block_data.len() + 7 * acked <= MAX_BLOCK_DATA {
+                    for seg in &self.block_segments[..acked] {
+                        self.block_data.extend_from_slice(seg);
+                    }
+                }
+                self.block_end_next = self
+                    .block_last
+                    .is_some_and(|last| usize::from(last) <= acked);
+                self.block_segments.clear();
+                self.block_last = None;
             }
             Transfer::BlockUpload { end_next: true, .. } => {
                 self.transfer = Transfer::Idle;
