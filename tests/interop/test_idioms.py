@@ -70,6 +70,21 @@ def arrived_before_the_wait(way, stamp, triggered_at, waited_at):
     )
 
 
+def emcy_after(way, code, trigger):
+    """`trigger()`, then python-canopen's `emcy.wait(code)`: the EMCY, or None. An EMCY that
+    arrived before the wait began counts only as `arrived_before_the_wait` allows."""
+    seen = len(way.node.emcy.log)
+    triggered_at = time.time()
+    trigger()
+    waited_at = time.time()
+    emcy = way.node.emcy.wait(code, timeout=2)
+    if emcy is None:
+        early = [e for e in way.node.emcy.log[seen:] if e.code == code]
+        if early and arrived_before_the_wait(way, early[0].timestamp, triggered_at, waited_at):
+            emcy = early[0]
+    return emcy
+
+
 @pytest.fixture(scope="module")
 def eds(tmp_path_factory):
     """The EDS the twin exports: python-canopen's PDO maps need the mapped objects."""
@@ -152,14 +167,7 @@ def test_nmt_state_then_wait_for_heartbeat(way):
 def test_emcy_wait_after_a_pdo_length_error(way):
     way.operational()
     # RPDO1 maps 4 bytes: 2 are a length error, EMCY 0x8210 (CiA 301 §7.2.2.2, table 21).
-    triggered_at = time.time()
-    way.net.send_message(0x200 + NODE_ID, b"\x01\x02")
-    waited_at = time.time()
-    emcy = way.node.emcy.wait(0x8210, timeout=2)
-    if emcy is None:
-        early = [e for e in way.node.emcy.log if e.code == 0x8210]
-        if early and arrived_before_the_wait(way, early[0].timestamp, triggered_at, waited_at):
-            emcy = early[0]
+    emcy = emcy_after(way, 0x8210, lambda: way.net.send_message(0x200 + NODE_ID, b"\x01\x02"))
     assert emcy is not None, way.node.emcy.log
     assert emcy.register & 0x10  # communication error (CiA 301 §7.5.2.2)
     assert [e.code for e in way.node.emcy.active] == [0x8210]
@@ -175,6 +183,22 @@ def test_emcy_wait_after_a_fault_of_the_device(way):
     assert emcy.register & 0x01  # generic error
     way.sim.write_object("node5", 0x2001, 0, u16(0))
     assert way.node.emcy.wait(0x0000, timeout=2) is not None
+    assert way.node.emcy.active == []
+
+
+@pytest.mark.parametrize("way", ["paced", "socketcand"], indirect=True)
+def test_emcy_wait_after_the_sdo_download_that_raises_it(way):
+    # The habit: write the object that makes the device fail, then wait for its EMCY. The
+    # device answers the write first and sends the EMCY after the answer (CiA 301 §7.2.7), so
+    # the wait that follows the download sees it. In virtual time the EMCY, one frame after
+    # the answer, is within the reaction gap of the package's port (frames that follow the
+    # one handed to Python within 1 ms of bus time come as they come) and reaches the log
+    # before `download()` has returned: there `emcy.log` holds it.
+    emcy = emcy_after(way, 0x5000, lambda: way.node.sdo.download(0x2001, 0, u16(0x5000)))
+    assert emcy is not None, way.node.emcy.log
+    assert emcy.register & 0x01  # generic error
+    reset = emcy_after(way, 0x0000, lambda: way.node.sdo.download(0x2001, 0, u16(0)))
+    assert reset is not None, way.node.emcy.log
     assert way.node.emcy.active == []
 
 
