@@ -495,7 +495,13 @@ pub(crate) fn add_eds_pdos(decoder: &mut PdoDecoder, specs: &[String]) -> Result
 }
 
 pub fn run_trace(args: &TraceArgs) -> Result<()> {
-    let pdos = pdo_decoder(&args.eds)?;
+    // The listing decoder of `cantwin dump --decode`: it also names a node guarding answer
+    // by the request before it (CiA 301 §7.2.8.3.2.1), which one frame alone cannot.
+    let opts = cantwin_report::Options {
+        pdos: pdo_decoder(&args.eds)?,
+        ..cantwin_report::Options::default()
+    };
+    let mut decoder = cantwin_report::Decoder::new(&opts);
     let mut link = Link::open(&args.target)?;
     let limit = args.seconds.map(WallDuration::from_secs_f64);
     let mut seen = 0u64;
@@ -507,7 +513,7 @@ pub fn run_trace(args: &TraceArgs) -> Result<()> {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| format!("{}.{:06}", d.as_secs(), d.subsec_micros()))
             .unwrap_or_default();
-        let text = describe(frame, &pdos);
+        let text = decoder.describe("", frame);
         let written = if output::json() {
             let mut v = output::frame_json(frame);
             v["time"] = json!(t);
