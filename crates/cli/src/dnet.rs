@@ -8,8 +8,9 @@
 //! asking for 8/16 or 16/16 and closes it afterwards.
 //!
 //! A node coming on line first runs the duplicate MAC ID check (two requests 1 s apart, no
-//! answer allowed, ODVA DeviceNet specification, Volume 3): every one-shot command spends
-//! those 2 s, `cantwin dnet shell` spends them once for many commands.
+//! answer allowed; ODVA DeviceNet specification Vol. 1 §6, network access state machine):
+//! every one-shot command spends those 2 s, `cantwin dnet shell` spends them once for many
+//! commands.
 
 use std::time::Duration as WallDuration;
 
@@ -309,7 +310,7 @@ impl Session {
             scanner,
             timeout: args.timeout,
         };
-        // The duplicate MAC ID check: two requests 1 s apart (DeviceNet Vol. 3).
+        // The duplicate MAC ID check: two requests 1 s apart (DeviceNet Vol. 1 §6).
         let mut online = None;
         s.link.run(
             &mut s.scanner,
