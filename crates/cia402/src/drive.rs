@@ -153,6 +153,74 @@ fn int(od: &ObjectDictionary, index: u16, sub: u8) -> Option<i64> {
         .and_then(|v| i64::try_from(v).ok())
 }
 
+/// Where the drive reads its inputs: located once, read as raw bytes at every evaluation.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+struct InputIds {
+    controlword: Input,
+    mode: Input,
+    target_position: Input,
+    target_velocity: Input,
+    target_torque: Input,
+    ip_data: Input,
+    vl_target: Input,
+    position_offset: Input,
+    velocity_offset: Input,
+    torque_offset: Input,
+}
+
+/// An input entry and whether its data type is signed (a vendor's dictionary may give an
+/// object another integer type than the profile's).
+type Input = Option<(EntryId, bool)>;
+
+impl InputIds {
+    fn locate(od: &ObjectDictionary) -> InputIds {
+        use cantwin_canopen::od::DataType::*;
+        let at = |index: u16, sub: u8| {
+            let id = od.locate(index, sub).ok()?;
+            let signed = matches!(
+                od.sub_object(id).data_type,
+                Integer8
+                    | Integer16
+                    | Integer24
+                    | Integer32
+                    | Integer40
+                    | Integer48
+                    | Integer56
+                    | Integer64
+            );
+            Some((id, signed))
+        };
+        InputIds {
+            controlword: at(CONTROLWORD, 0),
+            mode: at(MODES_OF_OPERATION, 0),
+            target_position: at(TARGET_POSITION, 0),
+            target_velocity: at(TARGET_VELOCITY, 0),
+            target_torque: at(TARGET_TORQUE, 0),
+            ip_data: at(INTERPOLATION_DATA_RECORD, 1),
+            vl_target: at(VL_TARGET_VELOCITY, 0),
+            position_offset: at(POSITION_OFFSET, 0),
+            velocity_offset: at(VELOCITY_OFFSET, 0),
+            torque_offset: at(TORQUE_OFFSET, 0),
+        }
+    }
+}
+
+/// The integer value of input `input` as its data type reads it; 0 for none.
+fn raw_int(od: &ObjectDictionary, input: Input) -> i64 {
+    let Some((id, signed)) = input else { return 0 };
+    let bytes = od.raw(id);
+    let n = bytes.len().min(8);
+    let mut b = [0u8; 8];
+    b[..n].copy_from_slice(&bytes[..n]);
+    let v = i64::from_le_bytes(b);
+    if signed && n > 0 && n < 8 {
+        let shift = 64 - 8 * n as u32;
+        (v << shift) >> shift
+    } else {
+        v
+    }
+}
+
 /// Where the drive writes its actual values.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 struct Outputs {
@@ -221,6 +289,7 @@ pub struct Drive {
     params: Params,
     params_stale: bool,
     inputs: Inputs,
+    input_ids: InputIds,
     outputs: Outputs,
     mode: Option<Mode>,
     traj: Trajectory,
@@ -303,6 +372,7 @@ impl Drive {
             },
             params_stale: true,
             inputs: Inputs::default(),
+            input_ids: InputIds::locate(od),
             outputs: Outputs::locate(od),
             mode: None,
             traj: Trajectory::default(),
@@ -513,18 +583,19 @@ impl Drive {
         if self.params_stale {
             self.read_params(od);
         }
-        let get = |index: u16, sub: u8| int(od, index, sub).unwrap_or(0);
+        let ids = &self.input_ids;
+        let get = |input: Input| raw_int(od, input);
         self.inputs = Inputs {
-            controlword: get(CONTROLWORD, 0) as u16,
-            mode: get(MODES_OF_OPERATION, 0) as i8,
-            target_position: get(TARGET_POSITION, 0) as f64,
-            target_velocity: get(TARGET_VELOCITY, 0) as f64,
-            target_torque: get(TARGET_TORQUE, 0) as f64,
-            ip_data: get(INTERPOLATION_DATA_RECORD, 1) as f64,
-            vl_target: get(VL_TARGET_VELOCITY, 0) as i16,
-            position_offset: get(POSITION_OFFSET, 0) as f64,
-            velocity_offset: get(VELOCITY_OFFSET, 0) as f64,
-            torque_offset: get(TORQUE_OFFSET, 0) as f64,
+            controlword: get(ids.controlword) as u16,
+            mode: get(ids.mode) as i8,
+            target_position: get(ids.target_position) as f64,
+            target_velocity: get(ids.target_velocity) as f64,
+            target_torque: get(ids.target_torque) as f64,
+            ip_data: get(ids.ip_data) as f64,
+            vl_target: get(ids.vl_target) as i16,
+            position_offset: get(ids.position_offset) as f64,
+            velocity_offset: get(ids.velocity_offset) as f64,
+            torque_offset: get(ids.torque_offset) as f64,
         };
     }
 
@@ -622,7 +693,22 @@ impl Drive {
             _ => {}
         }
         self.pending = true;
-        self.publish(od);
+        self.publish_status(od);
+    }
+
+    /// Writes what an evaluation changes: the statusword, 0x6061 and 0x603F.
+    fn publish_status(&self, od: &mut ObjectDictionary) {
+        let o = &self.outputs;
+        let put = |od: &mut ObjectDictionary, id: Option<EntryId>, bytes: &[u8]| {
+            if let Some(id) = id
+                && od.raw(id) != bytes
+            {
+                let _ = od.set_raw(id, bytes);
+            }
+        };
+        put(od, o.statusword, &self.statusword().to_le_bytes());
+        put(od, o.mode_display, &[self.mode.map_or(0, Mode::code) as u8]);
+        put(od, o.error_code, &self.error_code().to_le_bytes());
     }
 
     fn wired_inputs(&self) -> u32 {
@@ -640,9 +726,12 @@ impl Drive {
         bits
     }
 
-    /// A SYNC: the cyclic modes take their set-points.
+    /// A SYNC: the cyclic modes take the set-points of the last evaluation (the owner
+    /// evaluates the writes a SYNC applied, those of synchronous RPDOs, before it).
     pub fn sync(&mut self, od: &mut ObjectDictionary) {
-        self.read(od);
+        if self.params_stale {
+            self.read(od);
+        }
         let i = self.inputs;
         let period = self.params.interpolation_us;
         match self.mode {
@@ -1245,14 +1334,15 @@ impl Drive {
     fn publish(&self, od: &mut ObjectDictionary) {
         let o = &self.outputs;
         let u = &self.params.units;
+        // Only what changed is written: most actual values stand still most of the time.
         let put = |od: &mut ObjectDictionary, id: Option<EntryId>, bytes: &[u8]| {
-            if let Some(id) = id {
+            if let Some(id) = id
+                && od.raw(id) != bytes
+            {
                 let _ = od.set_raw(id, bytes);
             }
         };
-        put(od, o.statusword, &self.statusword().to_le_bytes());
-        put(od, o.mode_display, &[self.mode.map_or(0, Mode::code) as u8]);
-        put(od, o.error_code, &self.error_code().to_le_bytes());
+        self.publish_status(od);
         let demand = match self.demand {
             Demand::Position { position, .. } => position,
             _ => self.position(),

@@ -8,8 +8,9 @@
 //! * **Time.** Before the device handles a frame or a timer, the drive is brought to that
 //!   bus time, so a TPDO sent at a SYNC carries the actual values of the last loop cycle
 //!   before it. While the drive is active (high voltage applied or the motor turning) the
-//!   node wakes every [`ServoConfig::status_period`] to publish its statusword: a change
-//!   goes out in the event-driven TPDOs mapping it.
+//!   node wakes when [`ServoConfig::status_period`] has passed without a frame to publish
+//!   its statusword: a change goes out in the event-driven TPDOs mapping it at most one
+//!   period after the loop cycle that made it.
 //! * **SYNC.** At every SYNC the cyclic modes take the set-points received (those of
 //!   synchronous RPDOs are applied by the device at that SYNC).
 //! * **Refusals.** 0x6060 refuses a mode the drive does not support and 0x6098 a homing
@@ -296,13 +297,8 @@ impl Servo {
                 }
             }
         }
-        let od = self.device.od();
-        let sw = od.get_unsigned(STATUSWORD, 0).unwrap_or(0) as u16;
-        let mode = od
-            .get(MODES_OF_OPERATION_DISPLAY, 0)
-            .ok()
-            .and_then(|v| v.as_i128())
-            .unwrap_or(0) as i64;
+        let sw = self.drive.published_statusword();
+        let mode = i64::from(self.drive.mode().map_or(0, Mode::code));
         if sw != self.statusword || mode != self.mode_display {
             self.statusword = sw;
             self.mode_display = mode;
@@ -341,17 +337,14 @@ impl Servo {
         self.publish();
     }
 
+    /// While the drive is active, [`ServoConfig::status_period`] after the drive was last
+    /// brought up to date: a frame (a SYNC, an RPDO) settles it too, so a drive under a
+    /// cyclic master needs no wake-ups of its own.
     fn drive_deadline(&self) -> Option<Instant> {
         if !self.powered || !self.drive.active() {
             return None;
         }
-        let period = self.config.status_period.as_nanos().max(1);
-        let elapsed = self
-            .last
-            .saturating_duration_since(self.powered_at)
-            .as_nanos();
-        let next = (elapsed / period + 1) * period;
-        self.powered_at.checked_add(Duration::from_nanos(next))
+        self.last.checked_add(self.config.status_period)
     }
 }
 
