@@ -721,6 +721,22 @@ mod tests {
     }
 
     #[test]
+    fn cia402_csv_stream_ramps_the_velocity_on_sync() {
+        // RPDO4 (controlword + 0x60FF) synchronous, then a cyclic ramp to 8192 increments/s
+        // in 200 cycles of 1 ms, held.
+        let steps = "{ op = \"map_rpdo\", pdo = 4, entries = [0x60400010, 0x60FF0020] }, \
+                     { op = \"nmt_start\" }, { op = \"enable\" }, { op = \"mode\", mode = \"csv\" }, \
+                     { op = \"stream\", rpdo = 4 }, { op = \"sync\", period_ms = 1 }, \
+                     { op = \"move\", targets = [8192], cycles = 200 }, { op = \"wait\", ms = 300 }";
+        let mut e = expect(1000, 0x5000, 0, 1);
+        e += &expect(1000, 0x5001, 3, 8192);
+        e += &expect(1000, 0x5001, 4, 9);
+        e += "[[expect]]\nat_ms = 1000\nsignal = { device = \"servo\", name = \"velocity\", equals = 8192, tolerance = 100 }\n";
+        let r = run(&servo("", steps, &e));
+        assert!(r.passed(), "{r}");
+    }
+
+    #[test]
     fn bad_steps_name_the_key() {
         for (steps, wanted) in [
             ("{ op = \"fly\" }", "unknown `op` \"fly\""),
