@@ -641,6 +641,37 @@ fn web_dashboard_in_headless_chromium_shows_nodes_runs_controls_and_charts_zoom_
         prev = Some(*r);
         dropped = 0;
     }
+    // Pause holds the rows that come (the table stands still); Resume shows them, in order,
+    // with no gap.
+    let top = "return Number(document.querySelector('#frames tbody tr[data-seq]').dataset.seq);";
+    browser.click("#frames-pause");
+    let held_at = browser.js(top);
+    browser.wait_for(
+        "rows held while paused",
+        "return document.querySelector('#frames-count').textContent;",
+        |v| {
+            v.as_str()
+                .is_some_and(|t| t.starts_with("paused · ") && !t.starts_with("paused · 0 "))
+        },
+    );
+    assert_eq!(browser.js(top), held_at, "the table stands still");
+    browser.click("#frames-pause");
+    let after = browser.js(top);
+    assert!(after.as_i64() > held_at.as_i64(), "{held_at} -> {after}");
+    let seqs = browser.js(
+        "return Array.from(document.querySelectorAll('#frames tbody tr')).slice(0, 40).map(r => r.dataset.seq ? Number(r.dataset.seq) : -1);",
+    );
+    let seqs: Vec<i64> = seqs
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_i64().unwrap())
+        .collect();
+    assert!(
+        seqs.windows(2).all(|w| w[0] == w[1] + 1),
+        "contiguous after resuming: {seqs:?}"
+    );
+
     // The fixed trace: one row per identifier, node 5's heartbeat counted with its cycle.
     browser.click("#view-fixed");
     let hb = browser.wait_for(
