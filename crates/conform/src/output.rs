@@ -278,3 +278,86 @@ pub fn html(report: &Report) -> String {
     s.push_str("</tbody></table>\n</body></html>\n");
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::LoggedFrame;
+
+    fn report() -> Report {
+        let case = |id: &str, area, severity, verdict, detail: &str| CaseReport {
+            id: id.into(),
+            area,
+            title: "t".into(),
+            clause: "CiA 301 §7.2.4.3.17".into(),
+            severity,
+            verdict,
+            detail: detail.into(),
+            manual_section: None,
+            frames: vec![LoggedFrame {
+                t_us: 1500,
+                dir: Direction::Stimulus,
+                frame: "605#4000100000000000".into(),
+            }],
+            frames_omitted: 2,
+            duration_us: 10,
+        };
+        Report {
+            device: "a <b> & \"c\"".into(),
+            node: 5,
+            transport: "virtual bus can0".into(),
+            profile: "EDS".into(),
+            cases: vec![
+                case(
+                    "sdo.a",
+                    Area::Sdo,
+                    Severity::Mandatory,
+                    Verdict::Fail,
+                    "got <1> & 2",
+                ),
+                case("sdo.b", Area::Sdo, Severity::Advisory, Verdict::Fail, "x"),
+                case("nmt.c", Area::Nmt, Severity::Mandatory, Verdict::Pass, "ok"),
+            ],
+            stopped: None,
+            duration_us: 30,
+        }
+    }
+
+    #[test]
+    fn junit_has_a_suite_per_area_and_fails_only_mandatory_cases_escaped() {
+        let x = junit(&report());
+        assert_eq!(x.matches("<testsuite ").count(), 2);
+        assert_eq!(x.matches("<testcase ").count(), 3);
+        assert_eq!(x.matches("<failure ").count(), 1);
+        assert!(x.contains("failures=\"1\""));
+        assert!(x.contains("got &lt;1&gt; &amp; 2"), "{x}");
+        assert!(x.contains("a &lt;b&gt; &amp; &quot;c&quot;"), "{x}");
+        assert!(x.contains("<skipped message=\"advisory: x"), "{x}");
+        assert!(
+            x.contains("605#4000100000000000"),
+            "the failure carries its frames"
+        );
+        assert!(x.contains("(2 more frames not logged)"));
+    }
+
+    #[test]
+    fn html_escapes_and_shows_frames_and_clauses() {
+        let h = html(&report());
+        assert!(h.starts_with("<!DOCTYPE html>"));
+        assert!(h.contains("a &lt;b&gt; &amp;"));
+        assert!(h.contains("got &lt;1&gt; &amp; 2"));
+        assert!(h.contains("0.001500 stimulus 605#4000100000000000"), "{h}");
+        assert!(h.contains("CiA 301 §7.2.4.3.17"));
+        assert!(h.contains("<b>FAILED</b>"));
+    }
+
+    #[test]
+    fn summary_and_json_agree_with_the_report() {
+        let r = report();
+        let s = summary(&r);
+        assert!(s.contains("FAILED: 3 cases, 1 mandatory failures"), "{s}");
+        assert!(s.contains("(advisory)"));
+        let back: Report = serde_json::from_str(&json(&r)).unwrap();
+        assert_eq!(back, r);
+    }
+}

@@ -143,7 +143,19 @@ impl ProfileFile {
             "# cantwin conform device profile: optional features the device claims beyond\n\
              # its EDS, and the deviations from CiA 301 its manual prescribes.\n\n",
         );
-        out.push_str(&body);
+        // Abort codes read as CiA 301 writes them.
+        for line in body.lines() {
+            match line
+                .strip_prefix("abort = ")
+                .and_then(|v| v.parse::<u32>().ok())
+            {
+                Some(code) => out.push_str(&format!("abort = 0x{code:08X}\n")),
+                None => {
+                    out.push_str(line);
+                    out.push('\n');
+                }
+            }
+        }
         out
     }
 }
@@ -241,4 +253,53 @@ pub fn shipped(kind: &str) -> ProfileFile {
     };
     // The shipped files are checked by this crate's tests.
     ProfileFile::parse(text).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_profile_file_survives_its_own_text() {
+        let file = ProfileFile::parse(ADV200).unwrap();
+        let text = file.to_toml();
+        assert_eq!(ProfileFile::parse(&text).unwrap(), file);
+        assert!(text.contains("abort = 0x05040001"), "{text}");
+        assert_eq!(file.sdo.segmented, Some(false));
+        assert!(file.deviations.iter().all(|d| !d.section.is_empty()));
+    }
+
+    #[test]
+    fn a_file_overrides_only_the_keys_it_sets() {
+        let eds =
+            cantwin_eds::load("[1017]\nParameterName=hb\nDataType=0x0006\nAccessType=rw\n").eds;
+        let p = Profile::from_eds(&eds);
+        assert_eq!(p.features.heartbeat_producer, Some(true));
+        assert_eq!(p.features.store, Some(false));
+        assert_eq!(p.sdo.segmented, None, "CiA 306 cannot say");
+        let f = ProfileFile::parse("[features]\nstore = true\n[sdo]\nblock = false\n").unwrap();
+        let p = p.with_file(&f, "f.toml");
+        assert_eq!(p.features.store, Some(true));
+        assert_eq!(p.features.heartbeat_producer, Some(true));
+        assert_eq!(p.sdo.block, Some(false));
+        assert_eq!(p.source, "EDS + f.toml");
+    }
+
+    #[test]
+    fn bad_profiles_are_refused_with_a_reason() {
+        assert!(matches!(
+            ProfileFile::parse("[sdo]\nsegmented = 3\n"),
+            Err(ProfileError::Syntax(_))
+        ));
+        assert!(matches!(
+            ProfileFile::parse("[sdo]\nexpedited = true\n"),
+            Err(ProfileError::Syntax(_))
+        ));
+        assert!(matches!(
+            ProfileFile::parse(
+                "[[deviation]]\ncase = \"x.y\"\nsection = \"1\"\nbehaviour = \"b\"\n"
+            ),
+            Err(ProfileError::UnknownCase(_))
+        ));
+    }
 }

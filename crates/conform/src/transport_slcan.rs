@@ -5,7 +5,7 @@
 //! queue it. A refused frame is a stimulus the device never saw, and every verdict after it
 //! would be about something else: the transport reports it as an error, which ends the run.
 
-use std::net::SocketAddr;
+use std::net::{SocketAddr, ToSocketAddrs};
 use std::sync::Arc;
 use std::time::Duration as WallDuration;
 
@@ -29,6 +29,47 @@ impl BusPort for Shared {
     fn overflows(&self) -> u64 {
         self.0.overflows()
     }
+}
+
+/// Why the slcan transport could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum SlcanError {
+    /// The address is not `HOST:PORT`, or the host does not resolve.
+    #[error("slcan address {spec:?}: {why}")]
+    Address {
+        /// The address as given.
+        spec: String,
+        /// What is wrong with it.
+        why: String,
+    },
+    /// The adapter could not be reached or opened.
+    #[error("slcan adapter at {addr}: {source}")]
+    Connect {
+        /// The address connected to.
+        addr: SocketAddr,
+        /// What failed.
+        source: ClientError,
+    },
+}
+
+/// Open the adapter at `spec` (`HOST:PORT`, as a command line gives it): the first address
+/// the host resolves to, then [`SlcanTransport::connect`].
+pub fn open(
+    spec: &str,
+    bit_rate: Option<BitRate>,
+    timeout: WallDuration,
+) -> Result<SlcanTransport, SlcanError> {
+    let address = |why: String| SlcanError::Address {
+        spec: spec.to_owned(),
+        why,
+    };
+    let addr = spec
+        .to_socket_addrs()
+        .map_err(|e| address(format!("expected HOST:PORT ({e})")))?
+        .next()
+        .ok_or_else(|| address("resolves to no address".into()))?;
+    SlcanTransport::connect(addr, bit_rate, timeout)
+        .map_err(|source| SlcanError::Connect { addr, source })
 }
 
 /// An slcan adapter as the runner's [`Transport`], on the wall clock.
@@ -131,6 +172,27 @@ mod tests {
         assert!(before <= at && at <= t.now());
         assert_eq!(t.recv(deadline(&t, 20)).unwrap(), None);
         assert_eq!(t.acknowledged(), 1);
+    }
+
+    #[test]
+    fn addresses_are_host_and_port_and_a_closed_port_is_named() {
+        for bad in ["127.0.0.1", "127.0.0.1:port", ":29537", "no such host:1"] {
+            assert!(
+                matches!(open(bad, None, GUARD), Err(SlcanError::Address { .. })),
+                "{bad:?}"
+            );
+        }
+        // A port nobody listens on: taken and released again.
+        let free = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap();
+        match open(&free.to_string(), None, GUARD) {
+            Err(e @ SlcanError::Connect { .. }) => {
+                assert!(e.to_string().contains(&free.to_string()), "{e}")
+            }
+            other => panic!("{:?}", other.map(|_| ())),
+        }
     }
 
     #[test]
