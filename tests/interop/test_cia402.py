@@ -3,10 +3,10 @@
 * python-canopen's ``BaseNode402`` through the socketcand gateway: state changes, ``op_mode``,
   ``homing()``, and a profile position move, once with every object by SDO and once with
   the controlword, the mode and the target in RPDOs and the statusword in a TPDO.
-* Cyclic synchronous position at 1 ms SYNC, streamed from Python: in virtual time through
-  the ``cantwin`` package (SYNC and the set-point RPDOs are periodic frames in bus time, so
+* Cyclic synchronous position and velocity at 1 ms SYNC, streamed from Python: in virtual
+  time (csp and csv) through the ``cantwin`` package (SYNC and the set-point RPDOs are periodic frames in bus time, so
   every set-point acts at exactly its SYNC), and through the socketcand gateway on the
-  wall clock, where the host's scheduling makes set-points late or lets them go missing
+  wall clock (csp), where the host's scheduling makes set-points late or lets them go missing
   and the test checks the drive's answer to each, with the SYNC jitter printed.
 
 The twin is one servo at node 3 on a 1 Mbit/s bus with its home switch above 20000
@@ -162,17 +162,23 @@ def test_base_node_402_states_op_mode_homing_and_a_profile_move(network, servo_f
     assert node.state == "SWITCH ON DISABLED"
 
 
-def prepare_csp(node, interpolation_ms):
-    """RPDO3 (controlword + 0x607A) synchronous, TPDO3 statusword + 0x6062 position demand
-    value at every SYNC, 0x60C2 the interpolation period; OPERATION ENABLED in csp."""
+# csp: RPDO3 carries 0x607A, TPDO3 the position demand value 0x6062; csv: RPDO4 carries
+# 0x60FF, TPDO4 the velocity demand value 0x606B (CiA 402-3's pre-defined RPDO3 and RPDO4).
+CYCLIC = {"csp": (8, 3, 0x6062), "csv": (9, 4, 0x606B)}
+
+
+def prepare_csp(node, interpolation_ms, cyclic="csp"):
+    """The set-point RPDO synchronous, the TPDO of the same number statusword + the demand
+    value at every SYNC, 0x60C2 the interpolation period; OPERATION ENABLED in the mode."""
+    mode, n, demand = CYCLIC[cyclic]
     node.tpdo.read()
     node.rpdo.read()
-    node.rpdo[3].trans_type = 1
-    node.tpdo[3].clear()
-    node.tpdo[3].add_variable(0x6041)
-    node.tpdo[3].add_variable(0x6062)
-    node.tpdo[3].trans_type = 1
-    node.tpdo[3].enabled = True
+    node.rpdo[n].trans_type = 1
+    node.tpdo[n].clear()
+    node.tpdo[n].add_variable(0x6041)
+    node.tpdo[n].add_variable(demand)
+    node.tpdo[n].trans_type = 1
+    node.tpdo[n].enabled = True
     node.rpdo.save()
     node.tpdo.save()
     node.sdo[0x60C2][1].raw = interpolation_ms
@@ -183,11 +189,11 @@ def prepare_csp(node, interpolation_ms):
         end = time.monotonic() + 2
         while node.sdo[0x6041].raw & 0x6F != state:
             assert time.monotonic() < end
-    node.sdo[0x6060].raw = 8
+    node.sdo[0x6060].raw = mode
     end = time.monotonic() + 2
-    while node.sdo[0x6061].raw != 8:
+    while node.sdo[0x6061].raw != mode:
         assert time.monotonic() < end
-    return node.sdo[0x6064].raw
+    return node.sdo[0x6064].raw if cyclic == "csp" else 0
 
 
 def set_points(start, n, distance=4096):
@@ -195,32 +201,37 @@ def set_points(start, n, distance=4096):
     return [start + round(distance * (1 - math.cos(math.pi * k / n)) / 2) for k in range(1, n + 1)]
 
 
-def rpdo3(value):
-    return can.Message(arbitration_id=0x400 + NODE, data=struct.pack("<Hi", 0x000F, value), is_extended_id=False)
+def rpdo3(value, n=3):
+    """RPDO `n` (3: csp, 4: csv) with enable operation and `value`."""
+    cob_id = 0x200 + 0x100 * (n - 1) + NODE
+    return can.Message(arbitration_id=cob_id, data=struct.pack("<Hi", 0x000F, value), is_extended_id=False)
 
 
 class Tpdo3(can.Listener):
-    """The TPDO3s of the servo: (time, position demand value)."""
+    """TPDO `n` of the servo (3: csp, 4: csv): (time, demand value)."""
 
-    def __init__(self):
+    def __init__(self, n=3):
+        self.cob_id = 0x180 + 0x100 * (n - 1) + NODE
         self.seen = []
 
     def on_message_received(self, msg):
-        if msg.arbitration_id == 0x380 + NODE:
+        if msg.arbitration_id == self.cob_id:
             self.seen.append((msg.timestamp, struct.unpack("<Hi", bytes(msg.data))[1]))
 
 
-def test_csp_at_1ms_sync_in_virtual_time_is_exact(servo_files):
+@pytest.mark.parametrize("cyclic", ["csp", "csv"])
+def test_cyclic_sync_at_1ms_in_virtual_time_is_exact(servo_files, cyclic):
     cantwin = pytest.importorskip("cantwin")
+    _, n, _ = CYCLIC[cyclic]
     sim = cantwin.Simulation.load(str(servo_files[0]))
     net = canopen.Network()
     net.connect(interface="cantwin", channel="can0", sim=sim)
-    tpdo3 = Tpdo3()
+    tpdo3 = Tpdo3(n)
     try:
         node = canopen.RemoteNode(NODE, str(servo_files[1]))
         net.add_node(node)
         node.nmt.state = "PRE-OPERATIONAL"
-        start = prepare_csp(node, 1)
+        start = prepare_csp(node, 1, cyclic)
         cycles = 200
         points = set_points(start, cycles)
         net.notifier.add_listener(tpdo3)
@@ -229,7 +240,7 @@ def test_csp_at_1ms_sync_in_virtual_time_is_exact(servo_files):
         # k follows SYNC k (CiA 301 §7.2.2.2: it acts at the next SYNC, CiA 402-2 csp).
         t0 = sim.now
         sync = net.bus.send_periodic(can.Message(arbitration_id=0x80, data=b"", is_extended_id=False), 0.001)
-        stream = net.bus.send_periodic([rpdo3(v) for v in points], 0.001, duration=cycles * 0.001)
+        stream = net.bus.send_periodic([rpdo3(v, n) for v in points], 0.001, duration=cycles * 0.001)
         end = t0 + (cycles + 20) * 0.001
         while sim.now < end:
             time.sleep(0.005)
@@ -243,9 +254,9 @@ def test_csp_at_1ms_sync_in_virtual_time_is_exact(servo_files):
     assert [j for j, _, _ in seen] == list(range(len(seen))) and len(seen) >= cycles + 10, seen[:5]
     assert all(0 <= t - t0 - j * 0.001 < 0.0003 for j, t, _ in seen), seen[:5]
     # Set-point k is taken at SYNC k + 1 and the TPDO at SYNC k + 2 carries it (the demand
-    # of the loop cycle before that SYNC, at the end of the 1 ms interpolation segment
-    # 0x60C2): exact at every cycle, the start before, the last set-point held after (the
-    # drive does not extrapolate a missing set-point).
+    # of the loop cycle before that SYNC: in csp at the end of the 1 ms interpolation
+    # segment 0x60C2, in csv as it is): exact at every cycle, the start before, the last
+    # set-point held after (the drive does not extrapolate a missing set-point).
     want = [start, start] + points + [points[-1]] * (len(seen) - cycles - 2)
     assert [v for _, _, v in seen] == want[: len(seen)]
 
@@ -309,6 +320,9 @@ def test_csp_through_socketcand_late_and_missing_set_points(servo_sim, servo_fil
                 net.bus.send(rpdo3(points[k - 1]))
                 continue
             net.bus.send(rpdo3(value))
+        # 20 SYNCs more, after the last set-point is surely on the bus (queued together, a
+        # SYNC would win arbitration over it).
+        time.sleep(0.02)
         for _ in range(20):
             time.sleep(period)
             net.bus.send(sync)
@@ -324,8 +338,9 @@ def test_csp_through_socketcand_late_and_missing_set_points(servo_sim, servo_fil
     # the previous SYNC, if any (none: it holds the one it has). The TPDO it sends for a
     # SYNC carries the demand of its last loop cycle before that SYNC, which ran within
     # one loop period (250 µs) of it: the set-point taken at the SYNC before, or, when the
-    # host sent SYNCs closer together than a loop period, one taken a little earlier.
-    loop = 250e-6 + 20e-6
+    # host sent SYNCs closer together than a loop period, one taken a little earlier. The
+    # stamps are the gateway's wall clock, not bus time: two loop periods are allowed.
+    loop = 2 * 250e-6
     history = []  # (SYNC time, set-point taken there)
     shown = collections.deque()  # what each SYNC's TPDO may carry, in order
     taken = pending = None
