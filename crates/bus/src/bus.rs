@@ -429,6 +429,19 @@ impl Bus {
 
     /// Names `port` for front ends (who sent a frame), e.g. a gateway's client by its
     /// protocol and address. A port of another bus is ignored.
+    ///
+    /// ```
+    /// use cantwin_bus::{Bus, BusConfig, PortConfig};
+    /// use cantwin_can::{BitRate, ListenOnly};
+    ///
+    /// let mut bus = Bus::new(BusConfig::new("can0", BitRate::R500K));
+    /// let port = bus.attach(ListenOnly, PortConfig::default());
+    /// bus.set_port_label(port, "socketcand 127.0.0.1:54012");
+    /// // The name outlives the port: its frames may still be shown after it left.
+    /// assert!(bus.detach(port).is_ok());
+    /// assert_eq!(bus.port_label(port), Some("socketcand 127.0.0.1:54012"));
+    /// assert_eq!(bus.port_labels().count(), 1);
+    /// ```
     pub fn set_port_label(&mut self, port: PortId, label: impl Into<String>) {
         if port.bus == self.id {
             self.labels.insert(port.index, label.into());
