@@ -89,7 +89,8 @@ impl Default for Config {
     /// 500 kbit/s, 100 ms windows, one minute of them, 10 000 frames, 4096 identifiers.
     fn default() -> Self {
         Config {
-            bit_rate: BitRate::R500K,
+            // One default with the capture report: captures and sockets do not say the rate.
+            bit_rate: cantwin_report::DEFAULT_BIT_RATE,
             window: Duration::from_millis(100),
             windows: 600,
             ring: 10_000,
