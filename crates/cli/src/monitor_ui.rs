@@ -498,15 +498,19 @@ fn id_text(key: &cantwin_monitor::fixed_trace::RowKey) -> String {
     if key.remote { format!("{id}R") } else { id }
 }
 
-/// Widths of the fixed trace's columns: identifier, count, Δt, min, max, data.
+/// Widths of the fixed trace's columns: identifier (room for an extended one and `R`),
+/// count, Δt, min, max, data.
 const FIXED_COLUMNS: [usize; 6] = [9, 7, 8, 8, 8, 23];
+
+/// The identifier column's width when only standard identifiers are shown (`70C`, `70CR`).
+const STANDARD_ID_WIDTH: usize = 4;
 
 /// The inner width below which the fixed trace leaves out the data bytes, so that the
 /// decoded text keeps its room (the scrolling trace shows both).
 const FIXED_DATA_WIDTH: u16 = 100;
 
-fn fixed_header(with_data: bool) -> Line<'static> {
-    let [id, count, dt, min, max, data] = FIXED_COLUMNS;
+fn fixed_header(with_data: bool, id: usize) -> Line<'static> {
+    let [_, count, dt, min, max, data] = FIXED_COLUMNS;
     let data = if with_data {
         format!("{:<data$} ", "last data")
     } else {
@@ -523,8 +527,8 @@ fn fixed_header(with_data: bool) -> Line<'static> {
 
 /// One row of the fixed trace: the bytes the last frame changed stand out (the delta).
 /// Without room for the data, a frame without decoded text shows its bytes instead.
-fn fixed_line(r: &FixedRow, with_data: bool) -> Line<'static> {
-    let [id, count, dt, min, max, data] = FIXED_COLUMNS;
+fn fixed_line(r: &FixedRow, with_data: bool, id: usize) -> Line<'static> {
+    let [_, count, dt, min, max, data] = FIXED_COLUMNS;
     let colour = service_colour(r.service());
     let mut spans = vec![
         Span::styled(
@@ -608,12 +612,14 @@ fn fixed_panel(f: &mut Frame<'_>, area: Rect, view: &NetworkView, ui: &Ui) {
     let inner = block.inner(area);
     let with_data = inner.width >= FIXED_DATA_WIDTH;
     let rows = usize::from(inner.height).saturating_sub(1);
-    let mut lines = vec![fixed_header(with_data)];
-    lines.extend(
-        ui.fixed_rows(view, rows)
-            .into_iter()
-            .map(|r| fixed_line(r, with_data)),
-    );
+    let shown = ui.fixed_rows(view, rows);
+    let id = if shown.iter().any(|r| r.key.extended) {
+        FIXED_COLUMNS[0]
+    } else {
+        STANDARD_ID_WIDTH
+    };
+    let mut lines = vec![fixed_header(with_data, id)];
+    lines.extend(shown.into_iter().map(|r| fixed_line(r, with_data, id)));
     f.render_widget(Paragraph::new(lines).block(block), area);
 }
 

@@ -557,3 +557,35 @@ fn the_load_says_when_its_bit_rate_is_assumed() {
         "{narrow}"
     );
 }
+
+#[test]
+fn the_fixed_trace_widens_its_identifier_column_for_extended_identifiers() {
+    let mut view = NetworkView::new(Config::default());
+    view.push(
+        Instant::from_nanos(0),
+        &Frame::data(Id::standard(0x181).unwrap(), &[1]).unwrap(),
+    );
+    let mut ui = Ui::new(String::new());
+    ui.on_key(key(KeyCode::Char('t')), &view);
+    let screen = render_at(&view, &ui, 80, 24);
+    assert!(
+        screen.iter().any(|l| l.starts_with("│ 181 ")),
+        "{}",
+        screen.join("\n")
+    );
+    view.push(
+        Instant::from_nanos(1_000_000),
+        &Frame::data(Id::extended(0x18FF_0001).unwrap(), &[2]).unwrap(),
+    );
+    let screen = render_at(&view, &ui, 80, 24);
+    assert!(
+        screen.iter().any(|l| l.starts_with("│      181 ")),
+        "{}",
+        screen.join("\n")
+    );
+    assert!(
+        screen.iter().any(|l| l.starts_with("│ 18FF0001 ")),
+        "{}",
+        screen.join("\n")
+    );
+}
