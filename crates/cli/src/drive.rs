@@ -33,7 +33,9 @@ pub struct DriveArgs {
     #[arg(long, default_value_t = 10, global = true, value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=10_000))]
     poll_ms: u64,
     /// Send NMT Start to the node first (CiA 301): for drives that act on the controlword
-    /// only in OPERATIONAL, such as the ADV200 card (it trips on enable otherwise).
+    /// only in OPERATIONAL, such as the ADV200 card (it trips on enable otherwise). With
+    /// --scenario every command starts the scenario afresh, so give --nmt-start (and
+    /// --enable to move and home) on the command that needs it.
     #[arg(long, global = true)]
     nmt_start: bool,
     #[command(subcommand)]
