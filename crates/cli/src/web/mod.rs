@@ -207,6 +207,11 @@ pub struct Dashboard {
     scheduled: Vec<Scheduled>,
     next_snapshot: WallInstant,
     started: WallInstant,
+    /// The last `/api/history` answer and the snapshot count it was made at: pages asking
+    /// between two snapshots get the same text, so no number of them makes the simulation's
+    /// thread encode the window more than once per snapshot.
+    history: Option<(u64, Arc<String>)>,
+    snapshots: u64,
 }
 
 impl Dashboard {
@@ -269,6 +274,8 @@ impl Dashboard {
             scheduled: Vec::new(),
             next_snapshot: now,
             started: now,
+            history: None,
+            snapshots: 0,
         }
     }
 
@@ -347,7 +354,7 @@ impl Dashboard {
             } => self.set_input(handle, &device, &input, value),
             Command::PowerCycle { device } => self.power_cycle(handle, &device),
             Command::Fault(table) => self.fault(handle, table),
-            Command::History => Ok(self.history_json().to_string()),
+            Command::History => Ok(self.history().as_str().to_owned()),
             Command::SdoDownload {
                 device,
                 index,
@@ -666,12 +673,25 @@ impl Dashboard {
             return;
         };
         let snapshot = self.model.update(sample);
+        self.snapshots += 1;
         let json = self.encode(&snapshot);
         self.publish.send_replace(Arc::new(json.to_string()));
     }
 
-    /// Every signal's samples over the window: `{"uptime_s": …, "series": {key: [[t, v], …]}}`
-    /// with `t` in seconds since the dashboard started.
+    /// [`Dashboard::history_json`] as text, encoded at most once per snapshot.
+    fn history(&mut self) -> Arc<String> {
+        match &self.history {
+            Some((at, text)) if *at == self.snapshots => Arc::clone(text),
+            _ => {
+                let text = Arc::new(self.history_json().to_string());
+                self.history = Some((self.snapshots, Arc::clone(&text)));
+                text
+            }
+        }
+    }
+
+    /// Every signal's samples over the window: `{"series": {key: [[t, v], …]}}` with `t` in
+    /// seconds since the dashboard started.
     fn history_json(&self) -> Value {
         let series: serde_json::Map<String, Value> = self
             .model
