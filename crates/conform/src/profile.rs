@@ -240,15 +240,20 @@ impl Profile {
 /// manual's section.
 pub const ADV200: &str = include_str!("../profiles/adv200.toml");
 
-/// The profile of the twins built on the cantwin CANopen stack (`cia301`, `eds`, `tm3`):
+/// The profile of the twins built on the cantwin CANopen stack (`cia301`, `eds`):
 /// every SDO protocol, no deviation.
 pub const STACK: &str = include_str!("../profiles/stack.toml");
+
+/// The profile of the TM3BCCO coupler: every SDO protocol, RTR on its TPDOs as its
+/// manual's table of objects 1800H–1837H says, no deviation.
+pub const TM3: &str = include_str!("../profiles/tm3.toml");
 
 /// The profile of a shipped twin of scenario kind `kind`, as `cantwin eds export` writes
 /// it beside the twin's EDS.
 pub fn shipped(kind: &str) -> ProfileFile {
     let text = match kind {
         "adv200" => ADV200,
+        "tm3" => TM3,
         _ => STACK,
     };
     // The shipped files are checked by this crate's tests.

@@ -72,6 +72,8 @@ fn cia301_twin_passes_every_mandatory_case() {
 fn tm3_island_passes_every_mandatory_case() {
     let r = conform("tm3-island.toml", "island");
     assert!(r.passed(), "{}", show(&r));
+    // Its profile claims RTR (its manual, objects 1800H-1837H): the case ran and passed.
+    assert_eq!(r.case("pdo.rtr").unwrap().verdict, Verdict::Pass);
 }
 
 #[test]
@@ -150,6 +152,7 @@ fn shipped_profiles_parse_and_name_cases_of_the_catalogue() {
     for text in [
         cantwin_conform::profile::ADV200,
         cantwin_conform::profile::STACK,
+        cantwin_conform::profile::TM3,
     ] {
         cantwin_conform::ProfileFile::parse(text).unwrap();
     }
