@@ -791,3 +791,60 @@ fn a_second_job_on_a_busy_axis_is_refused() {
     );
     assert!(n.finished().is_ok());
 }
+
+mod props {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Any traffic while jobs run on two axes (one taking its statusword from a TPDO)
+        /// under a running SYNC: no panic, and every job ends within its timeouts.
+        #[test]
+        fn any_traffic_ends_every_job(
+            frames in proptest::collection::vec(
+                (0u16..0x800, proptest::collection::vec(any::<u8>(), 0..=8)),
+                0..200,
+            ),
+        ) {
+            let mut m = DriveMaster::new();
+            let fast = AxisConfig {
+                step_timeout: Duration::from_millis(20),
+                move_timeout: Duration::from_millis(50),
+                poll_interval: Duration::from_millis(1),
+                statusword_pdo: None,
+            };
+            m.add_axis(3, fast).expect("valid");
+            m.add_axis(4, AxisConfig { statusword_pdo: Some(0x184), ..fast }).expect("valid");
+            let mut out = Outbox::new();
+            m.switch(3, PowerTarget::OperationEnabled, Instant::ZERO, &mut out).expect("idle");
+            m.home(4, Homing { method: 35, ..Homing::default() }, Instant::ZERO, &mut out)
+                .expect("idle");
+            m.master_mut().set_sync(Some((Duration::from_millis(1), 0)), Instant::ZERO).expect("period");
+            let mut now = Instant::ZERO;
+            for (id, data) in frames {
+                now += Duration::from_micros(100);
+                let f = Frame::std(id, &data).expect("valid");
+                m.on_frame(&f, now, &mut out);
+                for f in out.drain().collect::<Vec<_>>() {
+                    m.on_sent(&f, now, &mut out);
+                }
+                if m.next_deadline().is_some_and(|d| d <= now) {
+                    m.on_tick(now, &mut out);
+                }
+            }
+            // Silence afterwards: the SDO timeouts (1 s) and the job timeouts end the jobs.
+            let end = now + Duration::from_secs(10);
+            while let Some(d) = m.next_deadline().filter(|d| *d <= end) {
+                m.on_tick(d, &mut out);
+                for f in out.drain().collect::<Vec<_>>() {
+                    m.on_sent(&f, d, &mut out);
+                }
+                if !m.is_busy(3) && !m.is_busy(4) {
+                    break;
+                }
+            }
+            prop_assert!(!m.is_busy(3) && !m.is_busy(4));
+        }
+    }
+}
