@@ -55,6 +55,11 @@ pub struct Report {
     pub bare: Run,
     /// 64 axes on 64 buses.
     pub fleet: Run,
+    /// 64 bare devices on 64 buses, the same frames: what the buses and the stack alone
+    /// cost at that scale.
+    pub bare_fleet: Run,
+    /// The threads the fleets ran on.
+    pub threads: usize,
 }
 
 impl Report {
@@ -156,6 +161,13 @@ fn start(sim: &mut Simulation, lines: &[Line]) -> Result<()> {
 
 /// `n` axes, one per bus, measured for `duration`.
 fn axes(n: usize, duration: Duration) -> Result<(Run, Simulation, Vec<PortId>)> {
+    let (mut sim, lines, ports) = axes_sim(n)?;
+    let run = measure(&mut sim, &lines, duration)?;
+    Ok((run, sim, ports))
+}
+
+/// `n` axes, one per bus, started.
+fn axes_sim(n: usize) -> Result<(Simulation, Vec<Line>, Vec<PortId>)> {
     let mut sim = Simulation::new();
     let mut lines = Vec::with_capacity(n);
     let mut ports = Vec::with_capacity(n);
@@ -171,8 +183,7 @@ fn axes(n: usize, duration: Duration) -> Result<(Run, Simulation, Vec<PortId>)> 
         });
     }
     start(&mut sim, &lines)?;
-    let run = measure(&mut sim, &lines, duration)?;
-    Ok((run, sim, ports))
+    Ok((sim, lines, ports))
 }
 
 /// One axis, with the last position it reported on its dictionary (the axis moved).
@@ -197,8 +208,15 @@ fn axis(duration: Duration) -> Result<Run> {
 }
 
 /// The bare CiA 301 devices: RPDO 0x301 (3 bytes) and 0x401 (6 bytes) received, TPDO 0x381
-/// and 0x481 (6 bytes each) on every SYNC: the identifiers and lengths of the axis's frames.
-fn bare(duration: Duration) -> Result<Run> {
+/// and 0x481 (6 bytes each) on every SYNC: the identifiers and lengths of the axis's frames;
+/// one device on each of `n` buses.
+fn bare(n: usize, duration: Duration) -> Result<Run> {
+    let (mut sim, lines) = bare_sim(n)?;
+    measure(&mut sim, &lines, duration)
+}
+
+/// The bare devices of [`bare`], started.
+fn bare_sim(n: usize) -> Result<(Simulation, Vec<Line>)> {
     let var = |name: &str, ty| SubObject::new(name, ty, Access::Rw).mappable();
     let b = cia301_defaults(OdBuilder::new(), &Cia301Options::default())
         .var(0x2000, var("Word", DataType::Unsigned16))
@@ -217,20 +235,117 @@ fn bare(duration: Duration) -> Result<Run> {
             .map_err(|e| anyhow!("bare dictionary: {e}"))?,
     );
     let mut sim = Simulation::new();
-    let bus = sim.add_bus(BusConfig::new("can0", BitRate::R1M));
-    sim.attach(
-        bus,
-        Device::new(desc, DeviceConfig::new(1))?,
-        PortConfig::default(),
-    )?;
-    let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
-    let lines = [Line {
-        bus,
-        master,
-        node: 1,
-    }];
+    let mut lines = Vec::with_capacity(n);
+    for b in 0..n {
+        let bus = sim.add_bus(BusConfig::new(format!("can{b}"), BitRate::R1M));
+        sim.attach(
+            bus,
+            Device::new(Arc::clone(&desc), DeviceConfig::new(1))?,
+            PortConfig::default(),
+        )?;
+        let master = sim.attach(bus, ListenOnly, PortConfig::default())?;
+        lines.push(Line {
+            bus,
+            master,
+            node: 1,
+        });
+    }
     start(&mut sim, &lines)?;
-    measure(&mut sim, &lines, duration)
+    Ok((sim, lines))
+}
+
+/// `n` buses of one node each (`make` builds and starts one), spread over the machine's
+/// threads as `cantwin bench fleet` spreads its networks: each thread steps its buses, each
+/// its own simulation (the buses do not meet), one communication cycle at a time. The
+/// figure is the wall time of the measured part, all threads together.
+fn fleet(
+    n: usize,
+    duration: Duration,
+    make: fn() -> Result<(Simulation, Vec<Line>)>,
+) -> Result<(Run, usize)> {
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |t| t.get())
+        .clamp(1, n.max(1));
+    let per = n.div_ceil(threads);
+    let ready = std::sync::Barrier::new(threads + 1);
+    let from = ms(10);
+    let end = from + duration;
+    let (wall, frames) = std::thread::scope(|s| -> Result<(std::time::Duration, u64)> {
+        let handles: Vec<_> = (0..threads)
+            .map(|t| {
+                let count = per.min(n.saturating_sub(t * per));
+                let ready = &ready;
+                s.spawn(move || -> Result<u64> {
+                    let built: Result<Vec<_>> = (0..count).map(|_| make()).collect();
+                    // Every thread waits for the others even when its buses failed to build.
+                    let built = built.map(|mut v| {
+                        for (sim, _) in &mut v {
+                            sim.run_until(from);
+                        }
+                        v
+                    });
+                    ready.wait();
+                    let mut units = built?;
+                    let count_frames = |units: &[(Simulation, Vec<Line>)]| -> u64 {
+                        units
+                            .iter()
+                            .flat_map(|(sim, lines)| {
+                                lines
+                                    .iter()
+                                    .map(move |l| sim.bus(l.bus).map_or(0, |b| b.stats().frames()))
+                            })
+                            .sum()
+                    };
+                    let before = count_frames(&units);
+                    let mut t = from;
+                    let mut k = 0u64;
+                    while t < end {
+                        for (sim, lines) in &mut units {
+                            sim.run_until(t);
+                            for l in lines.iter() {
+                                for f in cycle_frames(l.node, k)? {
+                                    sim.transmit(l.master, f)?;
+                                }
+                            }
+                        }
+                        k += 1;
+                        t += CYCLE;
+                    }
+                    for (sim, _) in &mut units {
+                        sim.run_until(end);
+                    }
+                    Ok(count_frames(&units) - before)
+                })
+            })
+            .collect();
+        ready.wait();
+        let wall = std::time::Instant::now();
+        let mut frames = 0;
+        for h in handles {
+            frames += h.join().map_err(|_| anyhow!("a fleet thread panicked"))??;
+        }
+        Ok((wall.elapsed(), frames))
+    })?;
+    let secs = duration.as_secs_f64().max(1e-12);
+    Ok((
+        Run {
+            ns_per_sim_second: wall.as_nanos() as f64 / secs,
+            frames_per_sim_second: frames as f64 / secs,
+            last_position: 0,
+        },
+        threads,
+    ))
+}
+
+/// One started axis on its bus, for [`fleet`].
+fn one_axis() -> Result<(Simulation, Vec<Line>)> {
+    let (sim, lines, _) = axes_sim(1)?;
+    Ok((sim, lines))
+}
+
+/// One started bare device on its bus, for [`fleet`].
+fn one_bare() -> Result<(Simulation, Vec<Line>)> {
+    bare_sim(1)
 }
 
 /// The axis, the bare devices and the fleet, `trials` times in turn; each at its fastest.
@@ -244,10 +359,13 @@ pub fn run(duration: Duration, fleet_duration: Duration, trials: usize) -> Resul
     };
     let mut best: Option<Report> = None;
     for _ in 0..trials.max(1) {
+        let (fleet_run, threads) = fleet(FLEET, fleet_duration, one_axis)?;
         let r = Report {
             axis: axis(duration)?,
-            bare: bare(duration)?,
-            fleet: axes(FLEET, fleet_duration)?.0,
+            bare: bare(1, duration)?,
+            fleet: fleet_run,
+            bare_fleet: fleet(FLEET, fleet_duration, one_bare)?.0,
+            threads,
         };
         best = Some(match best {
             None => r,
@@ -255,6 +373,8 @@ pub fn run(duration: Duration, fleet_duration: Duration, trials: usize) -> Resul
                 axis: fastest(b.axis, r.axis),
                 bare: fastest(b.bare, r.bare),
                 fleet: fastest(b.fleet, r.fleet),
+                bare_fleet: fastest(b.bare_fleet, r.bare_fleet),
+                threads: r.threads,
             },
         });
     }
@@ -283,7 +403,8 @@ pub(super) fn bench(args: &super::Args) -> Result<()> {
          | **axis / bare devices** | **{ratio:.2}** (floor ≤ {CPU_FLOOR}: {m1}) |\n\
          | bus time measured, {FLEET} axes on {FLEET} buses | {fleet_s:.1} s |\n\
          | frames per simulated second, all {FLEET} buses | {ff:.0} |\n\
-         | **real-time factor, {FLEET} axes on {FLEET} buses** | **{rtf:.1}** (floor ≥ {FLEET_FLOOR}: {m2}) |",
+         | **real-time factor, {FLEET} axes on {FLEET} buses** ({threads} threads) | **{rtf:.1}** (floor ≥ {FLEET_FLOOR}: {m2}) |\n\
+         | real-time factor, {FLEET} bare CiA 301 devices on {FLEET} buses, the same frames (same run) | {bare_rtf:.1} |",
         bus = duration.as_secs_f64(),
         af = r.axis.frames_per_sim_second,
         bf = r.bare.frames_per_sim_second,
@@ -293,6 +414,8 @@ pub(super) fn bench(args: &super::Args) -> Result<()> {
         fleet_s = fleet_duration.as_secs_f64(),
         ff = r.fleet.frames_per_sim_second,
         m2 = met(rtf >= FLEET_FLOOR),
+        bare_rtf = 1e9 / r.bare_fleet.ns_per_sim_second.max(1.0),
+        threads = r.threads,
     );
     let intro = format!(
         "One CiA 402 servo axis (`kind = \"cia402\"`, the built-in dictionary and PDOs) in \
@@ -304,7 +427,10 @@ pub(super) fn bench(args: &super::Args) -> Result<()> {
          and sending synchronous TPDOs of the same identifiers and lengths. Measured after \
          start-up in chunks of {CHUNK} of bus time, best of {trials} trials: the median \
          chunk's wall time per simulated second (≈ CPU of one core). The fleet: {FLEET} such \
-         axes, each on its own bus with its master, in one simulation.",
+         axes, each on its own bus with its master, spread over the machine's threads as \
+         `cantwin bench fleet` spreads its networks (each bus its own simulation, stepped one \
+         communication cycle at a time); its figure is the wall time of the whole, beside {FLEET} \
+         bare devices run the same way.",
         trials = args.trials.max(1),
     );
     super::record(
@@ -324,11 +450,15 @@ mod tests {
     fn the_axis_and_the_bare_devices_carry_the_same_frames() {
         let d = Duration::from_millis(200);
         let a = axis(d).unwrap();
-        let b = bare(d).unwrap();
+        let b = bare(1, d).unwrap();
         // SYNC, 2 RPDOs and 2 TPDOs every millisecond.
         assert!((a.frames_per_sim_second - 5000.0).abs() < 50.0, "{a:?}");
         assert!((b.frames_per_sim_second - 5000.0).abs() < 50.0, "{b:?}");
         // The axis followed the ramp of set-points (20 units a cycle for 200 cycles).
         assert!(a.last_position > 3_800 && a.last_position < 4_000, "{a:?}");
+        // Four axes over the threads carry four buses' frames.
+        let (f, threads) = fleet(4, d, one_axis).unwrap();
+        assert!(threads >= 1);
+        assert!((f.frames_per_sim_second - 20_000.0).abs() < 200.0, "{f:?}");
     }
 }
