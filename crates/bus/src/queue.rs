@@ -76,6 +76,10 @@ impl TxQueue {
 
     /// Remove the entry with sequence number `seq` (a frame that was transmitted).
     pub fn remove(&mut self, seq: u64) -> Option<Entry> {
+        // The head is the usual case (a single mailbox, a FIFO, or the oldest frame won).
+        if self.entries.front().is_some_and(|e| e.seq == seq) {
+            return self.entries.pop_front();
+        }
         let pos = self.entries.iter().position(|e| e.seq == seq)?;
         self.entries.remove(pos)
     }

@@ -1,5 +1,8 @@
 //! Several buses run together in one time line.
 
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
 use cantwin_can::{Duration, Frame, Instant};
 use cantwin_twin::{Context, Twin};
 
@@ -18,6 +21,9 @@ pub struct Simulation {
     buses: Vec<Bus>,
     now: Instant,
     time_map: Option<TimeMap>,
+    /// [`Simulation::run_until`]'s agenda: each bus's next event time, least first, ties by
+    /// bus. Kept between calls only for its allocation.
+    agenda: BinaryHeap<Reverse<(Instant, usize)>>,
 }
 
 impl Simulation {
@@ -128,18 +134,23 @@ impl Simulation {
         if let [bus] = self.buses.as_mut_slice() {
             bus.run_until(t);
         } else {
-            loop {
-                let mut best: Option<(Instant, usize)> = None;
-                for (i, bus) in self.buses.iter_mut().enumerate() {
-                    if let Some(n) = bus.next_event_time()
-                        && best.is_none_or(|(b, _)| n < b)
-                    {
-                        best = Some((n, i));
-                    }
+            // The earliest event of all, ties to the bus added first. Stepping a bus changes
+            // only that bus's next event (nodes reach no other bus), so only its entry is
+            // renewed: O(log buses) per event rather than a look at every bus.
+            self.agenda.clear();
+            for (i, bus) in self.buses.iter_mut().enumerate() {
+                if let Some(n) = bus.next_event_time() {
+                    self.agenda.push(Reverse((n, i)));
                 }
-                match best {
-                    Some((n, i)) if n <= t => self.buses[i].step(n),
-                    _ => break,
+            }
+            while let Some(Reverse((n, i))) = self.agenda.pop() {
+                if n > t {
+                    break;
+                }
+                let bus = &mut self.buses[i];
+                bus.step(n);
+                if let Some(next) = bus.next_event_time() {
+                    self.agenda.push(Reverse((next, i)));
                 }
             }
             for bus in &mut self.buses {
