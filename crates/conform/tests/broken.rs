@@ -27,6 +27,10 @@ fn case_for(fault: Fault) -> Option<(&'static str, Area)> {
         Fault::PdoCobIdChangeWhileValid => ("pdo.cob-id-change-valid", Area::Pdo),
         Fault::ErrorHistoryWriteAccepted => ("emcy.history", Area::SyncEmcyTime),
         Fault::BlockDownloadCrcNotChecked => ("sdo.abort-crc", Area::Sdo),
+        Fault::DuplicateHeartbeatConsumerAccepted => (
+            "error-control.heartbeat-consumer-duplicate",
+            Area::ErrorControl,
+        ),
         // `emcy.cob-id` reads 0x1014 and does not try to change it while valid.
         Fault::EmcyCobIdChangeWhileValid => return None,
     })
@@ -172,6 +176,11 @@ fn cia301_7_5_2_3_error_history_write_of_1_accepted_is_caught() {
 #[test]
 fn cia301_7_2_4_3_11_unchecked_block_download_crc_is_caught() {
     caught(Fault::BlockDownloadCrcNotChecked);
+}
+
+#[test]
+fn cia301_7_5_2_33_duplicate_heartbeat_consumer_entry_accepted_is_caught() {
+    caught(Fault::DuplicateHeartbeatConsumerAccepted);
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.

@@ -55,11 +55,14 @@ pub enum Fault {
     /// the device with the CRC of the data it took, so a wrong one is never aborted with
     /// 0x05040004.
     BlockDownloadCrcNotChecked,
+    /// Takes a second 0x1016 entry for a node-ID another entry monitors already, where
+    /// §7.5.2.33 requires abort 0x06040043.
+    DuplicateHeartbeatConsumerAccepted,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 11] = [
+    pub const ALL: [Fault; 12] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -71,6 +74,7 @@ impl Fault {
         Fault::PdoCobIdChangeWhileValid,
         Fault::ErrorHistoryWriteAccepted,
         Fault::BlockDownloadCrcNotChecked,
+        Fault::DuplicateHeartbeatConsumerAccepted,
     ];
 }
 
@@ -398,6 +402,29 @@ impl Broken {
                 let mut d: [u8; 8] = data.try_into().unwrap();
                 d[1..3].copy_from_slice(&crc);
                 Some(Frame::std(id, &d).unwrap())
+            }
+            Some(Fault::DuplicateHeartbeatConsumerAccepted) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                let v = u32::from_le_bytes(value);
+                let node = (v >> 16) & 0xFF;
+                let od = self.device.od();
+                let entries = od.get_unsigned(0x1016, 0).unwrap_or(0) as u8;
+                let duplicate = (1..=entries).filter(|&j| j != sub).any(|j| {
+                    let other = od.get_unsigned(0x1016, j).unwrap_or(0) as u32;
+                    other & 0xFFFF != 0 && (other >> 16) & 0xFF == node
+                });
+                if index != 0x1016 || sub == 0 || v & 0xFFFF == 0 || !duplicate {
+                    return Some(*frame);
+                }
+                // Stored as it is, past the check the device would make.
+                let abort = self
+                    .device
+                    .od_mut()
+                    .set(0x1016, sub, &Value::Unsigned32(v))
+                    .err()
+                    .map(|a| a.to_u32());
+                self.answer(out, data, abort);
+                None
             }
             Some(Fault::StoreWithoutSignature) if is_expedited_download(byte0) => {
                 let (index, sub, _) = expedited(data);
