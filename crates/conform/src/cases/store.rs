@@ -121,6 +121,15 @@ fn store_survives(ctx: &mut Ctx<'_>) -> Outcome {
         }
         seen.push(name);
     }
+    // Store the original value again: a device without restore keeps what it had.
+    let original = u16::try_from(before).unwrap_or(0);
+    ctx.write(
+        0x1017,
+        0,
+        &original.to_le_bytes(),
+        "the heartbeat producer time",
+    )?;
+    ctx.write(0x1010, 1, &SAVE.to_le_bytes(), "\"save\" to 0x1010 sub 1")?;
     Ok(format!("0x1017 = {value} survives {}", seen.join(" and ")))
 }
 
