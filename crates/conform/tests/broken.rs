@@ -27,6 +27,7 @@ fn case_for(fault: Fault) -> Option<(&'static str, Area)> {
         Fault::PdoCobIdChangeWhileValid => ("pdo.cob-id-change-valid", Area::Pdo),
         Fault::ErrorHistoryWriteAccepted => ("emcy.history", Area::SyncEmcyTime),
         Fault::BlockDownloadCrcNotChecked => ("sdo.abort-crc", Area::Sdo),
+        Fault::TpdoInPreOperational => ("nmt.pdo-operational-only", Area::Nmt),
         Fault::DuplicateHeartbeatConsumerAccepted => (
             "error-control.heartbeat-consumer-duplicate",
             Area::ErrorControl,
@@ -181,6 +182,11 @@ fn cia301_7_2_4_3_11_unchecked_block_download_crc_is_caught() {
 #[test]
 fn cia301_7_5_2_33_duplicate_heartbeat_consumer_entry_accepted_is_caught() {
     caught(Fault::DuplicateHeartbeatConsumerAccepted);
+}
+
+#[test]
+fn cia301_7_3_2_2_3_tpdo_in_pre_operational_is_caught() {
+    caught(Fault::TpdoInPreOperational);
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.

@@ -22,7 +22,7 @@ use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fault {
     /// Answers SDO requests in STOPPED (with abort 0x08000022), where CiA 301 §7.3.2.2.3
-    /// (table 87) allows no SDO at all.
+    /// allows no SDO at all.
     SdoInStopped,
     /// Does not check the toggle bit of segmented transfers (§7.2.4.3.4, §7.2.4.3.7): every
     /// download segment and upload segment request is taken as if its toggle bit were the
@@ -58,11 +58,14 @@ pub enum Fault {
     /// Takes a second 0x1016 entry for a node-ID another entry monitors already, where
     /// §7.5.2.33 requires abort 0x06040043.
     DuplicateHeartbeatConsumerAccepted,
+    /// Sends TPDO 1 on its event timer in PRE-OPERATIONAL too, where §7.3.2.2.3
+    /// allows PDOs only in OPERATIONAL.
+    TpdoInPreOperational,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 12] = [
+    pub const ALL: [Fault; 13] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -75,6 +78,7 @@ impl Fault {
         Fault::ErrorHistoryWriteAccepted,
         Fault::BlockDownloadCrcNotChecked,
         Fault::DuplicateHeartbeatConsumerAccepted,
+        Fault::TpdoInPreOperational,
     ];
 }
 
@@ -229,6 +233,8 @@ pub struct Broken {
     block_data: Vec<u8>,
     block_last: Option<u8>,
     block_end_next: bool,
+    /// When the next TPDO 1 of [`Fault::TpdoInPreOperational`] is due.
+    tpdo_due: Option<Instant>,
 }
 
 /// The most block download data the node keeps to compute a CRC: the DOMAIN and then some
@@ -249,6 +255,7 @@ impl Broken {
             block_data: Vec::new(),
             block_last: None,
             block_end_next: false,
+            tpdo_due: None,
         }
     }
 
@@ -608,6 +615,42 @@ impl Broken {
         Some(frame)
     }
 
+    /// TPDO 1 as the device would send it in OPERATIONAL: its COB-ID, if valid, and its
+    /// mapping (0x2100 sub 1 and 2, 16 bits each); with its event timer.
+    fn tpdo1(&self) -> Option<(Frame, Duration)> {
+        let od = self.device.od();
+        let cob = od.get_unsigned(0x1800, 1)? as u32;
+        let timer = od.get_unsigned(0x1800, 5)?;
+        if cob & 0x8000_0000 != 0 || timer == 0 {
+            return None;
+        }
+        let a = od.get_unsigned(INPUTS_INDEX, 1)? as u16;
+        let b = od.get_unsigned(INPUTS_INDEX, 2)? as u16;
+        let [a0, a1] = a.to_le_bytes();
+        let [b0, b1] = b.to_le_bytes();
+        let frame = Frame::std((cob & 0x7FF) as u16, &[a0, a1, b0, b1]).ok()?;
+        Some((frame, Duration::from_millis(timer)))
+    }
+
+    /// Sends TPDO 1 when due in PRE-OPERATIONAL ([`Fault::TpdoInPreOperational`]) and
+    /// schedules the next one.
+    fn tpdo_outside_operational(&mut self, now: Instant, out: &mut Outbox) {
+        let wanted = self.fault == Some(Fault::TpdoInPreOperational)
+            && self.device.state() == State::PreOperational;
+        let Some((frame, period)) = self.tpdo1().filter(|_| wanted) else {
+            self.tpdo_due = None;
+            return;
+        };
+        match self.tpdo_due {
+            Some(due) if due <= now => {
+                out.push(frame);
+                self.tpdo_due = Some(now + period);
+            }
+            Some(_) => {}
+            None => self.tpdo_due = Some(now + period),
+        }
+    }
+
     fn flush(&mut self, produced: &mut Outbox, out: &mut Outbox) {
         let frames: Vec<Frame> = produced.drain().collect();
         for f in frames {
@@ -647,16 +690,21 @@ impl Node for Broken {
             self.device.on_frame(&f, now, &mut produced);
         }
         self.flush(&mut produced, out);
+        self.tpdo_outside_operational(now, out);
     }
 
     fn on_tick(&mut self, now: Instant, out: &mut Outbox) {
         let mut produced = Outbox::new();
         self.device.on_tick(now, &mut produced);
         self.flush(&mut produced, out);
+        self.tpdo_outside_operational(now, out);
     }
 
     fn next_deadline(&self) -> Option<Instant> {
-        self.device.next_deadline()
+        match (self.device.next_deadline(), self.tpdo_due) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
