@@ -40,8 +40,8 @@ impl SimOptions {
     }
 }
 
-fn load() -> Result<SilKit> {
-    SilKit::load().context("--silkit needs Vector SIL Kit")
+fn load(what: &str) -> Result<SilKit> {
+    SilKit::load().with_context(|| format!("{what} needs Vector SIL Kit"))
 }
 
 fn announce(options: &SimOptions, mode: &str, buses: &[(String, BusId)]) -> Result<()> {
@@ -74,7 +74,7 @@ pub fn join_paced(
     handle: &SimHandle,
     buses: &[(String, BusId)],
 ) -> Result<PacedBridge> {
-    let kit = load()?;
+    let kit = load("cantwin sim --silkit")?;
     let bridge = PacedBridge::start(&kit, handle, buses, &options.config()).with_context(|| {
         format!(
             "joining the SIL Kit simulation at {} as {}",
@@ -110,7 +110,7 @@ pub fn run_synchronized(
     if step_us == 0 {
         bail!("--silkit-step must be at least 1 microsecond");
     }
-    let kit = load()?;
+    let kit = load("cantwin sim --silkit")?;
     let config = options.config();
     announce(
         options,
@@ -222,7 +222,7 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
     if args.step == 0 {
         bail!("--step must be at least 1 microsecond");
     }
-    let kit = load()?;
+    let kit = load("cantwin silkit netsim")?;
     if !kit.has_network_simulator() {
         bail!(
             "{} (SIL Kit {}) has no network simulator API (SIL Kit 4.0.50 or later has it)",

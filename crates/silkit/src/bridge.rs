@@ -19,7 +19,8 @@
 //!
 //! **Unsynchronised** ([`PacedBridge`]): an autonomous lifecycle without time
 //! synchronisation, for a simulation paced to the wall clock ([`cantwin_bus::PacedSimulation`]).
-//! Frames are exchanged as they come, and timestamps are wall-clock times.
+//! Frames are exchanged as they come; SIL Kit stamps them with no virtual time (the value
+//! with only bit 63 set), and cantwin's bus puts them on the wire when they arrive.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{RecvTimeoutError, channel};
