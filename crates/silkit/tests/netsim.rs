@@ -158,3 +158,35 @@ fn a_lone_participant_gets_no_ack_and_goes_error_passive() {
     assert!(!lines.iter().any(|l| l.starts_with("ack ")), "{lines:#?}");
     assert_eq!(out.networks[0].counters().frames, 0);
 }
+
+#[test]
+fn requests_beyond_the_transmit_queue_are_answered_transmit_queue_full() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
+    let sim = netsim(&dir, &registry.uri);
+    // Alone, A's frames are never acknowledged, so none leaves the queue: 20 requests in one
+    // step against 16 transmit buffers.
+    let sends: Vec<String> = (0..20)
+        .map(|i| format!("5000000:{:03X}#", 0x100 + i))
+        .collect();
+    let mut args: Vec<&str> = Vec::new();
+    for s in &sends {
+        args.extend(["--send", s.as_str()]);
+    }
+    args.extend(["--stop-at", "10000000"]);
+    let mut a = participant(&dir, &registry.uri, "A", &args);
+    let lines = a.finish(WallDuration::from_secs(30));
+    let out = sim.join().expect("simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+    let full: Vec<&String> = lines
+        .iter()
+        .filter(|l| l.contains("TransmitQueueFull"))
+        .collect();
+    // The last four, at the step that took them.
+    let want: Vec<String> = (16..20)
+        .map(|i| format!("ack 6000000 TransmitQueueFull {:X}", 0x100 + i))
+        .collect();
+    assert_eq!(full, want.iter().collect::<Vec<_>>(), "{lines:#?}");
+    assert_eq!(out.networks[0].counters().queue_full, 4);
+}
