@@ -46,6 +46,9 @@ pub mod output;
 pub mod profile;
 pub mod report;
 pub mod transport;
+pub mod transport_slcan;
+#[cfg(feature = "socketcan")]
+pub mod transport_socketcan;
 
 use cantwin_can::Duration;
 use cantwin_eds::Eds;
