@@ -4,14 +4,15 @@
 //!
 //! ```text
 //! can_participant --registry URI --name NAME --network NET [--step NS] [--bit-rate BPS]
-//!                 [--send AT_NS:ID#HEX]... [--stop-at NS] [--exit-at NS]
+//!                 [--send AT_NS:ID#HEX]... [--stop-at NS] [--exit-at NS] [--can-stop-at NS]
 //! ```
 //!
 //! With `--step` it runs coordinated and synchronised (it must then be among the names a
 //! system controller waits for): `AT_NS` is virtual time, each frame goes out in the first
 //! step at or after it, and `--stop-at` stops the whole simulation. Without it it runs
 //! autonomously, unsynchronised, and the times are nanoseconds of wall time after start.
-//! `--exit-at` leaves abruptly, as a crashed participant does. `ID#HEX` is candump's form
+//! `--exit-at` leaves abruptly, as a crashed participant does; `--can-stop-at` stops the CAN
+//! controller. `ID#HEX` is candump's form
 //! (`123#0102`, `12345678#` for an extended identifier, `123#R` for a remote frame).
 //!
 //! Output, one line per event: `rx TS ID#HEX`, `ack TS STATUS ID`, `state TS STATE`,
@@ -36,6 +37,7 @@ struct Options {
     sends: Vec<(u64, CanFrame)>,
     stop_at: Option<u64>,
     exit_at: Option<u64>,
+    can_stop_at: Option<u64>,
 }
 
 fn parse_frame(s: &str) -> Result<CanFrame, String> {
@@ -78,6 +80,7 @@ fn parse() -> Result<Options, String> {
         sends: Vec::new(),
         stop_at: None,
         exit_at: None,
+        can_stop_at: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -91,6 +94,7 @@ fn parse() -> Result<Options, String> {
             "--bit-rate" => o.bit_rate = num(value()?)? as u32,
             "--stop-at" => o.stop_at = Some(num(value()?)?),
             "--exit-at" => o.exit_at = Some(num(value()?)?),
+            "--can-stop-at" => o.can_stop_at = Some(num(value()?)?),
             "--send" => {
                 let v = value()?;
                 let (at, frame) = v
@@ -176,8 +180,14 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             Arc::clone(&pending),
             Arc::clone(&stopped),
         );
-        let (stop_at, exit_at) = (o.stop_at, o.exit_at);
+        let (stop_at, exit_at, can_stop_at) = (o.stop_at, o.exit_at, o.can_stop_at);
+        let can_stopped = AtomicBool::new(false);
         move |now: u64| {
+            if can_stop_at.is_some_and(|t| now >= t) && !can_stopped.swap(true, Ordering::SeqCst) {
+                if let Err(e) = can.stop() {
+                    eprintln!("can_participant: stopping the controller: {e}");
+                }
+            }
             if exit_at.is_some_and(|t| now >= t) {
                 say("exit".into());
                 std::process::exit(0);

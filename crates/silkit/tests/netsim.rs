@@ -190,3 +190,35 @@ fn requests_beyond_the_transmit_queue_are_answered_transmit_queue_full() {
     assert_eq!(full, want.iter().collect::<Vec<_>>(), "{lines:#?}");
     assert_eq!(out.networks[0].counters().queue_full, 4);
 }
+
+#[test]
+fn stopping_a_controller_cancels_its_pending_requests() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
+    let sim = netsim(&dir, &registry.uri);
+    // Alone, A's frame waits for an ACK for ever; stopping the controller at 9 ms (taken by
+    // the simulator at 10 ms) cancels it and reports the new state.
+    let mut a = participant(
+        &dir,
+        &registry.uri,
+        "A",
+        &[
+            "--send",
+            "5000000:123#01",
+            "--can-stop-at",
+            "9000000",
+            "--stop-at",
+            "14000000",
+        ],
+    );
+    let lines = a.finish(WallDuration::from_secs(30));
+    let out = sim.join().expect("simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+    let acks: Vec<&String> = lines.iter().filter(|l| l.starts_with("ack ")).collect();
+    assert_eq!(acks, ["ack 10000000 Canceled 123"], "{lines:#?}");
+    assert!(
+        lines.contains(&"state 10000000 Stopped".to_string()),
+        "{lines:#?}"
+    );
+}
