@@ -1,5 +1,6 @@
 //! `cantwin conform`: the CiA 301/306 conformance cases of `cantwin-conform` against one
-//! device, over a socketcand connection or a scenario run in virtual time.
+//! device, over a socketcand connection, an slcan adapter on TCP, or a scenario run in
+//! virtual time.
 
 use std::net::ToSocketAddrs;
 use std::path::{Path, PathBuf};
@@ -28,8 +29,16 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     profile: Option<PathBuf>,
     /// A socketcand server in front of the device, HOST:PORT.
-    #[arg(long, value_name = "HOST:PORT", conflicts_with = "scenario")]
+    #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["scenario", "slcan"])]
     socketcand: Option<String>,
+    /// An slcan (Lawicel) adapter on TCP in front of the device, HOST:PORT: cantwin's slcan
+    /// gateway, or a serial adapter behind a TCP-to-serial bridge.
+    #[arg(long, value_name = "HOST:PORT", conflicts_with = "scenario")]
+    slcan: Option<String>,
+    /// The bit rate an slcan adapter is set to before it opens (e.g. 500k); cantwin's
+    /// gateway keeps its bus's.
+    #[arg(long, value_name = "RATE", requires = "slcan")]
+    bit_rate: Option<cantwin_can::BitRate>,
     /// Run this scenario in-process in virtual time and test its device.
     #[arg(long, value_name = "FILE")]
     scenario: Option<PathBuf>,
@@ -112,6 +121,14 @@ fn options(args: &Args) -> Result<Options> {
 }
 
 fn transport(args: &Args) -> Result<Box<dyn Transport>> {
+    if let Some(spec) = &args.slcan {
+        let t = cantwin_conform::transport_slcan::open(
+            spec,
+            args.bit_rate,
+            WallDuration::from_secs(5),
+        )?;
+        return Ok(Box::new(t));
+    }
     match (&args.socketcand, &args.scenario) {
         (Some(spec), _) => {
             let addr = spec
@@ -149,7 +166,11 @@ fn transport(args: &Args) -> Result<Box<dyn Transport>> {
             let vb = VirtualBus::new(built.sim, id).context("attaching to the bus")?;
             Ok(Box::new(vb))
         }
-        (None, None) => bail!("say where the device is: --socketcand HOST:PORT or --scenario FILE"),
+        (None, None) => {
+            bail!(
+                "say where the device is: --socketcand HOST:PORT, --slcan HOST:PORT or --scenario FILE"
+            )
+        }
     }
 }
 

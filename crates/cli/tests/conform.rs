@@ -444,3 +444,79 @@ fn a_killed_run_leaves_its_reports_so_far() {
     assert!(!v["cases"].as_array().unwrap().is_empty());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Over an slcan adapter on TCP (here `cantwin sim --slcan`), remote frames included: the
+/// error-control area passes, node guarding polling with remote frames. The wall clock of
+/// a loaded machine gets a wide tolerance.
+#[test]
+fn conform_over_slcan_with_remote_frames() {
+    let mut sim = common::Killed(
+        Command::new(env!("CARGO_BIN_EXE_cantwin"))
+            .args([
+                "sim",
+                &common::scenario_file("cia301-device.toml"),
+                "--slcan",
+                "0",
+                "--duration",
+                "60",
+            ])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(sim.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let addr = line.split_whitespace().nth(1).unwrap().to_string();
+    let dir = tmp("slcan");
+    let eds = dir.join("node5.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--device",
+        "node5",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let json = dir.join("r.json");
+    let o = cantwin(&[
+        "conform",
+        "--slcan",
+        &addr,
+        "--node-id",
+        "5",
+        "--eds",
+        eds.to_str().unwrap(),
+        "--only",
+        "error-control",
+        "--tolerance-percent",
+        "50",
+        "--json-report",
+        json.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let cases = v["cases"].as_array().unwrap();
+    let guarding = cases
+        .iter()
+        .find(|c| c["id"] == "error-control.node-guarding")
+        .unwrap();
+    assert_eq!(guarding["verdict"], "pass", "{guarding}");
+    assert!(
+        guarding["frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|f| f["frame"] == "705#R1"),
+        "{guarding}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
