@@ -232,3 +232,34 @@ fn remote_opens_a_connection_per_port() {
         Frame::std(0x181, &[1, 2]).unwrap()
     );
 }
+
+#[test]
+fn records_split_across_reads_come_out_whole() {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = listener.local_addr().unwrap();
+    let adapter = thread::spawn(move || {
+        let (mut s, _) = listener.accept().unwrap();
+        s.set_nodelay(true).unwrap();
+        let mut cmd = [0u8; 2];
+        for _ in 0..2 {
+            s.read_exact(&mut cmd).unwrap(); // `C\r`, then `O\r`
+            s.write_all(b"\r").unwrap();
+        }
+        // A record and an answer in four pieces, each its own read on the client's side.
+        for piece in [&b"t12"[..], b"32AB", b"CD\rZ", b"\r"] {
+            s.write_all(piece).unwrap();
+            thread::sleep(Duration::from_millis(20));
+        }
+        let mut rest = Vec::new();
+        let _ = s.read_to_end(&mut rest);
+    });
+    let c = Client::connect(addr, None, GUARD).unwrap();
+    assert_eq!(
+        c.recv_timeout(GUARD).unwrap().unwrap().frame,
+        Frame::std(0x123, &[0xAB, 0xCD]).unwrap()
+    );
+    assert_eq!(c.recv_timeout(Duration::from_millis(200)).unwrap(), None);
+    assert_eq!(c.tx_acknowledged(), 1);
+    drop(c);
+    adapter.join().unwrap();
+}
