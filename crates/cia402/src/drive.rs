@@ -319,6 +319,8 @@ pub struct Drive {
     cycles: u64,
     /// An evaluation changed something a loop cycle has not yet shown.
     pending: bool,
+    /// The statusword last written.
+    last_statusword: u16,
 }
 
 impl Drive {
@@ -398,6 +400,7 @@ impl Drive {
             events: Vec::new(),
             cycles: 0,
             pending: false,
+            last_statusword: 0,
         };
         drive.read(od);
         drive.mode = Mode::from_code(drive.inputs.mode).filter(|m| config.modes.contains(*m));
@@ -697,7 +700,8 @@ impl Drive {
     }
 
     /// Writes what an evaluation changes: the statusword, 0x6061 and 0x603F.
-    fn publish_status(&self, od: &mut ObjectDictionary) {
+    fn publish_status(&mut self, od: &mut ObjectDictionary) {
+        self.last_statusword = self.statusword();
         let o = &self.outputs;
         let put = |od: &mut ObjectDictionary, id: Option<EntryId>, bytes: &[u8]| {
             if let Some(id) = id
@@ -706,7 +710,7 @@ impl Drive {
                 let _ = od.set_raw(id, bytes);
             }
         };
-        put(od, o.statusword, &self.statusword().to_le_bytes());
+        put(od, o.statusword, &self.last_statusword.to_le_bytes());
         put(od, o.mode_display, &[self.mode.map_or(0, Mode::code) as u8]);
         put(od, o.error_code, &self.error_code().to_le_bytes());
     }
@@ -1331,7 +1335,8 @@ impl Drive {
     }
 
     /// Writes the statusword, 0x6061 and the actual values into `od`.
-    fn publish(&self, od: &mut ObjectDictionary) {
+    fn publish(&mut self, od: &mut ObjectDictionary) {
+        self.publish_status(od);
         let o = &self.outputs;
         let u = &self.params.units;
         // Only what changed is written: most actual values stand still most of the time.
@@ -1342,7 +1347,6 @@ impl Drive {
                 let _ = od.set_raw(id, bytes);
             }
         };
-        self.publish_status(od);
         let demand = match self.demand {
             Demand::Position { position, .. } => position,
             _ => self.position(),
@@ -1388,6 +1392,6 @@ impl Drive {
 
     /// The statusword the dictionary holds (as last published).
     pub fn published_statusword(&self) -> u16 {
-        self.statusword()
+        self.last_statusword
     }
 }
