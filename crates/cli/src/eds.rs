@@ -133,7 +133,10 @@ fn twin_dictionary(
 /// The twin's EDS and its kind.
 fn export(scenario: &Path, device: &str) -> Result<(String, String)> {
     let sc = cantwin_scenario::Scenario::load(scenario)?;
-    let built = sc.build(&cantwin_scenario::Registry::builtin(), &Default::default())?;
+    let mut built = sc.build(&cantwin_scenario::Registry::builtin(), &Default::default())?;
+    // Powered up, the twin holds its power-on values (CiA 306 §4.6.3 defaults), among them
+    // those it sets itself at reset communication (`heartbeat_ms`).
+    built.sim.run_until(cantwin_can::Instant::ZERO);
     let dev = built.device(device).with_context(|| {
         let names: Vec<&str> = built.devices.iter().map(|d| d.name.as_str()).collect();
         format!(
@@ -197,11 +200,12 @@ fn export(scenario: &Path, device: &str) -> Result<(String, String)> {
     if let Some(bus) = built.sim.bus(dev.port.bus()) {
         info.set_baud_rates(&[bus.bit_rate().bits_per_second() / 1000]);
     }
-    let eds = cantwin_eds::from_od(
+    let mut eds = cantwin_eds::from_od(
         desc,
         info,
         cantwin_eds::FileInfo::new(format!("{device}.eds")),
     );
+    cantwin_eds::power_on_defaults(&mut eds, od);
     Ok((cantwin_eds::write(&eds), dev.kind.clone()))
 }
 

@@ -220,6 +220,42 @@ fn cia306_eds_export_of_an_lss_slave_states_lss_supported() {
     assert!(out.contains("\nLSS_Supported=0\n"), "{out}");
     let (ok, _, err) = export(device("\"unconfigured\"", true));
     assert!(!ok);
-    assert!(err.contains("has no node-ID yet and waits for an LSS master"), "{err}");
+    assert!(
+        err.contains("has no node-ID yet and waits for an LSS master"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// The exported EDS gives a communication parameter the twin sets at every reset
+/// communication its power-on value as default (CiA 306 §4.6.3): `heartbeat_ms = 100` is
+/// 0x1017's default, where the shared description says 0; COB-IDs keep their `$NODEID` form.
+#[test]
+fn cia306_eds_export_states_the_twins_power_on_values() {
+    let scenario = scenario_file("cia301-device.toml");
+    let (ok, out, err) = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        &scenario,
+        "--device",
+        "node5",
+    ]);
+    assert!(ok, "{err}");
+    let section = |name: &str| {
+        let start = out
+            .find(&format!("[{name}]\n"))
+            .unwrap_or_else(|| panic!("{name}\n{out}"));
+        out[start..].split("\n\n").next().unwrap().to_string()
+    };
+    let heartbeat = section("1017");
+    assert!(
+        heartbeat.contains("DefaultValue=100\n") || heartbeat.contains("DefaultValue=0x64\n"),
+        "{heartbeat}"
+    );
+    assert!(
+        section("1800sub1").contains("$NODEID"),
+        "{}",
+        section("1800sub1")
+    );
 }

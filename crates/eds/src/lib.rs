@@ -94,7 +94,8 @@ pub use model::{
     DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, ObjectList, Section,
 };
 pub use od::{
-    ConvertError, apply_parameter_values, commission, configured, from_od, to_dcf, to_od,
+    ConvertError, apply_parameter_values, commission, configured, from_od, power_on_defaults,
+    to_dcf, to_od,
 };
 pub use parse::{Loaded, decode, load, load_bytes, parse};
 pub use value::{EdsValue, parse_integer, parse_node_id_expr};

@@ -352,6 +352,51 @@ fn compact(obj: &mut Object) {
     }
 }
 
+/// `eds` (typically from [`from_od`]) with the power-on values of `od`'s writable
+/// communication parameters (0x1000–0x1FFF) as their `DefaultValue` where they differ from
+/// the description's default on `od`'s node: the values a twin sets itself at every reset
+/// communication (a scenario's heartbeat time, for one) are what the device has after a
+/// reset, which is what CiA 306 §4.6.3 calls the default. A value that equals the
+/// node-relative default keeps its `$NODEID` form; values of other objects (inputs, status)
+/// are not defaults and stay as described.
+pub fn power_on_defaults(eds: &mut Eds, od: &ObjectDictionary) {
+    let desc = od.description();
+    let node = i128::from(od.node_id());
+    for (&index, o) in eds.objects.range_mut(0x1000..=0x1FFF) {
+        let entries: Vec<(u8, &mut Entry)> = if o.subs.is_empty() {
+            vec![(0, &mut o.entry)]
+        } else {
+            o.subs.iter_mut().map(|(&sub, e)| (sub, e)).collect()
+        };
+        for (sub, e) in entries {
+            let Some(d) = desc.get(index, sub) else {
+                continue;
+            };
+            if !d.access.writable() {
+                continue;
+            }
+            let Ok(now) = od.get(index, sub) else {
+                continue;
+            };
+            let described = d
+                .default
+                .clone()
+                .unwrap_or_else(|| Value::zero(d.data_type));
+            let same = match (
+                d.default_node_id_relative,
+                described.as_i128(),
+                now.as_i128(),
+            ) {
+                (true, Some(offset), Some(v)) => v == offset + node,
+                _ => now == described,
+            };
+            if !same {
+                e.default_value = Some(from_value(&now));
+            }
+        }
+    }
+}
+
 /// The DCF of a configured device: `eds` (typically from [`from_od`]) with every
 /// sub-object's current value from `od` as its `ParameterValue` and `commissioning` as
 /// `[DeviceComissioning]`. [`apply_parameter_values`] loads it back into a device.

@@ -75,16 +75,32 @@ impl Rig {
             for f in from_client.drain() {
                 self.dev.on_frame(&f, self.now, &mut from_dev);
             }
+            let from_dev = self.confirm(&mut from_dev);
             if from_dev.is_empty() {
                 return;
             }
-            for f in from_dev.drain() {
+            for f in from_dev {
                 if !self.client.on_frame(&f, self.now, &mut from_client) {
                     self.heard.push((self.now, f));
                 }
             }
         }
         panic!("the transfer does not end");
+    }
+
+    /// The frames of `out`, each confirmed to the device as the bus does once it is sent
+    /// (EMCYs wait for the boot-up message and for the SDO answer they follow), with what
+    /// the device queues on that.
+    fn confirm(&mut self, out: &mut Outbox) -> Vec<Frame> {
+        let mut sent = Vec::new();
+        while !out.is_empty() {
+            let frames: Vec<Frame> = out.drain().collect();
+            for f in frames {
+                self.dev.on_sent(&f, self.now, out);
+                sent.push(f);
+            }
+        }
+        sent
     }
 
     fn finish(&mut self) -> Result<Vec<u8>, AbortCode> {
@@ -123,7 +139,8 @@ impl Rig {
             self.now,
             &mut out,
         );
-        self.heard.extend(out.drain().map(|f| (self.now, f)));
+        let sent = self.confirm(&mut out);
+        self.heard.extend(sent.into_iter().map(|f| (self.now, f)));
     }
 
     fn run_until(&mut self, t: Instant) {
@@ -134,7 +151,8 @@ impl Rig {
             self.now = d.max(self.now);
             let mut out = Outbox::new();
             self.dev.on_tick(self.now, &mut out);
-            self.heard.extend(out.drain().map(|f| (self.now, f)));
+            let sent = self.confirm(&mut out);
+            self.heard.extend(sent.into_iter().map(|f| (self.now, f)));
         }
         self.now = t.max(self.now);
     }
