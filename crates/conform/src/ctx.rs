@@ -207,6 +207,39 @@ impl<'a> Ctx<'a> {
         Ok(out)
     }
 
+    /// Takes, logged, every frame the transport already holds, so that what the next
+    /// stimulus is answered with cannot be a frame the bus carried before it.
+    pub fn drain(&mut self) -> Result<(), Finding> {
+        let now = self.t.now();
+        // A transport holds a bounded number of frames; the bound only guards against one
+        // that keeps producing frames stamped in the past.
+        for _ in 0..100_000 {
+            if self.recv(now)?.is_none() {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// Waits until the bus has been quiet for `quiet` (nothing from the device), for
+    /// `within` at most: a device that has just been powered sends its boot-up (CiA 301
+    /// §7.3.2.2.1) and maybe EMCYs first, and the first case must not take them for the
+    /// answer to its stimulus. Returns whether the bus became quiet.
+    pub fn settle(&mut self, quiet: Duration, within: Duration) -> Result<bool, Finding> {
+        let end = self.t.now() + within;
+        loop {
+            let now = self.t.now();
+            if now >= end {
+                return Ok(false);
+            }
+            let until = (now + quiet).min(end);
+            if self.recv(until)?.is_none() {
+                // Nothing from `now` to `until`: quiet if that was the whole period.
+                return Ok(now + quiet <= end);
+            }
+        }
+    }
+
     /// Lets `d` pass, logging what the bus carries.
     pub fn idle(&mut self, d: Duration) -> Result<(), Finding> {
         self.collect(d, |_| false).map(|_| ())
@@ -236,6 +269,7 @@ impl<'a> Ctx<'a> {
     /// SDO timeout.
     pub fn sdo_raw(&mut self, req: [u8; 8]) -> Result<Option<[u8; 8]>, Finding> {
         let timeout = self.options.sdo_timeout;
+        self.drain()?;
         self.send(Frame::data_array(self.sdo_rx(), req))?;
         self.sdo_answer(timeout)
     }
@@ -398,7 +432,10 @@ impl<'a> Ctx<'a> {
     }
 
     /// Sends NMT `cs` and waits for the boot-up message (CiA 301 §7.2.8.3.2.4).
+    /// Only a boot-up seen after the command counts: one still queued from before (the
+    /// power-up's, an earlier reset's) is not the answer to it.
     pub fn reset(&mut self, cs: NmtCs) -> Result<Option<Instant>, Finding> {
+        self.drain()?;
         self.nmt(cs)?;
         let ec = self.ec_id();
         let within = self.options.boot_timeout;

@@ -177,6 +177,10 @@ fn verdict_of(
     }
 }
 
+/// How long the bus must carry nothing before the first case runs (a device's boot-up
+/// and the EMCYs behind it come within a few milliseconds of power-up).
+const SETTLE_QUIET: cantwin_can::Duration = cantwin_can::Duration::from_millis(50);
+
 /// Whether the selection needs no bus at all (only the file checks of the EDS area).
 fn only_offline(options: &Options) -> bool {
     cases::all()
@@ -220,6 +224,16 @@ pub fn run(
     let start = ctx.now();
     let bad_node = !(1..=127).contains(&node);
     if !bad_node && !only_offline(options) {
+        // Start from a settled bus: a device powered just before the run sends its boot-up
+        // (CiA 301 §7.3.2.2.1) now, and no case may take it for the answer to a reset.
+        // The frames are before any case: they are in no case's log.
+        let settled = ctx.settle(SETTLE_QUIET, options.boot_timeout);
+        let _ = ctx.take_log();
+        if let Err(Finding::Transport(e)) = settled {
+            report.stopped = Some(e.to_string());
+        }
+    }
+    if !bad_node && !only_offline(options) && report.stopped.is_none() {
         // A device that does not answer at all would take every case to its timeouts.
         match ctx.upload(0x1000, 0) {
             Ok(Err(a)) if !a.by_server => {

@@ -39,9 +39,14 @@ fn case_for(fault: Fault) -> Option<(&'static str, Area)> {
 
 /// Runs the cases of `area` against the device, broken by `fault` or not.
 fn conform(fault: Option<Fault>, area: Area) -> Report {
+    conform_powered(fault, area, broken::POWERED_BEFORE)
+}
+
+/// As [`conform`], with the device powered `powered` before the runner attaches.
+fn conform_powered(fault: Option<Fault>, area: Area, powered: Duration) -> Report {
     let desc = Arc::new(broken::description());
     let eds = broken::eds(&desc);
-    let (sim, bus, _) = broken::simulation(&desc, fault);
+    let (sim, bus, _) = broken::simulation_powered(&desc, fault, powered);
     let mut transport = VirtualBus::new(sim, bus).unwrap();
     let options = Options {
         only: vec![area],
@@ -109,6 +114,37 @@ fn cia301_7_2_4_3_4_unchecked_toggle_bit_is_caught() {
 #[test]
 fn cia301_7_2_8_3_2_1_no_boot_up_after_reset_communication_is_caught() {
     caught(Fault::NoBootUpAfterResetCommunication);
+}
+
+/// The runner attached before the device's power-up (as `cantwin conform --scenario`
+/// does): the power-up boot-up is not the answer to the first reset communication, so the
+/// device that sends none after it is still caught, and the unbroken one still passes.
+#[test]
+fn cia301_7_2_8_3_2_1_power_up_boot_up_is_not_taken_for_the_reset_answer() {
+    let id = "nmt.boot-up-reset-communication";
+    let good = conform_powered(None, Area::Nmt, Duration::ZERO);
+    let case = good.case(id).unwrap();
+    assert_eq!(
+        case.verdict,
+        Verdict::Pass,
+        "{}\n{}",
+        case.detail,
+        show(&good)
+    );
+    assert!(good.passed(), "{}", show(&good));
+    let bad = conform_powered(
+        Some(Fault::NoBootUpAfterResetCommunication),
+        Area::Nmt,
+        Duration::ZERO,
+    );
+    let case = bad.case(id).unwrap();
+    assert_eq!(
+        case.verdict,
+        Verdict::Fail,
+        "{}\n{}",
+        case.detail,
+        show(&bad)
+    );
 }
 
 #[test]

@@ -93,6 +93,7 @@ fn boot_reset_node(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn broadcast(ctx: &mut Ctx<'_>) -> Outcome {
     let nmt = cantwin_can::Id::standard(0).map_err(|e| fail(e.to_string()))?;
+    ctx.drain()?;
     ctx.send(Frame::data_array(nmt, [NmtCs::ResetCommunication as u8, 0]))?;
     let ec = ctx.ec_id();
     let within = ctx.options.boot_timeout;

@@ -174,6 +174,16 @@ pub const POWERED_BEFORE: Duration = Duration::from_millis(10);
 /// [`POWERED_BEFORE`] ago. The runner's first reset then cannot mistake the power-up
 /// boot-up for the answer to it.
 pub fn simulation(desc: &Arc<OdDescription>, fault: Option<Fault>) -> (Simulation, BusId, PortId) {
+    simulation_powered(desc, fault, POWERED_BEFORE)
+}
+
+/// As [`simulation`], with the device powered `powered` ago (`Duration::ZERO`: not yet; the
+/// runner then attaches before the device's power-up boot-up).
+pub fn simulation_powered(
+    desc: &Arc<OdDescription>,
+    fault: Option<Fault>,
+    powered: Duration,
+) -> (Simulation, BusId, PortId) {
     let mut sim = Simulation::new();
     let bus = sim.add_bus(BusConfig::new("can0", BitRate::R500K));
     let config = DeviceConfig {
@@ -191,7 +201,9 @@ pub fn simulation(desc: &Arc<OdDescription>, fault: Option<Fault>) -> (Simulatio
     let port = sim.attach(bus, Broken::new(device, fault), port).unwrap();
     sim.attach(bus, Acknowledger, PortConfig::default())
         .unwrap();
-    sim.run_for(POWERED_BEFORE);
+    if powered > Duration::ZERO {
+        sim.run_for(powered);
+    }
     (sim, bus, port)
 }
 
