@@ -84,11 +84,76 @@ fn add_networks(
     buses: usize,
     filtering: Filtering,
 ) -> Result<Vec<BusId>> {
+    add_networks_of(sim, desc, buses, NETWORK_DEVICES, SYNC_PERIOD, filtering)
+}
+
+/// The SYNC period at which a network of `devices` devices offers `load_percent` of a
+/// 1 Mbit/s bus: per period a SYNC and a TPDO per device, and each device's heartbeat every
+/// [`HEARTBEAT_MS`] (its share subtracted first). `None` when the heartbeats alone exceed it.
+pub fn sync_period_for_load(devices: u8, load_percent: f64) -> Option<Duration> {
+    let bits = |id: u16, data: &[u8]| {
+        cantwin_can::Frame::std(id, data).map_or(0.0, |f| f64::from(f.bit_length()))
+    };
+    let n = f64::from(devices);
+    let per_sync: f64 = bits(0x080, &[])
+        + (1..=devices)
+            .map(|d| bits(0x180 + u16::from(d), &[0; 8]))
+            .sum::<f64>();
+    let heartbeats_per_s = n * bits(0x700 + 1, &[5]) * 1000.0 / f64::from(HEARTBEAT_MS);
+    let budget = load_percent / 100.0 * 1e6 - heartbeats_per_s;
+    (budget > 0.0).then(|| Duration::from_nanos((per_sync / budget * 1e9).round() as u64))
+}
+
+/// Simulate one network of `devices` devices with SYNC every `sync_period` for `duration`,
+/// firmware acceptance filters.
+pub fn run_network_of(
+    devices: u8,
+    sync_period: Duration,
+    duration: Duration,
+) -> Result<NetworkReport> {
+    let desc = Arc::new(network_description()?);
+    let started = std::time::Instant::now();
+    let mut sim = Simulation::new();
+    let ids = add_networks_of(
+        &mut sim,
+        &desc,
+        1,
+        devices,
+        sync_period,
+        Filtering::Firmware,
+    )?;
+    let build_time = started.elapsed();
+    let end = Instant::ZERO + duration;
+    let started = std::time::Instant::now();
+    sim.run_until(end);
+    let wall_time = started.elapsed();
+    let bus = ids.first().and_then(|&b| sim.bus(b));
+    Ok(NetworkReport {
+        buses: 1,
+        threads: 1,
+        bus_time: duration,
+        wall_time,
+        build_time,
+        frames: bus.map_or(0, |b| b.stats().frames()),
+        bus_load_percent: bus.map_or(0.0, |b| b.stats().load_percent(end)),
+    })
+}
+
+/// Build `buses` networks into `sim`, each of `devices` devices (node-IDs 1..=devices) and a
+/// master sending SYNC every `sync_period`.
+fn add_networks_of(
+    sim: &mut Simulation,
+    desc: &Arc<OdDescription>,
+    buses: usize,
+    devices: u8,
+    sync_period: Duration,
+    filtering: Filtering,
+) -> Result<Vec<BusId>> {
     let mut ids = Vec::with_capacity(buses);
     for b in 0..buses {
         let bus = sim.add_bus(BusConfig::new(format!("can{b}"), BitRate::R1M));
-        sim.attach(bus, SyncMaster::new(SYNC_PERIOD), PortConfig::default())?;
-        for node in 1..=NETWORK_DEVICES {
+        sim.attach(bus, SyncMaster::new(sync_period), PortConfig::default())?;
+        for node in 1..=devices.min(127) {
             let config = DeviceConfig {
                 acceptance_filter: filtering != Filtering::Unfiltered,
                 ..DeviceConfig::new(node)
@@ -186,7 +251,57 @@ pub fn run_networks(
     })
 }
 
-/// Simulate `buses` networks spread over `threads` threads, one [`Simulation`] each.
+/// How far a fleet thread runs each of its networks before it moves on to the next: every
+/// network stays within one slice of bus time of every other, and each runs a whole slice
+/// while its devices are in the core's caches.
+pub const FLEET_SLICE: Duration = Duration::from_millis(100);
+
+/// Simulate `networks` networks, each its own [`Simulation`], in slices of [`FLEET_SLICE`]:
+/// all networks to the end of a slice, one after the other, then the next slice.
+fn run_networks_sliced(
+    networks: usize,
+    duration: Duration,
+    filtering: Filtering,
+) -> Result<NetworkReport> {
+    let desc = Arc::new(network_description()?);
+    let started = std::time::Instant::now();
+    let mut sims = Vec::with_capacity(networks);
+    for _ in 0..networks {
+        let mut sim = Simulation::new();
+        let ids = add_networks(&mut sim, &desc, 1, filtering)?;
+        sims.push((sim, ids));
+    }
+    let build_time = started.elapsed();
+    let end = Instant::ZERO + duration;
+    let started = std::time::Instant::now();
+    let mut t = Instant::ZERO;
+    while t < end {
+        t = (t + FLEET_SLICE).min(end);
+        for (sim, _) in &mut sims {
+            sim.run_until(t);
+        }
+    }
+    let wall_time = started.elapsed();
+    let stats = |(sim, ids): &(Simulation, Vec<BusId>)| {
+        ids.iter()
+            .filter_map(|&b| sim.bus(b))
+            .map(|b| (b.stats().frames(), b.stats().load_percent(end)))
+            .collect::<Vec<_>>()
+    };
+    let all: Vec<(u64, f64)> = sims.iter().flat_map(stats).collect();
+    Ok(NetworkReport {
+        buses: networks,
+        threads: 1,
+        bus_time: duration,
+        wall_time,
+        build_time,
+        frames: all.iter().map(|&(f, _)| f).sum(),
+        bus_load_percent: all.first().map_or(0.0, |&(_, l)| l),
+    })
+}
+
+/// Simulate `buses` networks spread over `threads` threads, each network its own
+/// [`Simulation`], each thread running its networks in slices ([`FLEET_SLICE`]).
 pub fn run_networks_threaded(
     buses: usize,
     threads: usize,
@@ -200,7 +315,7 @@ pub fn run_networks_threaded(
     let reports: Vec<Result<NetworkReport>> = std::thread::scope(|s| {
         let handles: Vec<_> = shares
             .iter()
-            .map(|&n| s.spawn(move || run_networks(n, duration, filtering)))
+            .map(|&n| s.spawn(move || run_networks_sliced(n, duration, filtering)))
             .collect();
         handles
             .into_iter()
@@ -460,6 +575,75 @@ pub fn run_sdo_expedited(duration: Duration) -> Result<ExpeditedReport> {
     })
 }
 
+/// What the device stack alone measured: the SDO server answering the expedited benchmark's
+/// request, called directly, with no bus and no client.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DeviceAloneReport {
+    /// Requests answered (each with exactly one expedited upload response).
+    pub answers: u64,
+    /// Their wall time.
+    pub wall_time: std::time::Duration,
+}
+
+impl DeviceAloneReport {
+    /// Wall nanoseconds per answered request.
+    pub fn ns_per_answer(&self) -> f64 {
+        self.wall_time.as_nanos() as f64 / self.answers.max(1) as f64
+    }
+}
+
+impl Trial for DeviceAloneReport {
+    fn wall(&self) -> std::time::Duration {
+        self.wall_time
+    }
+    fn with_wall(&self, wall: std::time::Duration) -> Self {
+        DeviceAloneReport {
+            wall_time: wall,
+            ..*self
+        }
+    }
+    fn counts(&self) -> Vec<(&'static str, u64)> {
+        vec![("answers", self.answers)]
+    }
+}
+
+/// The expedited benchmark's server (the same device, wrapped as on the bus) answering
+/// `requests` initiate-upload requests of 0x1000 handed straight to `on_frame`, 1 µs apart,
+/// the way the bus hands it each request; every call is checked to answer with one expedited
+/// upload response (CiA 301 §7.2.4.3) of the server's COB-ID.
+pub fn run_sdo_device_alone(requests: u64) -> Result<DeviceAloneReport> {
+    let desc = Arc::new(sdo_description(16)?);
+    let device = Device::new(desc, DeviceConfig::new(SDO_NODE))?;
+    let mut node = NetworkDevice::new(device, Filtering::Device, HEARTBEAT_MS);
+    let mut out = cantwin_can::Outbox::new();
+    node.on_power_up(Instant::ZERO, &mut out);
+    out.clear();
+    let request = cantwin_can::Frame::std(
+        0x600 + u16::from(SDO_NODE),
+        &[0x40, 0x00, 0x10, 0x00, 0, 0, 0, 0],
+    )?;
+    let response = 0x580 + u32::from(SDO_NODE);
+    let mut answers = 0u64;
+    let started = std::time::Instant::now();
+    for k in 0..requests {
+        let now = Instant::from_nanos(1_000 * (k + 1));
+        node.on_frame(std::hint::black_box(&request), now, &mut out);
+        // Its heartbeat (0x1017) may go out in the same call, as on the bus.
+        let expedited = |f: &&cantwin_can::Frame| {
+            f.id().as_raw() == response && f.data_bytes().first().is_some_and(|b| b & 0xE3 == 0x43)
+        };
+        if out.frames().iter().filter(expedited).count() == 1 {
+            answers += 1;
+        }
+        out.clear();
+    }
+    let wall_time = started.elapsed();
+    if answers != requests {
+        bail!("the device alone answered {answers} of {requests} expedited upload requests");
+    }
+    Ok(DeviceAloneReport { answers, wall_time })
+}
+
 /// The bulk part of the `sdo` benchmark: a segmented and a block download of `bulk_bytes`,
 /// measured in bus time.
 pub fn run_sdo_transfers(bulk_bytes: usize) -> Result<TransferReport> {
@@ -614,9 +798,50 @@ mod tests {
                 .round_trips,
             e.round_trips
         );
+        let alone = run_sdo_device_alone(1000).unwrap();
+        assert_eq!(alone.answers, 1000);
         let r = run_sdo_transfers(7000).unwrap();
         assert!(r.segmented_fraction > 0.95 && r.segmented_fraction < 1.0);
         assert!(r.block_fraction > 0.95 && r.block_fraction < 1.0);
+    }
+
+    /// In virtual time the device answers with no reaction time: its expedited upload
+    /// response starts arbitrating at the first idle bit after the request, the end of the
+    /// request's intermission (ISO 11898-1 §10.4.6.2), every time.
+    #[test]
+    fn cia301_sdo_answer_arbitrates_at_the_first_idle_bit_after_the_request() {
+        let client = SdoBenchClient::new(
+            SDO_NODE,
+            SdoWork::UploadLoop {
+                mux: Mux::new(0x1000, 0),
+            },
+        )
+        .unwrap();
+        let (mut sim, bus, tap, _) = sdo_bus(16, client, true).unwrap();
+        sim.run_until(Instant::ZERO + Duration::from_millis(5));
+        let rec = sim
+            .bus(bus)
+            .and_then(|b| b.tap::<Recorder>(tap.unwrap()))
+            .unwrap();
+        let frames: Vec<_> = rec.frames().collect();
+        let request = 0x600 + u32::from(SDO_NODE);
+        let response = 0x580 + u32::from(SDO_NODE);
+        // The boot-up message (0x700 + node) was queued at power-up, before the first request
+        // arrived, and the device's queue is FIFO: it goes first. From then on nothing else
+        // is due in these 5 ms.
+        let boot_up = frames
+            .iter()
+            .position(|f| f.frame.id().as_raw() == 0x700 + u32::from(SDO_NODE))
+            .unwrap();
+        let mut answered = 0;
+        for pair in frames[boot_up..].windows(2) {
+            if pair[0].frame.id().as_raw() == request {
+                assert_eq!(pair[1].frame.id().as_raw(), response);
+                assert_eq!(pair[1].start, pair[0].idle_at);
+                answered += 1;
+            }
+        }
+        assert!(answered > 10, "{answered} round trips in 5 ms");
     }
 
     #[test]
