@@ -3,7 +3,7 @@
 
 use cantwin_can::Frame;
 
-use crate::canopen::hex_bytes;
+use crate::hex::hex_bytes;
 
 /// One line for `frame` on a CAL network.
 pub fn describe(frame: &Frame) -> String {

@@ -110,13 +110,7 @@ pub fn add_od_pdos(decoder: &mut PdoDecoder, od: &ObjectDictionary) {
     }
 }
 
-/// Bytes as spaced hex, `01 02 0A`.
-pub fn hex_bytes(data: &[u8]) -> String {
-    data.iter()
-        .map(|b| format!("{b:02X}"))
-        .collect::<Vec<_>>()
-        .join(" ")
-}
+pub use crate::hex::hex_bytes;
 
 /// The decoded values of a PDO `decoder` knows, as `name=value` pairs.
 pub fn describe_pdo(frame: &Frame, pdos: &PdoDecoder) -> Option<String> {

@@ -8,7 +8,7 @@ use cantwin_devicenet::wire::{
     BodyFormat, DnId, ExplicitFrame, FragKind, Request, Response, service,
 };
 
-use crate::canopen::hex_bytes;
+use crate::hex::hex_bytes;
 
 fn service_name(code: u8) -> &'static str {
     match code {

@@ -35,6 +35,7 @@ pub mod cal;
 pub mod canopen;
 pub mod decode;
 pub mod devicenet;
+mod hex;
 mod html;
 pub mod lss;
 pub mod sdo;

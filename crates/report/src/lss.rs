@@ -6,7 +6,7 @@ use cantwin_canopen::lss::wire::{
     self, FASTSCAN_CONFIRM, IdentifyField, MASTER_ID, Mode, Part, Request, Response, SLAVE_ID,
 };
 
-use crate::canopen::hex_bytes;
+use crate::hex::hex_bytes;
 
 fn part_name(p: Part) -> &'static str {
     match p {
