@@ -38,6 +38,13 @@ pub(super) fn cases() -> Vec<Case> {
             emcy_cob_id,
         ),
         m(
+            "emcy.cob-id-change-valid",
+            A,
+            "CiA 301 §7.5.2.20, §7.3.5",
+            "a new CAN-ID in 0x1014 while the EMCY is valid (bit 31 = 0) is refused",
+            emcy_cob_id_change_valid,
+        ),
+        m(
             "emcy.history",
             A,
             "CiA 301 §7.5.2.3",
@@ -242,6 +249,62 @@ fn emcy_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
         "0x1014 = 0x{v:08X}, error register 0x{:02X}",
         reg[0]
     ))
+}
+
+/// An 11-bit EMCY CAN-ID other than `id` that no table of CiA 301 §7.3.5 restricts (the
+/// EMCY range 0x081–0x0FF): a refusal of it is a refusal of the change, not of the value.
+fn other_emcy_id(id: u32) -> u32 {
+    if id == 0xFE { 0xFD } else { 0xFE }
+}
+
+fn emcy_cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.emcy == Some(false) {
+        return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
+    }
+    // §7.5.2.20 lets 0x1014 be read-only (a fixed identifier): nothing to change then.
+    if !eds_entry(ctx, 0x1014, 0).is_some_and(|e| access(e).writable()) {
+        return Err(Finding::NotApplicable(
+            "0x1014 is not writable in the file".into(),
+        ));
+    }
+    let v = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+    if v & 0x8000_0000 != 0 {
+        return Err(Finding::NotApplicable(format!(
+            "0x1014 = 0x{v:08X}: the EMCY is not valid"
+        )));
+    }
+    let other = (v & !0x1FFF_FFFF) | other_emcy_id(v & 0x7FF);
+    match ctx.download(0x1014, 0, &other.to_le_bytes())? {
+        Err(a) if a.by_server => {
+            let now = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+            if now != v {
+                return Err(fail(format!(
+                    "0x1014 reads 0x{now:08X} after the change to 0x{other:08X} was refused ({a}), expected 0x{v:08X}"
+                )));
+            }
+            Ok(format!("0x1014 = 0x{other:08X} refused: {a}"))
+        }
+        Err(a) => Err(fail(format!("writing 0x{other:08X} to 0x1014: {a}"))),
+        Ok(()) => {
+            // Put the original identifier back the way §7.3.5 allows: not valid first.
+            ctx.write(
+                0x1014,
+                0,
+                &(other | 0x8000_0000).to_le_bytes(),
+                "the COB-ID EMCY",
+            )?;
+            ctx.write(
+                0x1014,
+                0,
+                &(v | 0x8000_0000).to_le_bytes(),
+                "the COB-ID EMCY",
+            )?;
+            ctx.write(0x1014, 0, &v.to_le_bytes(), "the COB-ID EMCY")?;
+            Err(fail(format!(
+                "0x1014 changed from 0x{v:08X} to 0x{other:08X} while the EMCY was valid"
+            )))
+        }
+    }
 }
 
 fn emcy_history(ctx: &mut Ctx<'_>) -> Outcome {
