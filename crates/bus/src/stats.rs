@@ -152,7 +152,12 @@ impl BusStats {
 
     fn busy_interval(&mut self, start: Instant, end: Instant) {
         self.busy += end - start;
-        self.recent.push_back((start, end));
+        // Back-to-back transmissions (a loaded bus) extend one interval: the window's sums
+        // are the same, and the window holds a few intervals rather than one per frame.
+        match self.recent.back_mut() {
+            Some(last) if last.1 == start => last.1 = end,
+            _ => self.recent.push_back((start, end)),
+        }
         let horizon = end - self.window;
         while let Some(&(_, e)) = self.recent.front() {
             if e <= horizon {
@@ -321,5 +326,22 @@ mod tests {
             }
         );
         assert_eq!((s.frames(), s.dropped_frames()), (2, 1));
+    }
+
+    #[test]
+    fn back_to_back_frames_share_one_interval_with_the_same_window_load() {
+        let mut s = BusStats::new(Instant::ZERO, Duration::from_millis(1));
+        let id = Id::standard(1).unwrap();
+        let t = |us: u64| Instant::from_nanos(us * 1000);
+        for k in 0..10 {
+            s.frame(id, 100, t(100 * k), t(100 * (k + 1)), false);
+        }
+        s.frame(id, 100, t(1500), t(1600), false);
+        assert_eq!(s.recent.len(), 2);
+        // Window (600, 1600]: 400 µs of the run of ten frames and the last frame.
+        assert_eq!(s.window_load_percent(t(1600)), 50.0);
+        // Window (50, 1050]: 950 µs of the run.
+        assert_eq!(s.window_load_percent(t(1050)), 95.0);
+        assert_eq!(s.load_percent(t(2000)), 55.0);
     }
 }
