@@ -1,6 +1,6 @@
 //! `cantwin conform`: the CiA 301/306 conformance cases of `cantwin-conform` against one
-//! device, over a socketcand connection, an slcan adapter on TCP, or a scenario run in
-//! virtual time.
+//! device, over a socketcand connection, an slcan adapter on TCP, a SocketCAN interface of
+//! this host (cargo feature `socketcan`), or a scenario run in virtual time.
 
 use std::net::ToSocketAddrs;
 use std::path::{Path, PathBuf};
@@ -28,9 +28,20 @@ pub struct Args {
     /// twin's EDS).
     #[arg(long, value_name = "FILE")]
     profile: Option<PathBuf>,
-    /// A socketcand server in front of the device, HOST:PORT.
+    /// A socketcand server in front of the device, HOST:PORT. (A SocketCAN interface of
+    /// this host directly: `--socketcan IFACE`, in a cantwin built with `cargo build
+    /// --features socketcan`.)
     #[arg(long, value_name = "HOST:PORT", conflicts_with_all = ["scenario", "slcan"])]
     socketcand: Option<String>,
+    /// A SocketCAN interface of this host on the device's bus (can0, vcan0), up at the
+    /// device's bit rate.
+    #[cfg(feature = "socketcan")]
+    #[arg(
+        long,
+        value_name = "IFACE",
+        conflicts_with_all = ["scenario", "slcan", "socketcand"]
+    )]
+    socketcan: Option<String>,
     /// An slcan (Lawicel) adapter on TCP in front of the device, HOST:PORT: cantwin's slcan
     /// gateway, or a serial adapter behind a TCP-to-serial bridge.
     #[arg(long, value_name = "HOST:PORT", conflicts_with = "scenario")]
@@ -121,6 +132,12 @@ fn options(args: &Args) -> Result<Options> {
 }
 
 fn transport(args: &Args) -> Result<Box<dyn Transport>> {
+    #[cfg(feature = "socketcan")]
+    if let Some(iface) = &args.socketcan {
+        let t = cantwin_conform::transport_socketcan::open(iface)
+            .with_context(|| format!("--socketcan {iface:?}"))?;
+        return Ok(Box::new(t));
+    }
     if let Some(spec) = &args.slcan {
         let t = cantwin_conform::transport_slcan::open(
             spec,
@@ -168,7 +185,12 @@ fn transport(args: &Args) -> Result<Box<dyn Transport>> {
         }
         (None, None) => {
             bail!(
-                "say where the device is: --socketcand HOST:PORT, --slcan HOST:PORT or --scenario FILE"
+                "say where the device is: --socketcand HOST:PORT, --slcan HOST:PORT{} or --scenario FILE",
+                if cfg!(feature = "socketcan") {
+                    ", --socketcan IFACE"
+                } else {
+                    ""
+                }
             )
         }
     }

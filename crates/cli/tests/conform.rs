@@ -520,3 +520,51 @@ fn conform_over_slcan_with_remote_frames() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The help names the SocketCAN transport: the option in a build with the feature, how to
+/// build with it in one without.
+#[test]
+fn the_help_names_the_socketcan_transport() {
+    let o = cantwin(&["conform", "--help"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(help.contains("--features socketcan"), "{help}");
+    assert_eq!(
+        help.contains("--socketcan <IFACE>"),
+        cfg!(feature = "socketcan"),
+        "{help}"
+    );
+}
+
+/// `--socketcan IFACE` opens the interface, and one that is not CAN is refused by name
+/// before any case (every Linux host has `lo`, a loopback interface).
+#[cfg(feature = "socketcan")]
+#[test]
+fn socketcan_on_an_interface_that_is_not_can_is_refused() {
+    let o = cantwin(&[
+        "conform",
+        "--socketcan",
+        "lo",
+        "--node-id",
+        "5",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let t = text(&o);
+    assert!(t.contains("--socketcan \"lo\""), "{t}");
+    assert!(t.contains("not a CAN interface"), "{t}");
+    let o = cantwin(&[
+        "conform",
+        "--socketcan",
+        "vcan0",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "5",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("cannot be used with"), "{}", text(&o));
+}
