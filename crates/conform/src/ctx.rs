@@ -294,13 +294,18 @@ impl<'a> Ctx<'a> {
         Ok(c)
     }
 
-    /// Runs `client`'s transfer to its end.
+    /// Runs `client`'s transfer to its end. `no_switch`: the transfer is a block upload
+    /// whose initiate carries pst = 0, so the server may not answer it with an ordinary
+    /// upload (CiA 301 §7.2.4.3.13). The client takes such a switch, as a master should;
+    /// a conformance case may not, so the server's first answer is looked at here.
     fn drive(
         &mut self,
         client: &mut SdoClient,
         mut out: Outbox,
+        no_switch: bool,
     ) -> Result<Result<Vec<u8>, Aborted>, Finding> {
         let rx = client.rx_id();
+        let mut first_answer = no_switch;
         // Every transfer ends at the client's timeout at the latest; the bound only guards
         // against a transport whose clock does not move.
         for _ in 0..1_000_000 {
@@ -327,7 +332,10 @@ impl<'a> Ctx<'a> {
             };
             match self.recv(deadline)? {
                 Some((t, f)) => {
-                    if f.id() == rx {
+                    if f.id() == rx && !f.is_remote() {
+                        if std::mem::take(&mut first_answer) {
+                            self.switched_protocol(&f)?;
+                        }
                         client.on_frame(&f, t, &mut out);
                     }
                 }
@@ -340,6 +348,30 @@ impl<'a> Ctx<'a> {
         Err(fail("the SDO transfer did not end"))
     }
 
+    /// Fails on `answer` to a block upload initiate with pst = 0 if it is an ordinary upload
+    /// initiate response (scs = 2, CiA 301 §7.2.4.3.6): the server switched protocol where
+    /// §7.2.4.3.13 allows no switch. The server's ordinary upload is aborted first with
+    /// 0x05040001 (§7.2.4.3.17), so that it is idle for what follows.
+    fn switched_protocol(&mut self, answer: &Frame) -> Result<(), Finding> {
+        let d = answer.data_bytes();
+        if d.len() != 8 || d[0] >> 5 != 2 {
+            return Ok(());
+        }
+        let mut abort = [0u8; 8];
+        abort[0] = 0x80;
+        abort[1..4].copy_from_slice(&d[1..4]);
+        abort[4..].copy_from_slice(&AbortCode::INVALID_COMMAND.to_u32().to_le_bytes());
+        self.send(Frame::data_array(self.sdo_rx(), abort))?;
+        let kind = if d[0] & 0x02 != 0 {
+            "an expedited"
+        } else {
+            "a segmented"
+        };
+        Err(fail(format!(
+            "a block upload initiate with pst = 0 (no change of protocol, CiA 301 §7.2.4.3.13) was answered with {kind} upload ({d:02X?})"
+        )))
+    }
+
     /// Reads `index`/`sub` with `mode`.
     pub fn upload_mode(
         &mut self,
@@ -350,11 +382,12 @@ impl<'a> Ctx<'a> {
     ) -> Result<Result<Vec<u8>, Aborted>, Finding> {
         let mut c = self.client()?;
         c.config_mut().crc = crc;
+        let no_switch = matches!(mode, Mode::Block { .. }) && c.config_mut().pst == 0;
         let mut out = Outbox::new();
         let now = self.t.now();
         c.start_upload(index, sub, mode, now, &mut out)
             .map_err(|e| fail(e.to_string()))?;
-        self.drive(&mut c, out)
+        self.drive(&mut c, out, no_switch)
     }
 
     /// Writes `data` to `index`/`sub` with `mode`.
@@ -372,7 +405,7 @@ impl<'a> Ctx<'a> {
         let now = self.t.now();
         c.start_download(index, sub, data.to_vec(), mode, now, &mut out)
             .map_err(|e| fail(e.to_string()))?;
-        Ok(self.drive(&mut c, out)?.map(|_| ()))
+        Ok(self.drive(&mut c, out, false)?.map(|_| ()))
     }
 
     /// Reads with the normal protocol (the server chooses expedited or segmented).

@@ -32,6 +32,7 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
             Area::ErrorControl,
         ),
         Fault::EmcyCobIdChangeWhileValid => ("emcy.cob-id-change-valid", Area::SyncEmcyTime),
+        Fault::BlockUploadSwitchedOnPst0 => ("sdo.block-upload", Area::Sdo),
     }
 }
 
@@ -163,6 +164,11 @@ fn cia301_7_2_8_3_2_2_heartbeat_at_twice_the_period_is_caught() {
 #[test]
 fn cia301_7_5_2_20_emcy_cob_id_change_while_valid_is_caught() {
     caught(Fault::EmcyCobIdChangeWhileValid);
+}
+
+#[test]
+fn cia301_7_2_4_3_13_block_upload_switched_to_an_ordinary_upload_on_pst_0_is_caught() {
+    caught(Fault::BlockUploadSwitchedOnPst0);
 }
 
 #[test]

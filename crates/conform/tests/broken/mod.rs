@@ -61,11 +61,15 @@ pub enum Fault {
     /// Sends TPDO 1 on its event timer in PRE-OPERATIONAL too, where §7.3.2.2.3
     /// allows PDOs only in OPERATIONAL.
     TpdoInPreOperational,
+    /// Answers every block upload initiate with an ordinary (expedited or segmented)
+    /// upload, as a server without block upload might, although the client's protocol
+    /// switch threshold pst = 0 allows no change of protocol (§7.2.4.3.13).
+    BlockUploadSwitchedOnPst0,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 13] = [
+    pub const ALL: [Fault; 14] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -79,6 +83,7 @@ impl Fault {
         Fault::BlockDownloadCrcNotChecked,
         Fault::DuplicateHeartbeatConsumerAccepted,
         Fault::TpdoInPreOperational,
+        Fault::BlockUploadSwitchedOnPst0,
     ];
 }
 
@@ -315,6 +320,15 @@ impl Broken {
         let byte0 = data[0];
         self.track_client(byte0, data);
         match self.fault {
+            // Block upload initiate (ccs 5, cs 0): the device gets an ordinary upload
+            // initiate of the same object instead, and answers it the ordinary way.
+            Some(Fault::BlockUploadSwitchedOnPst0) if byte0 >> 5 == 5 && byte0 & 0x03 == 0 => {
+                self.transfer = Transfer::Idle;
+                let mut d = [0u8; 8];
+                d[0] = 0x40;
+                d[1..4].copy_from_slice(&data[1..4]);
+                Some(Frame::std(id, &d).unwrap())
+            }
             Some(Fault::SdoInStopped) if self.device.state() == State::Stopped => {
                 // 0x08000022: data cannot be transferred because of the present device state.
                 self.answer(out, data, Some(0x0800_0022));
