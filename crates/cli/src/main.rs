@@ -154,7 +154,7 @@ enum Command {
         after_help = "Examples:\n  cantwin monitor --scenario scenarios/monitor-network.toml\n  \
                             cantwin monitor --socketcand 127.0.0.1:29536 --names scenarios/monitor-network.toml\n  \
                             cantwin monitor --socketcand 127.0.0.1:29536 --bit-rate 250k --eds 5=device.eds\n\n\
-                            Keys: q quit (Esc only leaves the filter editor), up/down select a node,\n\
+                            Keys: q quit (Esc only leaves the filter editor or the device page), up/down select a node,\n\
                             t fixed/scrolling trace, space pause, PgUp/PgDn scroll, Home/End oldest/live,\n\
                             / filter (node=5 svc=emcy,hb,lss id=0x180-0x1FF), c clear filter,\n\
                             Enter device page (below 120 columns)"
