@@ -488,3 +488,54 @@ impl<'a> Ctx<'a> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::VecDeque;
+
+    use super::*;
+
+    /// A bus on which the device's boot-up is already waiting to be read and the device
+    /// answers nothing after that.
+    struct Queued {
+        now: Instant,
+        held: VecDeque<(Instant, Frame)>,
+    }
+
+    impl Transport for Queued {
+        fn send(&mut self, _frame: Frame) -> Result<(), TransportError> {
+            Ok(())
+        }
+        fn recv(&mut self, deadline: Instant) -> Result<Option<(Instant, Frame)>, TransportError> {
+            if let Some(f) = self.held.pop_front() {
+                return Ok(Some(f));
+            }
+            self.now = self.now.max(deadline);
+            Ok(None)
+        }
+        fn now(&self) -> Instant {
+            self.now
+        }
+        fn describe(&self) -> String {
+            "queued".into()
+        }
+    }
+
+    #[test]
+    fn a_boot_up_held_from_before_the_reset_is_not_its_answer() {
+        let boot_up = Frame::std(0x705, &[0]).unwrap();
+        let mut t = Queued {
+            now: Instant::from_nanos(10_000_000),
+            held: VecDeque::from([(Instant::from_nanos(1_000_000), boot_up)]),
+        };
+        let eds = Eds::default();
+        let profile = Profile::from_eds(&eds);
+        let options = Options::default();
+        let mut ctx = Ctx::new(&mut t, 5, &eds, &profile, &options);
+        assert_eq!(ctx.reset(NmtCs::ResetCommunication), Ok(None));
+        // The held boot-up is in the log, before the command.
+        let (log, _) = ctx.take_log();
+        assert_eq!(log[0].dir, Direction::Response);
+        assert_eq!(log[1].dir, Direction::Stimulus);
+    }
+}
