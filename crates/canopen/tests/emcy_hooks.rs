@@ -150,7 +150,11 @@ fn cia301_7_2_7_an_emcy_raised_by_an_sdo_write_follows_the_sdo_answer() {
     assert_eq!(queued.len(), 1, "{queued:?}");
     assert_eq!(queued[0].id().as_raw(), 0x583);
     assert_eq!(queued[0].data_bytes()[0], 0x60);
-    assert_eq!(dev.next_deadline().filter(|d| *d <= ms(2)), None, "nothing due until the answer is sent");
+    assert_eq!(
+        dev.next_deadline().filter(|d| *d <= ms(2)),
+        None,
+        "nothing due until the answer is sent"
+    );
     dev.on_sent(&queued[0], ms(3), &mut out);
     let after: Vec<Frame> = out.drain().collect();
     assert_eq!(after.len(), 1, "{after:?}");

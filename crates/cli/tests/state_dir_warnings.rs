@@ -61,7 +61,12 @@ fn sim_warns_of_an_lss_slaves_store_that_cannot_be_read() {
     let file = dir.join("fresh").join("parameters.store");
     std::fs::write(&file, b"not a parameter store at all").unwrap();
     let err = stderr_of(
-        &["sim", &scenario("lss-commissioning.toml"), "--duration", "0.2"],
+        &[
+            "sim",
+            &scenario("lss-commissioning.toml"),
+            "--duration",
+            "0.2",
+        ],
         &dir,
     );
     assert!(

@@ -1,8 +1,8 @@
 //! The device kinds built into cantwin.
 
 pub mod adv200;
-pub mod cia402;
 pub mod cia301;
+pub mod cia402;
 pub mod cia402_master;
 mod common;
 pub mod eds;
