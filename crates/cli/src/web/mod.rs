@@ -79,7 +79,7 @@ pub struct Options {
 }
 
 /// How often the dashboard takes a snapshot and publishes it.
-const PERIOD: WallDuration = WallDuration::from_millis(250);
+const PERIOD: WallDuration = cantwin_monitor::dashboard::SAMPLE_PERIOD;
 /// How long a power cycle keeps the device off.
 const POWER_CYCLE_OFF: WallDuration = WallDuration::from_millis(500);
 
@@ -247,6 +247,9 @@ impl Dashboard {
                     bus,
                     bus_name: buses.get(bus).map(|b| b.0.clone()).unwrap_or_default(),
                     node_id: None,
+                    canopen: sim
+                        .twin(d.port)
+                        .is_some_and(|t| t.canopen_node_id().is_some() || t.lss_slave()),
                     monitor_kind: crate::monitor::declared_kind(sim, d).and_then(|(_, k)| k),
                 }
             })
@@ -635,6 +638,7 @@ impl Dashboard {
                         frames: s.frames(),
                         error_frames: s.error_frames(),
                         load_percent: s.window_load_percent(now),
+                        load_span: now.saturating_duration_since(s.since()).min(s.window()),
                         bit_rate: b.bit_rate(),
                     }
                 })
@@ -877,6 +881,9 @@ fn object_entry(od: &OdDescription, mux: Mux) -> Option<(String, DataType)> {
 
 /// The most bytes an answer shows of an upload read as hex bytes.
 const SHOWN_BYTES: usize = 64;
+/// The most characters an answer shows of an upload read as a string: a whole device name
+/// or version (0x1008–0x100A) fits, a segmented upload of a megabyte does not flood the page.
+const SHOWN_CHARS: usize = 1024;
 
 /// `bytes` read as `ty` (CiA 301 §7.1), with the bytes beside numbers; as hex bytes without a
 /// type or when they do not fit it.
@@ -895,8 +902,13 @@ fn show_value(ty: Option<DataType>, bytes: &[u8]) -> String {
     match OdValue::from_le_bytes(ty, bytes) {
         Ok(OdValue::OctetString(_) | OdValue::Domain(_)) => format!("{} ({ty})", raw()),
         Ok(v @ (OdValue::VisibleString(_) | OdValue::UnicodeString(_))) => {
-            let text: String = v.to_string().chars().take(SHOWN_BYTES).collect();
-            format!("{text:?} ({ty})")
+            let whole = v.to_string();
+            let text: String = whole.chars().take(SHOWN_CHARS).collect();
+            if text.len() < whole.len() {
+                format!("{text:?} … ({} bytes) ({ty})", bytes.len())
+            } else {
+                format!("{text:?} ({ty})")
+            }
         }
         Ok(v) if v.as_i128().is_some() => format!("{v} (0x{}, {ty})", hex_le(bytes)),
         Ok(v) => format!("{v} ({ty})"),
@@ -1073,6 +1085,22 @@ mod tests {
             "bytes that do not fit the type are shown as they came"
         );
         assert!(show_value(None, &[0; 100]).ends_with("… (100 bytes)"));
+        // A string longer than the old 64-character cut shows whole; one past the bound
+        // shows its start and is marked as cut, as raw bytes are.
+        let long = "x".repeat(200);
+        assert_eq!(
+            show_value(Some(DataType::VisibleString), long.as_bytes()),
+            format!("{long:?} (VISIBLE_STRING)")
+        );
+        let huge = "y".repeat(SHOWN_CHARS + 10);
+        assert_eq!(
+            show_value(Some(DataType::VisibleString), huge.as_bytes()),
+            format!(
+                "{:?} … ({} bytes) (VISIBLE_STRING)",
+                &huge[..SHOWN_CHARS],
+                SHOWN_CHARS + 10
+            )
+        );
         let od = OdBuilder::new()
             .var(
                 0x1017,

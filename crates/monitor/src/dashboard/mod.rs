@@ -29,8 +29,8 @@ pub mod tap;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Duration as WallDuration;
 
-use cantwin_bus::{PortId, PortStatus};
-use cantwin_can::{BitRate, Duration, ErrorCounters, ErrorState, Frame, Instant};
+use cantwin_bus::{ErrorKind, PortId, PortStatus};
+use cantwin_can::{BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Instant};
 use cantwin_canopen::wire::{self, ErrorControl, Message};
 use cantwin_twin::{LiveValue, Role, SignalValue};
 
@@ -45,6 +45,9 @@ pub const WINDOW_S: f64 = 300.0;
 /// quarter of a second is 8192 frames/s, most of a 1 Mbit/s bus; beyond it rows are left
 /// out and their numbers show the gap.
 pub const STREAM_LEN: usize = 2048;
+/// How often the front end samples the simulation for a snapshot: the charts' sampling
+/// period.
+pub const SAMPLE_PERIOD: WallDuration = WallDuration::from_millis(250);
 
 /// A sliding window of samples over wall time.
 #[derive(Debug, Default, Clone)]
@@ -84,6 +87,10 @@ pub struct Device {
     pub bus_name: String,
     /// Its CANopen node-ID once known (see [`Model::update`]).
     pub node_id: Option<u8>,
+    /// Whether its twin is a CANopen node at power-up (it has a node-ID,
+    /// `Twin::canopen_node_id`, or is an LSS slave waiting for one): a bus with one carries
+    /// CANopen.
+    pub canopen: bool,
     /// How the bus view reads its PDOs, from the twin itself (an ADV200 in its active
     /// personality), when it is a CANopen node; without it the view takes the built-in
     /// reading of its kind ([`DeviceKind::builtin`]).
@@ -94,6 +101,9 @@ pub struct Device {
 #[derive(Debug)]
 struct Bus {
     name: String,
+    /// Whether the bus carries CANopen: every frame on it is decoded as CANopen, whoever
+    /// sent it (a gateway's client, a generator, the dashboard).
+    canopen: bool,
     /// The CANopen model of the bus, fed with the frames of CANopen senders.
     view: NetworkView,
     /// The fixed trace of every frame that reached the receivers, whatever its protocol
@@ -143,6 +153,9 @@ pub struct BusSample {
     pub error_frames: u64,
     /// The bus load over the statistics' window, in percent.
     pub load_percent: f64,
+    /// The bus time `load_percent` was measured over: the statistics' window, or less
+    /// while the bus has run for less than it.
+    pub load_span: Duration,
     /// The bus's bit rate.
     pub bit_rate: BitRate,
 }
@@ -191,6 +204,10 @@ pub struct BusSnapshot {
     pub error_frames: u64,
     /// The bus load, in percent.
     pub load: f64,
+    /// Whether `load` was measured over at least [`SAMPLE_PERIOD`] of bus time: a shorter
+    /// window (the first milliseconds after start) is a start-up artefact, shown in the
+    /// table but not charted.
+    pub load_settled: bool,
     /// Frames per second of wall time since the previous snapshot (0 for the first).
     pub fps: f64,
 }
@@ -336,6 +353,9 @@ pub struct Model {
 impl Model {
     /// A model of scenario `scenario` with `buses` (name and bit rate), `devices` (their
     /// `bus` indices into `buses`) and the dashboard's own ports `masters`.
+    ///
+    /// A bus carries CANopen when it has no device or one of its devices is a CANopen node
+    /// ([`Device::canopen`]), the judgement `cantwin dump --scenario` makes of a recording.
     pub fn new(
         scenario: String,
         buses: Vec<(String, BitRate)>,
@@ -344,8 +364,11 @@ impl Model {
     ) -> Model {
         let buses = buses
             .into_iter()
-            .map(|(name, bit_rate)| Bus {
+            .enumerate()
+            .map(|(i, (name, bit_rate))| Bus {
                 name,
+                canopen: devices.iter().all(|d| d.bus != i)
+                    || devices.iter().any(|d| d.bus == i && d.canopen),
                 view: NetworkView::new(Config {
                     bit_rate,
                     ring: STREAM_LEN,
@@ -422,15 +445,17 @@ impl Model {
         let buses = self.sample_buses(wall, &bus_stats);
         let mut signals = Vec::new();
         for b in &buses {
-            signals.push(Signal {
-                key: format!("bus/{}/load", b.name),
-                label: format!("{} bus load", b.name),
-                unit: "%".into(),
-                group: format!("bus {}", b.name),
-                source: SignalSource::Bus,
-                non_negative: true,
-                value: b.load,
-            });
+            if b.load_settled {
+                signals.push(Signal {
+                    key: format!("bus/{}/load", b.name),
+                    label: format!("{} bus load", b.name),
+                    unit: "%".into(),
+                    group: format!("bus {}", b.name),
+                    source: SignalSource::Bus,
+                    non_negative: true,
+                    value: b.load,
+                });
+            }
             signals.push(Signal {
                 key: format!("bus/{}/fps", b.name),
                 label: format!("{} frames per second", b.name),
@@ -570,6 +595,7 @@ impl Model {
                 frames: s.frames,
                 error_frames: s.error_frames,
                 load: s.load_percent,
+                load_settled: s.load_span.as_nanos() >= SAMPLE_PERIOD.as_nanos() as u64,
                 fps,
             });
         }
@@ -598,7 +624,7 @@ impl Model {
                     sender,
                     dropped,
                 } => {
-                    let canopen = self.speaks_canopen(sender);
+                    let canopen = self.buses.get(bus).is_some_and(|b| b.canopen);
                     let mut text = String::new();
                     if canopen && !dropped {
                         self.learn(&frame, sender);
@@ -650,7 +676,7 @@ impl Model {
                     bus,
                     frame: Some(frame),
                     from: self.name_of(sender),
-                    text: format!("error frame: {kind:?}"),
+                    text: format!("error frame: {}", error_words(kind)),
                     kind: RowKind::Error,
                 }),
                 Seen::Controller { at, port, event } => {
@@ -661,7 +687,7 @@ impl Model {
                         bus,
                         frame: None,
                         from,
-                        text: format!("controller: {event:?}"),
+                        text: format!("controller: {}", controller_words(event)),
                         kind: RowKind::Controller,
                     });
                 }
@@ -678,23 +704,6 @@ impl Model {
         while self.stream.len() > STREAM_LEN {
             self.stream.pop_front();
         }
-    }
-
-    /// Whether frames from `port` are CANopen (the dashboard's master, or a device of a
-    /// CANopen kind): other protocols on the same identifiers mean other things.
-    fn speaks_canopen(&self, port: PortId) -> bool {
-        if self.masters.contains(&port) {
-            return true;
-        }
-        self.devices
-            .iter()
-            .find(|d| d.port == port)
-            .is_some_and(|d| {
-                matches!(
-                    d.kind.as_str(),
-                    "cia301" | "eds" | "tm3" | "adv200" | "master"
-                )
-            })
     }
 
     /// Learns which node-ID a device has from the COB-IDs of what its port sends (CiA 301
@@ -728,6 +737,29 @@ impl Model {
                     .or_else(|| DeviceKind::builtin(&d.kind)),
             );
         }
+    }
+}
+
+/// Why a transmission ended in an error frame, in words (ISO 11898-1 §10.11 names the
+/// errors receivers flag).
+fn error_words(kind: ErrorKind) -> &'static str {
+    match kind {
+        ErrorKind::Ack => "acknowledgement error",
+        ErrorKind::Corrupted => "bit error (corrupted)",
+        ErrorKind::BitRateMismatch => "stuff error (bit-rate mismatch)",
+        ErrorKind::Aborted => "form error (transmitter stopped)",
+    }
+}
+
+/// A controller event in words (ISO 11898-1 §12.1.4 fault confinement states).
+fn controller_words(event: ControllerEvent) -> &'static str {
+    match event {
+        ControllerEvent::ErrorPassive => "error passive",
+        ControllerEvent::ErrorActive => "error active",
+        ControllerEvent::BusOff => "bus-off",
+        ControllerEvent::BusOffRecovered => "bus-off recovered",
+        ControllerEvent::RxOverrun => "receive overrun",
+        ControllerEvent::TxDropped => "transmit frame dropped",
     }
 }
 

@@ -1,7 +1,8 @@
 use std::time::Duration as WallDuration;
 
+use cantwin_bus::ErrorKind;
 use cantwin_bus::{Bus, BusConfig, PortConfig};
-use cantwin_can::{Id, ListenOnly};
+use cantwin_can::{ControllerEvent, Id, ListenOnly};
 
 use super::*;
 
@@ -20,6 +21,7 @@ fn model() -> (Model, PortId, PortId) {
             bus: 0,
             bus_name: "field".into(),
             node_id: None,
+            canopen: true,
             monitor_kind: None,
         }],
         vec![master],
@@ -44,6 +46,7 @@ fn sample(wall_ms: u64, events: Vec<Seen>, frames: u64) -> Sample {
             frames,
             error_frames: 0,
             load_percent: 1.5,
+            load_span: Duration::from_secs(1),
             bit_rate: BitRate::R500K,
         }],
         devices: vec![DeviceSample::default()],
@@ -323,7 +326,10 @@ fn the_fixed_trace_keeps_one_row_per_identifier_of_every_sender_and_skips_droppe
     assert_eq!(other.count, 2, "the dropped frame reached nobody");
     assert_eq!(other.cycle.last.unwrap().as_millis(), 20);
     assert_eq!(other.changed, 0b10);
-    assert_eq!(other.last.text, "", "not decoded as CANopen");
+    assert_eq!(
+        other.last.text, "",
+        "0x123 is no identifier of the CANopen predefined connection set"
+    );
     let hb = fixed.rows().find(|r| r.key.id == 0x705).unwrap();
     assert_eq!((hb.count, hb.cycle.last.unwrap().as_millis()), (2, 100));
     assert!(!hb.last.text.is_empty());
@@ -390,4 +396,173 @@ fn a_pdo_value_charts_as_its_fields_number_or_as_its_typed_text() {
     assert_eq!(pdo_number(None, &value("b", Some(1), "true")), Some(1.0));
     assert_eq!(pdo_number(None, &value("s", None, "abc")), None);
     assert!(!pdo_unsigned(None, &value("x", Some(1), "1")));
+}
+
+/// Two buses: `field` with a device of `kind` (a CANopen node) and an outside port (a
+/// gateway's client), `line` with a device that is no CANopen node (a DeviceNet slave).
+fn two_buses(kind: &str) -> (Model, PortId, PortId, PortId) {
+    let mut field = Bus::new(BusConfig::new("field", BitRate::R500K));
+    let device = field.attach(ListenOnly, PortConfig::default());
+    let outsider = field.attach(ListenOnly, PortConfig::default());
+    let mut line = Bus::new(BusConfig::new("line", BitRate::R500K));
+    let slave = line.attach(ListenOnly, PortConfig::default());
+    let device_on = |name: &str, kind: &str, port, bus: usize, canopen| Device {
+        name: name.into(),
+        kind: kind.into(),
+        port,
+        bus,
+        bus_name: ["field", "line"][bus].into(),
+        node_id: None,
+        canopen,
+        monitor_kind: None,
+    };
+    let model = Model::new(
+        "plant".into(),
+        vec![
+            ("field".into(), BitRate::R500K),
+            ("line".into(), BitRate::R500K),
+        ],
+        vec![
+            device_on("drive", kind, device, 0, true),
+            device_on("valve", "devicenet", slave, 1, false),
+        ],
+        Vec::new(),
+    );
+    (model, device, outsider, slave)
+}
+
+fn two_bus_sample(wall_ms: u64, field: Vec<Seen>, line: Vec<Seen>) -> Sample {
+    let bus = BusSample {
+        frames: 0,
+        error_frames: 0,
+        load_percent: 1.5,
+        load_span: Duration::from_secs(1),
+        bit_rate: BitRate::R500K,
+    };
+    Sample {
+        now: ms(wall_ms),
+        wall: WallDuration::from_millis(wall_ms),
+        events: vec![(field, 0), (line, 0)],
+        buses: vec![bus.clone(), bus],
+        devices: vec![DeviceSample::default(), DeviceSample::default()],
+        labels: Vec::new(),
+    }
+}
+
+#[test]
+fn a_canopen_bus_decodes_every_senders_frames_and_a_bus_of_other_devices_none() {
+    let (mut m, device, outsider, slave) = two_buses("cia402");
+    let f = |at: u64, id: u16, data: &[u8], sender: PortId| Seen::Frame {
+        at: ms(at),
+        frame: frame(id, data),
+        sender,
+        dropped: false,
+    };
+    let s = m.update(two_bus_sample(
+        100,
+        vec![
+            // An outside master's NMT start, a generator's SYNC and an SDO upload request.
+            f(1, 0x000, &[0x01, 7], outsider),
+            f(2, 0x080, &[], outsider),
+            f(3, 0x607, &[0x40, 0x08, 0x10, 0, 0, 0, 0, 0], outsider),
+            // The CiA 402 drive's heartbeat: operational.
+            f(4, 0x707, &[0x05], device),
+        ],
+        vec![f(5, 0x707, &[0x05], slave)],
+    ));
+    let texts: Vec<&str> = s.frames.iter().map(|r| r.text.as_str()).collect();
+    for (row, text) in texts[..4].iter().enumerate() {
+        assert!(!text.is_empty(), "row {row} of the CANopen bus is decoded");
+    }
+    assert_eq!(texts[4], "", "the other bus's frame is not read as CANopen");
+    let fixed = m.fixed_trace(0).unwrap();
+    assert!(fixed.rows().all(|r| !r.last.text.is_empty()));
+    assert_eq!(
+        m.fixed_trace(1).unwrap().rows().next().unwrap().last.text,
+        ""
+    );
+    // The cia402 node has its node-ID, NMT state and heartbeat in the node table.
+    assert_eq!(s.nodes[0].node_id, Some(7));
+    assert_eq!(s.nodes[0].nmt, Some("operational"));
+    assert!(s.nodes[0].heartbeat_age.is_some());
+    assert_eq!(s.nodes[1].node_id, None);
+}
+
+#[test]
+fn a_load_measured_over_less_than_the_sampling_period_is_not_charted() {
+    let (mut m, ..) = model();
+    let load = |s: &Snapshot| {
+        s.signals
+            .iter()
+            .find(|g| g.key == "bus/field/load")
+            .map(|g| g.value)
+    };
+    // The first window after start: 3 ms of bus time, a few frames in it read as 35 %.
+    let mut first = sample(3, Vec::new(), 2);
+    first.buses[0].load_percent = 35.0;
+    first.buses[0].load_span = Duration::from_millis(3);
+    let s = m.update(first);
+    assert_eq!(s.buses[0].load, 35.0, "the table still shows it");
+    assert!(!s.buses[0].load_settled);
+    assert_eq!(load(&s), None);
+    assert!(m.history().iter().all(|(k, _)| *k != "bus/field/load"));
+    let mut settled = sample(300, Vec::new(), 3);
+    settled.buses[0].load_percent = 0.1;
+    settled.buses[0].load_span = Duration::from_millis(300);
+    let s = m.update(settled);
+    assert_eq!(load(&s), Some(0.1));
+    let history = m.history();
+    let points = &history
+        .iter()
+        .find(|(k, _)| *k == "bus/field/load")
+        .unwrap()
+        .1;
+    assert_eq!(
+        points,
+        &[(0.3, 0.1)],
+        "the axis is set by settled samples only"
+    );
+}
+
+#[test]
+fn error_and_controller_rows_are_in_words() {
+    let (mut m, device, _) = model();
+    let s = m.update(sample(
+        10,
+        vec![
+            Seen::Error {
+                at: ms(1),
+                frame: frame(0x185, &[1]),
+                sender: device,
+                kind: ErrorKind::BitRateMismatch,
+            },
+            Seen::Error {
+                at: ms(2),
+                frame: frame(0x185, &[1]),
+                sender: device,
+                kind: ErrorKind::Ack,
+            },
+            Seen::Controller {
+                at: ms(3),
+                port: device,
+                event: ControllerEvent::ErrorPassive,
+            },
+            Seen::Controller {
+                at: ms(4),
+                port: device,
+                event: ControllerEvent::BusOff,
+            },
+        ],
+        0,
+    ));
+    let texts: Vec<&str> = s.frames.iter().map(|r| r.text.as_str()).collect();
+    assert_eq!(
+        texts,
+        [
+            "error frame: stuff error (bit-rate mismatch)",
+            "error frame: acknowledgement error",
+            "controller: error passive",
+            "controller: bus-off",
+        ]
+    );
 }
