@@ -1,9 +1,10 @@
 //! A frame-by-frame decoder for listings (`cantwin dump --decode`): one line per frame, by
 //! the protocol its channel carries, as `cantwin trace` decodes a live bus. It keeps what a
 //! line needs from earlier frames: which nodes were sent a node guarding request, so that
-//! their answers are named as guarding rather than heartbeat (CiA 301 §7.2.8.3.2).
+//! their answers are named as guarding rather than heartbeat (CiA 301 §7.2.8.3.2), and each
+//! DeviceNet slave's message body format, from its Allocate exchange.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 use cantwin_can::Frame;
 use cantwin_canopen::wire::{self, ErrorControl, Message};
@@ -16,6 +17,8 @@ pub struct Decoder<'o> {
     opts: &'o Options,
     /// (channel, node) pairs with a guard request waiting for its answer.
     guarded: BTreeSet<(String, u8)>,
+    /// DeviceNet slaves' body formats, per channel.
+    formats: BTreeMap<String, devicenet::BodyFormats>,
 }
 
 impl<'o> Decoder<'o> {
@@ -24,6 +27,7 @@ impl<'o> Decoder<'o> {
         Decoder {
             opts,
             guarded: BTreeSet::new(),
+            formats: BTreeMap::new(),
         }
     }
 
@@ -32,7 +36,11 @@ impl<'o> Decoder<'o> {
     pub fn describe(&mut self, channel: &str, frame: &Frame) -> String {
         match self.opts.protocol(channel) {
             Protocol::CanOpen => self.canopen(channel, frame),
-            Protocol::DeviceNet => devicenet::describe(frame),
+            Protocol::DeviceNet => self
+                .formats
+                .entry(channel.to_string())
+                .or_default()
+                .describe(frame),
             Protocol::Cal => cal::describe(frame),
         }
     }
@@ -111,6 +119,27 @@ mod tests {
         assert_eq!(
             d.describe("can0", &f(0x70A, &[0x05])),
             "HEARTBEAT node 10 operational"
+        );
+    }
+
+    #[test]
+    fn devicenet_body_formats_are_learned_per_channel() {
+        let opts = Options {
+            default_protocol: Protocol::DeviceNet,
+            ..Options::default()
+        };
+        let mut d = Decoder::new(&opts);
+        // MAC 12 on "a" is allocated with body format 8/16; on "b" it is not.
+        d.describe("a", &f(0x466, &[0x40, 0x4B, 0x03, 0x01, 0x01, 0x00]));
+        d.describe("a", &f(0x463, &[0x40, 0xCB, 0x01]));
+        let get = f(0x464, &[0x00, 0x0E, 0x01, 0x01, 0x00, 0x07]);
+        assert_eq!(
+            d.describe("a", &get),
+            "G2 MAC 12 msg 4: master explicit request: Get_Attribute_Single (0x0E) class 0x01 instance 1 attribute 7 [MAC 0]"
+        );
+        assert_eq!(
+            d.describe("b", &get),
+            "G2 MAC 12 msg 4: master explicit request: Get_Attribute_Single (0x0E) class 0x01 instance 1 attribute 0 data 07 [MAC 0]"
         );
     }
 }

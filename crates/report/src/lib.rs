@@ -408,6 +408,8 @@ pub struct Analysis<'o> {
     ids: HashMap<(usize, Id), IdStats>,
     sdo: HashMap<(usize, u8), sdo::Tracker>,
     hb: BTreeMap<(String, u8), NodeHb>,
+    /// DeviceNet slaves' message body formats, per channel.
+    dn_formats: BTreeMap<String, devicenet::BodyFormats>,
     emcy: HashMap<(usize, u8), EmcyRun>,
     transfers: Vec<sdo::Transfer>,
     transfers_total: u64,
@@ -465,6 +467,7 @@ impl<'o> Analysis<'o> {
             ids: HashMap::new(),
             sdo: HashMap::new(),
             hb: BTreeMap::new(),
+            dn_formats: BTreeMap::new(),
             emcy: HashMap::new(),
             transfers: Vec::new(),
             transfers_total: 0,
@@ -841,7 +844,11 @@ impl<'o> Analysis<'o> {
         if self.full() {
             return;
         }
-        let text = devicenet::describe(f);
+        let text = self
+            .dn_formats
+            .entry(ch.to_string())
+            .or_default()
+            .describe(f);
         self.row(t, ch, Kind::DeviceNet, devicenet::node_of(f), text);
     }
 

@@ -425,6 +425,33 @@ fn devicenet_and_cal_channels_decode_by_their_protocol() {
 }
 
 #[test]
+fn devicenet_timeline_decodes_each_slave_in_the_body_format_its_allocate_granted() {
+    // DeviceNet Vol. 1 §3-5: the ADV200 (MAC 12) answers Allocate with body format 8/16, so
+    // the Get_Attribute_Single after it carries a 16-bit instance.
+    let records = [
+        Record::new(T0, "dnet", f(0x466, &[0x40, 0x4B, 0x03, 0x01, 0x01, 0x00])),
+        Record::new(T0 + MS, "dnet", f(0x463, &[0x40, 0xCB, 0x01])),
+        Record::new(
+            T0 + 2 * MS,
+            "dnet",
+            f(0x464, &[0x00, 0x0E, 0x01, 0x01, 0x00, 0x07]),
+        ),
+    ];
+    let mut opts = Options::default();
+    opts.protocols.insert("dnet".into(), Protocol::DeviceNet);
+    let report = analyse(&records, &opts);
+    let rows: Vec<_> = report.timeline.iter().map(|r| r.text.as_str()).collect();
+    assert_eq!(
+        rows,
+        [
+            "G2 MAC 12 msg 6: unconnected explicit request: Allocate_Master/Slave_Connection_Set (0x4B) class 0x03 instance 1 allocation choice 0x01 (explicit) allocator MAC 0 [MAC 0]",
+            "G2 MAC 12 msg 3: slave explicit response: Allocate_Master/Slave_Connection_Set (0x4B) response message body format 8/16 [MAC 0]",
+            "G2 MAC 12 msg 4: master explicit request: Get_Attribute_Single (0x0E) class 0x01 instance 1 attribute 7 [MAC 0]",
+        ]
+    );
+}
+
+#[test]
 fn pdo_values_named_from_an_eds() {
     let eds = include_bytes!("../../eds/tests/corpus/io_module.eds");
     let mut opts = Options::default();
