@@ -83,6 +83,9 @@ pub fn run() -> Result<()> {
         "scanner (MAC ID 0). Both check for a duplicate MAC ID at power-up: two requests 1 s apart.\n"
     );
     sim.run_until(at(2100));
+    // The listing learns the explicit connection's message body format from the Allocate
+    // answer (the ADV200 grants 8/16), as a capture's decoder does.
+    let mut formats = cantwin_report::devicenet::BodyFormats::new();
     {
         let rec = sim
             .bus(bus)
@@ -93,7 +96,7 @@ pub fn run() -> Result<()> {
                 "  {:>12}  {:<22} {}",
                 f.end.to_string(),
                 f.frame.to_string(),
-                cantwin_report::devicenet::describe(&f.frame)
+                formats.describe(&f.frame)
             );
         }
     }
@@ -127,7 +130,7 @@ pub fn run() -> Result<()> {
                     "  {:>12}  {:<22} {}",
                     f.end.to_string(),
                     f.frame.to_string(),
-                    cantwin_report::devicenet::describe(&f.frame)
+                    formats.describe(&f.frame)
                 );
             }
         }
