@@ -23,7 +23,6 @@
 //! with only bit 63 set), and cantwin's bus puts them on the wire when they arrive.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{RecvTimeoutError, channel};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 
@@ -117,11 +116,62 @@ pub enum BridgeError {
     #[error("the SIL Kit step size must be at least 1 ns")]
     ZeroStep,
     /// Asked to stop before the SIL Kit simulation started (no system controller started
-    /// it): the participant is left as it is, for the process to exit.
+    /// it): the participant leaves without running.
     #[error(
         "stopped before the SIL Kit simulation started (state {0:?}): a system controller must start it, e.g. `sil-kit-system-controller` with this participant's name among the required ones"
     )]
     StoppedBeforeStart(ParticipantState),
+    /// The simulation did not start within [`Deadlines::join`]: a required participant did
+    /// not join (or died before it did), or no system controller started it.
+    #[error(
+        "the SIL Kit simulation did not start within {after:?}: {} (this participant is {state:?}; others seen: {seen})",
+        missing_text(.never_joined, .never_ran)
+    )]
+    NotStarted {
+        /// The bound.
+        after: std::time::Duration,
+        /// This participant's state then.
+        state: ParticipantState,
+        /// The expected participants ([`Deadlines::peers`]) never seen at all.
+        never_joined: Vec<String>,
+        /// The expected participants seen, but never running.
+        never_ran: Vec<String>,
+        /// Every other participant seen, with its last state.
+        seen: String,
+    },
+    /// The simulation did not end within [`Deadlines::run`] (cantwin then stops it).
+    #[error(
+        "the SIL Kit simulation did not end within {after:?} (this participant is {state:?}; others seen: {seen})"
+    )]
+    NotStopped {
+        /// The bound.
+        after: std::time::Duration,
+        /// This participant's state then.
+        state: ParticipantState,
+        /// Every other participant seen, with its last state.
+        seen: String,
+    },
+}
+
+fn missing_text(never_joined: &[String], never_ran: &[String]) -> String {
+    let mut parts = Vec::new();
+    if !never_joined.is_empty() {
+        parts.push(format!(
+            "participant {} never joined",
+            never_joined.join(", ")
+        ));
+    }
+    if !never_ran.is_empty() {
+        parts.push(format!(
+            "participant {} joined but never ran",
+            never_ran.join(", ")
+        ));
+    }
+    if parts.is_empty() {
+        "no system controller started it".into()
+    } else {
+        parts.join("; ")
+    }
 }
 
 /// The node standing for SIL Kit on a bus in synchronised mode: it hands every frame the
@@ -215,11 +265,26 @@ impl Synced {
 /// `buses` is the SIL Kit CAN network of its name. Blocks; returns the simulation.
 pub fn run_synchronized(
     kit: &SilKit,
+    sim: Simulation,
+    buses: &[(String, BusId)],
+    config: &BridgeConfig,
+    step: Duration,
+    stop: &AtomicBool,
+) -> Result<SyncedOutcome, BridgeError> {
+    run_synchronized_within(kit, sim, buses, config, step, stop, &Deadlines::default())
+}
+
+/// [`run_synchronized`] within `deadlines`: [`BridgeError::NotStarted`] naming who never
+/// joined when the simulation does not start in time, [`BridgeError::NotStopped`] when it
+/// does not end in time.
+pub fn run_synchronized_within(
+    kit: &SilKit,
     mut sim: Simulation,
     buses: &[(String, BusId)],
     config: &BridgeConfig,
     step: Duration,
     stop: &AtomicBool,
+    deadlines: &Deadlines,
 ) -> Result<SyncedOutcome, BridgeError> {
     if step.is_zero() {
         return Err(BridgeError::ZeroStep);
@@ -282,8 +347,13 @@ pub fn run_synchronized(
             s.step(now, &controllers);
         })?;
     }
-    let (participant, final_state, left) =
-        run_coordinated(participant, &lifecycle, &config.participant, stop)?;
+    let (participant, final_state, left) = run_coordinated(
+        participant,
+        &lifecycle,
+        &config.participant,
+        stop,
+        deadlines,
+    )?;
     // Destroying the participant frees the handlers, the last holders of `shared` but this.
     drop(time_sync);
     drop(lifecycle);
@@ -308,51 +378,114 @@ pub fn run_synchronized(
     })
 }
 
-/// Start a coordinated lifecycle and block until it ends: stop it when `stop` is set, and
-/// when a participant that ran with us leaves mid-run (a synchronised participant that
-/// disconnects while running stalls everyone's time, since SIL Kit waits for its next step
-/// for ever). Returns the participant (for the caller to destroy), the final state and who
-/// left.
+/// Bounds on the waits of a coordinated run ([`run_synchronized_within`],
+/// [`crate::run_network_simulator_within`]). A coordinated participant otherwise waits for
+/// ever: for the system controller to start the simulation (which it does only once every
+/// required participant has joined, so one that dies before it joins keeps it from ever
+/// starting), and for the simulation to stop. `None` waits without bound.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Deadlines {
+    /// From the lifecycle's start until it runs.
+    pub join: Option<std::time::Duration>,
+    /// From the lifecycle's start until it ends.
+    pub run: Option<std::time::Duration>,
+    /// The other participants expected, named in [`BridgeError::NotStarted`] when they did
+    /// not run (the system controller knows the required ones; a participant does not).
+    pub peers: Vec<String>,
+}
+
+impl Deadlines {
+    /// At most `join` until running, `run` until the end.
+    pub fn new(join: std::time::Duration, run: std::time::Duration) -> Deadlines {
+        Deadlines {
+            join: Some(join),
+            run: Some(run),
+            peers: Vec::new(),
+        }
+    }
+
+    /// The same bounds, with `peers` named when they did not run.
+    pub fn expecting(mut self, peers: &[&str]) -> Deadlines {
+        self.peers = peers.iter().map(|p| p.to_string()).collect();
+        self
+    }
+}
+
+/// What the system monitor saw of the others.
+#[derive(Default)]
+struct Peers {
+    /// Each participant's last state, in the order first seen.
+    last: Vec<(String, ParticipantState)>,
+    /// Those that ran.
+    ran: Vec<String>,
+    /// Those that disconnected.
+    gone: Vec<String>,
+}
+
+impl Peers {
+    /// "PLC ServicesCreated, A disconnected", or "none".
+    fn describe(&self) -> String {
+        if self.last.is_empty() {
+            return "none".into();
+        }
+        self.last
+            .iter()
+            .map(|(name, state)| {
+                if self.gone.contains(name) {
+                    format!("{name} disconnected after {state:?}")
+                } else {
+                    format!("{name} {state:?}")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// Start a coordinated lifecycle and block until it ends (or a bound of `deadlines` runs
+/// out): stop it when `stop` is set, and when a participant that ran with us leaves mid-run
+/// (a synchronised participant that disconnects while running stalls everyone's time, since
+/// SIL Kit waits for its next step for ever). Returns the participant (for the caller to
+/// destroy), the final state and who left. On an error the participant is destroyed here.
 pub(crate) fn run_coordinated(
     participant: Participant,
     lifecycle: &Lifecycle,
     me: &str,
     stop: &AtomicBool,
+    deadlines: &Deadlines,
 ) -> Result<(Participant, ParticipantState, Vec<String>), BridgeError> {
     let stop_requested = AtomicBool::new(false);
-    // Who ran with us and left: a synchronised participant that disconnects while running
-    // stalls everyone's time, since SIL Kit waits for its next step for ever.
-    let running_peers = Arc::new(Mutex::new(Vec::<String>::new()));
+    let peers = Arc::new(Mutex::new(Peers::default()));
     let left = Arc::new(Mutex::new(Vec::<String>::new()));
     let monitor = participant.system_monitor()?;
     {
-        let (peers, me) = (Arc::clone(&running_peers), me.to_string());
+        let (seen, me) = (Arc::clone(&peers), me.to_string());
         monitor.on_participant_status(move |name, state| {
-            let mut peers = peers.lock().unwrap_or_else(PoisonError::into_inner);
-            if state == ParticipantState::Running && name != me && !peers.iter().any(|p| p == name)
-            {
-                peers.push(name.to_string());
+            if name == me {
+                return;
+            }
+            let mut peers = seen.lock().unwrap_or_else(PoisonError::into_inner);
+            match peers.last.iter_mut().find(|(n, _)| n == name) {
+                Some(entry) => entry.1 = state,
+                None => peers.last.push((name.to_string(), state)),
+            }
+            if state == ParticipantState::Running && !peers.ran.iter().any(|p| p == name) {
+                peers.ran.push(name.to_string());
             }
         })?;
-        let (peers, left, lc) = (
-            Arc::clone(&running_peers),
-            Arc::clone(&left),
-            lifecycle.clone(),
-        );
+        let (seen, left, lc) = (Arc::clone(&peers), Arc::clone(&left), lifecycle.clone());
         monitor.on_participant_disconnected(move |name| {
+            let mut peers = seen.lock().unwrap_or_else(PoisonError::into_inner);
+            if !peers.gone.iter().any(|p| p == name) {
+                peers.gone.push(name.to_string());
+            }
             // Only a departure while we run is one mid-run: at the end, participants leave
             // once their own lifecycle is over (ours is stopping by then).
             let running = matches!(
                 lc.state(),
                 Ok(ParticipantState::Running | ParticipantState::Paused)
             );
-            if running
-                && peers
-                    .lock()
-                    .unwrap_or_else(PoisonError::into_inner)
-                    .iter()
-                    .any(|p| p == name)
-            {
+            if running && peers.ran.iter().any(|p| p == name) {
                 left.lock()
                     .unwrap_or_else(PoisonError::into_inner)
                     .push(name.to_string());
@@ -360,36 +493,57 @@ pub(crate) fn run_coordinated(
         })?;
     }
     lifecycle.start()?;
-    let (done_tx, done_rx) = channel();
-    let waiter = {
-        let lifecycle = lifecycle.clone();
-        std::thread::Builder::new()
-            .name("cantwin-silkit-wait".into())
-            .spawn(move || {
-                let r = participant.wait_for_lifecycle(&lifecycle);
-                let _ = done_tx.send(());
-                (participant, r)
-            })
-            .map_err(|e| {
-                BridgeError::SilKit(Error::Call {
-                    function: "std::thread::spawn",
-                    code: 1,
-                    message: e.to_string(),
-                })
-            })?
-    };
+    let started = std::time::Instant::now();
+    let mut ran = false;
+    // Polled rather than blocking in SIL Kit's wait, which has no bound: the lifecycle ends
+    // in Shutdown, and the wait then returns at once with the final state.
     loop {
-        match done_rx.recv_timeout(std::time::Duration::from_millis(20)) {
-            Ok(()) | Err(RecvTimeoutError::Disconnected) => break,
-            Err(RecvTimeoutError::Timeout) => {}
+        let state = lifecycle.state()?;
+        if state == ParticipantState::Shutdown {
+            break;
+        }
+        ran |= matches!(
+            state,
+            ParticipantState::Running
+                | ParticipantState::Paused
+                | ParticipantState::Stopping
+                | ParticipantState::Stopped
+                | ParticipantState::ShuttingDown
+        );
+        let waited = started.elapsed();
+        if !ran && let Some(bound) = deadlines.join.filter(|b| waited >= *b) {
+            let peers = peers.lock().unwrap_or_else(PoisonError::into_inner);
+            let (never_ran, never_joined): (Vec<String>, Vec<String>) = deadlines
+                .peers
+                .iter()
+                .filter(|p| !peers.ran.contains(p))
+                .cloned()
+                .partition(|p| peers.last.iter().any(|(n, _)| n == p));
+            return Err(BridgeError::NotStarted {
+                after: bound,
+                state,
+                never_joined,
+                never_ran,
+                seen: peers.describe(),
+            });
+        }
+        if let Some(bound) = deadlines.run.filter(|b| waited >= *b) {
+            if matches!(state, ParticipantState::Running | ParticipantState::Paused) {
+                let _ = lifecycle.stop("cantwin's run bound ran out");
+            }
+            return Err(BridgeError::NotStopped {
+                after: bound,
+                state,
+                seen: peers
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .describe(),
+            });
         }
         let gone = left.lock().unwrap_or_else(PoisonError::into_inner).clone();
         if let Some(name) = gone.first()
             && !stop_requested.load(Ordering::SeqCst)
-            && matches!(
-                lifecycle.state(),
-                Ok(ParticipantState::Running | ParticipantState::Paused)
-            )
+            && matches!(state, ParticipantState::Running | ParticipantState::Paused)
         {
             // The synchronised simulation cannot go on without it (its time never advances
             // again): end it for everyone, saying why.
@@ -397,31 +551,23 @@ pub(crate) fn run_coordinated(
             let _ = lifecycle.stop(&format!("participant {name} left mid-run"));
         }
         if stop.load(Ordering::SeqCst) && !stop_requested.load(Ordering::SeqCst) {
-            match lifecycle.state() {
-                Ok(ParticipantState::Running | ParticipantState::Paused) => {
+            match state {
+                ParticipantState::Running | ParticipantState::Paused => {
                     stop_requested.store(true, Ordering::SeqCst);
                     let _ = lifecycle.stop("cantwin was asked to stop");
                 }
-                Ok(
-                    s @ (ParticipantState::Invalid
-                    | ParticipantState::ServicesCreated
-                    | ParticipantState::CommunicationInitializing
-                    | ParticipantState::CommunicationInitialized
-                    | ParticipantState::ReadyToRun),
-                ) => return Err(BridgeError::StoppedBeforeStart(s)),
+                s @ (ParticipantState::Invalid
+                | ParticipantState::ServicesCreated
+                | ParticipantState::CommunicationInitializing
+                | ParticipantState::CommunicationInitialized
+                | ParticipantState::ReadyToRun) => return Err(BridgeError::StoppedBeforeStart(s)),
                 // Stopping, shutting down, error, aborting: the lifecycle ends by itself.
                 _ => stop_requested.store(true, Ordering::SeqCst),
             }
         }
+        std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let (participant, result) = waiter.join().map_err(|_| {
-        BridgeError::SilKit(Error::Call {
-            function: "SilKit_LifecycleService_WaitForLifecycleToComplete",
-            code: 1,
-            message: "the waiting thread panicked".into(),
-        })
-    })?;
-    let final_state = result?;
+    let final_state = participant.wait_for_lifecycle(lifecycle)?;
     drop(monitor);
     let left = std::mem::take(&mut *left.lock().unwrap_or_else(PoisonError::into_inner));
     Ok((participant, final_state, left))

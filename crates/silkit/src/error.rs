@@ -53,6 +53,16 @@ pub enum Error {
     /// The participant this handle belongs to was destroyed.
     #[error("the SIL Kit participant was destroyed")]
     Destroyed,
+    /// A bounded wait ended before what it waited for happened.
+    #[error("{waited_for} did not happen within {after:?} (the participant is {state:?})")]
+    Timeout {
+        /// What did not happen, e.g. "the lifecycle reaching Shutdown".
+        waited_for: &'static str,
+        /// The bound.
+        after: std::time::Duration,
+        /// The participant's state when the bound ran out.
+        state: crate::types::ParticipantState,
+    },
     /// The library does not offer an experimental function this binding needs.
     #[error("this SIL Kit library has no {0} (experimental API; SIL Kit 4.0.50 or later has it)")]
     NoExperimental(&'static str),

@@ -38,13 +38,18 @@ mod ffi;
 pub mod netsim;
 mod types;
 
-pub use bridge::{BridgeConfig, BridgeError, PacedBridge, run_synchronized};
+pub use bridge::{
+    BridgeConfig, BridgeError, Deadlines, PacedBridge, run_synchronized, run_synchronized_within,
+};
 pub use error::Error;
 pub use ffi::{
     CanController, CanEventProducer, LIBRARY_NAME, Lifecycle, Participant, SilKit,
     SimulatedCanNetwork, SystemMonitor, TimeSync,
 };
-pub use netsim::{CanNetworkModel, NetsimConfig, NetsimOutcome, run_network_simulator};
+pub use netsim::{
+    CanNetworkModel, NetsimConfig, NetsimOutcome, run_network_simulator,
+    run_network_simulator_within,
+};
 pub use types::{
     CanFrame, ControllerState, Direction, DirectionMask, ErrorState, ErrorStateChangeEvent,
     FLAG_BRS, FLAG_ESI, FLAG_FDF, FLAG_IDE, FLAG_RTR, FLAG_SEC, FLAG_XLF, FrameConversionError,

@@ -33,7 +33,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use cantwin_bus::{BusConfig, BusId, PortConfig, PortId, Simulation};
 use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
 
-use crate::bridge::{BridgeConfig, BridgeError, run_coordinated};
+use crate::bridge::{BridgeConfig, BridgeError, Deadlines, run_coordinated};
 use crate::ffi::{CanEventProducer, Participant, SilKit, SimulatedCanNetwork};
 use crate::types::{
     CanFrame, ControllerState, Direction, ErrorState, ErrorStateChangeEvent, FrameEvent,
@@ -529,6 +529,18 @@ pub fn run_network_simulator(
     config: NetsimConfig,
     stop: &AtomicBool,
 ) -> Result<NetsimOutcome, BridgeError> {
+    run_network_simulator_within(kit, bridge, networks, config, stop, &Deadlines::default())
+}
+
+/// [`run_network_simulator`] within `deadlines` (see [`crate::run_synchronized_within`]).
+pub fn run_network_simulator_within(
+    kit: &SilKit,
+    bridge: &BridgeConfig,
+    networks: &[String],
+    config: NetsimConfig,
+    stop: &AtomicBool,
+    deadlines: &Deadlines,
+) -> Result<NetsimOutcome, BridgeError> {
     if config.step.is_zero() {
         return Err(BridgeError::ZeroStep);
     }
@@ -559,8 +571,13 @@ pub fn run_network_simulator(
             }
         })?;
     }
-    let (participant, final_state, left) =
-        run_coordinated(participant, &lifecycle, &bridge.participant, stop)?;
+    let (participant, final_state, left) = run_coordinated(
+        participant,
+        &lifecycle,
+        &bridge.participant,
+        stop,
+        deadlines,
+    )?;
     drop(time_sync);
     drop(lifecycle);
     drop(participant);

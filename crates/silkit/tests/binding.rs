@@ -127,7 +127,9 @@ fn frames_cross_between_processes_in_virtual_time() {
         .expect("step handler");
     }
     lifecycle.start().expect("start");
-    let state = p.wait_for_lifecycle(&lifecycle).expect("wait");
+    let state = p
+        .wait_for_lifecycle_timeout(&lifecycle, common::RUN)
+        .expect("the lifecycle ends");
     assert_eq!(state, ParticipantState::Shutdown);
 
     // Steps of exactly the size asked for, from 0 to the stop.
@@ -165,4 +167,44 @@ fn frames_cross_between_processes_in_virtual_time() {
     drop(p);
     // A handle that outlives its participant reports it, it does not crash.
     assert!(matches!(can.start(), Err(Error::Destroyed)));
+}
+
+/// A coordinated participant whose required peer dies before it joins (here `/bin/false`
+/// stands in for it) never runs: the bounded wait ends with the state it is stuck in.
+#[test]
+fn a_bounded_lifecycle_wait_ends_when_a_required_peer_never_joins() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["Here", "There"]);
+    let mut there = Lines::spawn(Command::new("/bin/false"));
+    assert!(!there.status(Duration::from_secs(10)).success());
+    let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
+    let p = Participant::create(&kit, "Here", &registry.uri, QUIET_CONFIG).expect("participant");
+    let lifecycle = p.lifecycle(OperationMode::Coordinated).expect("lifecycle");
+    lifecycle.start().expect("start");
+    let bound = Duration::from_secs(2);
+    let started = std::time::Instant::now();
+    let err = p
+        .wait_for_lifecycle_timeout(&lifecycle, bound)
+        .expect_err("There never joins");
+    let took = started.elapsed();
+    let Error::Timeout { after, state, .. } = err else {
+        panic!("{err:?}")
+    };
+    assert_eq!(after, bound);
+    assert!(
+        matches!(
+            state,
+            ParticipantState::ServicesCreated
+                | ParticipantState::CommunicationInitializing
+                | ParticipantState::CommunicationInitialized
+                | ParticipantState::ReadyToRun
+        ),
+        "{state:?}"
+    );
+    assert!(err.to_string().contains("Shutdown"), "{err}");
+    assert!(
+        took >= bound && took < bound + Duration::from_secs(10),
+        "{took:?}"
+    );
 }

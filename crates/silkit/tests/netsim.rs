@@ -12,8 +12,13 @@ use std::time::Duration as WallDuration;
 
 use cantwin_bus::{BusConfig, PortConfig, Simulation};
 use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
-use cantwin_silkit::{BridgeConfig, NetsimConfig, ParticipantState, SilKit, run_network_simulator};
-use common::{Lines, QUIET_CONFIG, Registry, example_participant, silkit_dir, system_controller};
+use cantwin_silkit::{
+    BridgeConfig, BridgeError, NetsimConfig, NetsimOutcome, ParticipantState, SilKit,
+    run_network_simulator_within,
+};
+use common::{
+    Lines, QUIET_CONFIG, Registry, deadlines, example_participant, silkit_dir, system_controller,
+};
 
 const BIT_NS: u64 = 2_000;
 
@@ -26,7 +31,12 @@ fn participant(dir: &Path, uri: &str, name: &str, extra: &[&str]) -> Lines {
     Lines::spawn(cmd)
 }
 
-fn netsim(dir: &Path, uri: &str) -> std::thread::JoinHandle<cantwin_silkit::NetsimOutcome> {
+/// The network simulator on a thread of its own, within the tests' bounds for `peers`.
+fn netsim(
+    dir: &Path,
+    uri: &str,
+    peers: &'static [&'static str],
+) -> std::thread::JoinHandle<Result<NetsimOutcome, BridgeError>> {
     let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
     let bridge = BridgeConfig {
         registry_uri: uri.to_string(),
@@ -41,8 +51,14 @@ fn netsim(dir: &Path, uri: &str) -> std::thread::JoinHandle<cantwin_silkit::Nets
             step: Duration::from_millis(2),
             ..NetsimConfig::default()
         };
-        run_network_simulator(&kit, &bridge, &["can0".to_string()], config, &stop)
-            .expect("network simulator")
+        run_network_simulator_within(
+            &kit,
+            &bridge,
+            &["can0".to_string()],
+            config,
+            &stop,
+            &deadlines(peers),
+        )
     })
 }
 
@@ -51,7 +67,7 @@ fn two_foreign_participants_arbitrate_through_cantwins_bus_with_exact_frame_time
     let Some(dir) = silkit_dir() else { return };
     let registry = Registry::start(&dir);
     let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
-    let sim = netsim(&dir, &registry.uri);
+    let sim = netsim(&dir, &registry.uri, &["A", "B"]);
     let mut a = participant(
         &dir,
         &registry.uri,
@@ -61,7 +77,10 @@ fn two_foreign_participants_arbitrate_through_cantwins_bus_with_exact_frame_time
     let mut b = participant(&dir, &registry.uri, "B", &["--send", "5000000:100#2233"]);
     let a_lines = a.finish(WallDuration::from_secs(30));
     let b_lines = b.finish(WallDuration::from_secs(30));
-    let out = sim.join().expect("simulator");
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
     assert_eq!(out.final_state, ParticipantState::Shutdown);
 
     // Both requests reach the bus at 6 ms; 0x100 wins arbitration (ISO 11898-1 §10.4.4.2),
@@ -140,7 +159,7 @@ fn a_lone_participant_gets_no_ack_and_goes_error_passive() {
 
     let registry = Registry::start(&dir);
     let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
-    let sim = netsim(&dir, &registry.uri);
+    let sim = netsim(&dir, &registry.uri, &["A"]);
     let mut a = participant(
         &dir,
         &registry.uri,
@@ -148,7 +167,10 @@ fn a_lone_participant_gets_no_ack_and_goes_error_passive() {
         &["--send", "5000000:123#01", "--stop-at", "20000000"],
     );
     let lines = a.finish(WallDuration::from_secs(30));
-    let out = sim.join().expect("simulator");
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
     assert_eq!(out.final_state, ParticipantState::Shutdown);
     assert!(
         lines.contains(&format!("error-state {passive} ErrorPassive")),
@@ -164,7 +186,7 @@ fn requests_beyond_the_transmit_queue_are_answered_transmit_queue_full() {
     let Some(dir) = silkit_dir() else { return };
     let registry = Registry::start(&dir);
     let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
-    let sim = netsim(&dir, &registry.uri);
+    let sim = netsim(&dir, &registry.uri, &["A"]);
     // Alone, A's frames are never acknowledged, so none leaves the queue: 20 requests in one
     // step against 16 transmit buffers.
     let sends: Vec<String> = (0..20)
@@ -177,7 +199,10 @@ fn requests_beyond_the_transmit_queue_are_answered_transmit_queue_full() {
     args.extend(["--stop-at", "10000000"]);
     let mut a = participant(&dir, &registry.uri, "A", &args);
     let lines = a.finish(WallDuration::from_secs(30));
-    let out = sim.join().expect("simulator");
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
     assert_eq!(out.final_state, ParticipantState::Shutdown);
     let full: Vec<&String> = lines
         .iter()
@@ -196,7 +221,7 @@ fn stopping_a_controller_cancels_its_pending_requests() {
     let Some(dir) = silkit_dir() else { return };
     let registry = Registry::start(&dir);
     let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A"]);
-    let sim = netsim(&dir, &registry.uri);
+    let sim = netsim(&dir, &registry.uri, &["A"]);
     // Alone, A's frame waits for an ACK for ever; stopping the controller at 9 ms (taken by
     // the simulator at 10 ms) cancels it and reports the new state.
     let mut a = participant(
@@ -213,7 +238,10 @@ fn stopping_a_controller_cancels_its_pending_requests() {
         ],
     );
     let lines = a.finish(WallDuration::from_secs(30));
-    let out = sim.join().expect("simulator");
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
     assert_eq!(out.final_state, ParticipantState::Shutdown);
     let acks: Vec<&String> = lines.iter().filter(|l| l.starts_with("ack ")).collect();
     assert_eq!(acks, ["ack 10000000 Canceled 123"], "{lines:#?}");

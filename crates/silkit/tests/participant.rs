@@ -13,8 +13,13 @@ use std::time::Duration as WallDuration;
 use cantwin_bus::{PacedConfig, PacedSimulation, Recorder};
 use cantwin_can::Duration;
 use cantwin_scenario::{BuildEnv, Built, Registry as Kinds, Scenario};
-use cantwin_silkit::{BridgeConfig, PacedBridge, ParticipantState, SilKit, run_synchronized};
-use common::{Lines, QUIET_CONFIG, Registry, example_participant, silkit_dir, system_controller};
+use cantwin_silkit::{
+    BridgeConfig, BridgeError, Deadlines, PacedBridge, ParticipantState, SilKit,
+    run_synchronized_within,
+};
+use common::{
+    Lines, QUIET_CONFIG, Registry, deadlines, example_participant, silkit_dir, system_controller,
+};
 
 fn adv200() -> Built {
     let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenarios/adv200-ds402.toml");
@@ -71,13 +76,14 @@ fn synchronised_run(dir: &Path) -> (Vec<String>, Vec<(u32, u64, u64)>, Participa
         .expect("bus")
         .add_tap(Recorder::new());
     let stop = AtomicBool::new(false);
-    let out = run_synchronized(
+    let out = run_synchronized_within(
         &kit,
         built.sim,
         &built.buses,
         &config(&registry.uri),
         Duration::from_millis(1),
         &stop,
+        &deadlines(&["PLC"]),
     )
     .expect("synchronised run");
     assert!(out.left.is_empty(), "{:?}", out.left);
@@ -161,13 +167,14 @@ fn stopping_cantwin_stops_the_whole_synchronised_simulation() {
     let runner = {
         let stop = Arc::clone(&stop);
         std::thread::spawn(move || {
-            run_synchronized(
+            run_synchronized_within(
                 &kit,
                 built.sim,
                 &built.buses,
                 &config(&uri),
                 Duration::from_millis(1),
                 &stop,
+                &deadlines(&["PLC"]),
             )
         })
     };
@@ -204,13 +211,14 @@ fn a_participant_leaving_mid_run_ends_the_synchronised_simulation_with_its_name(
     let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
     let built = adv200();
     let stop = AtomicBool::new(false);
-    let out = run_synchronized(
+    let out = run_synchronized_within(
         &kit,
         built.sim,
         &built.buses,
         &config(&registry.uri),
         Duration::from_millis(1),
         &stop,
+        &deadlines(&["PLC"]),
     )
     .expect("run");
     assert_eq!(out.left, ["PLC"]);
@@ -260,4 +268,55 @@ fn unsynchronised_twins_serve_participants_that_come_and_go() {
     assert!(counters.frames_out >= 2, "{counters:?}");
     let sim = paced.stop().expect("simulation");
     assert!(sim.buses()[0].stats().frames() >= 5);
+}
+
+/// A required participant that dies before it joins (here the PLC, given an argument it
+/// refuses) keeps the system controller from ever starting the simulation: the run ends
+/// with an error naming it once the join bound runs out, instead of waiting for ever.
+#[test]
+fn a_participant_dying_before_it_joins_ends_the_run_naming_it_within_the_bound() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "PLC"]);
+    let mut plc = plc(&dir, &registry.uri, &["--no-such-argument"]);
+    assert!(!plc.status(WallDuration::from_secs(10)).success());
+    let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
+    let built = adv200();
+    let stop = AtomicBool::new(false);
+    let bound = WallDuration::from_secs(2);
+    let started = std::time::Instant::now();
+    let err = run_synchronized_within(
+        &kit,
+        built.sim,
+        &built.buses,
+        &config(&registry.uri),
+        Duration::from_millis(1),
+        &stop,
+        &Deadlines::new(bound, common::RUN).expecting(&["PLC"]),
+    )
+    .expect_err("the simulation cannot start without the PLC");
+    let took = started.elapsed();
+    let BridgeError::NotStarted {
+        after,
+        state,
+        ref never_joined,
+        ref never_ran,
+        ..
+    } = err
+    else {
+        panic!("{err:?}")
+    };
+    assert_eq!(after, bound);
+    assert_eq!(never_joined, &["PLC".to_string()]);
+    assert!(never_ran.is_empty(), "{never_ran:?}");
+    assert_ne!(state, ParticipantState::Running);
+    assert!(
+        err.to_string().contains("participant PLC never joined"),
+        "{err}"
+    );
+    // The bound, plus the participant's creation and destruction (generous: a loaded box).
+    assert!(
+        took >= bound && took < bound + WallDuration::from_secs(15),
+        "{took:?}"
+    );
 }

@@ -477,6 +477,35 @@ impl Participant {
             .check("SilKit_LifecycleService_WaitForLifecycleToComplete", rc)?;
         Ok(ParticipantState::from_raw(state))
     }
+
+    /// [`Participant::wait_for_lifecycle`] for at most `timeout`: the C API's wait has no
+    /// bound (a coordinated participant waits for ever for a required peer that never
+    /// joins), so this polls the state until `Shutdown`, the state in which SIL Kit
+    /// completes that wait, and only then takes the final state.
+    /// After `timeout` it gives [`Error::Timeout`] with the state the lifecycle is stuck in;
+    /// the participant stays usable (e.g. to be destroyed).
+    pub fn wait_for_lifecycle_timeout(
+        &self,
+        lifecycle: &Lifecycle,
+        timeout: std::time::Duration,
+    ) -> Result<ParticipantState, Error> {
+        let until = std::time::Instant::now() + timeout;
+        loop {
+            let state = lifecycle.state()?;
+            if state == ParticipantState::Shutdown {
+                return self.wait_for_lifecycle(lifecycle);
+            }
+            let left = until.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(Error::Timeout {
+                    waited_for: "the lifecycle reaching Shutdown",
+                    after: timeout,
+                    state,
+                });
+            }
+            std::thread::sleep(left.min(std::time::Duration::from_millis(10)));
+        }
+    }
 }
 
 impl Drop for Participant {
