@@ -19,8 +19,9 @@ pub struct Args {
     /// `cantwin monitor` does), and the output says so.
     #[arg(long = "bit-rate", value_name = "[CHANNEL=]RATE")]
     bit_rate: Vec<String>,
-    /// Protocol of a channel: CHANNEL=canopen|devicenet|cal (default canopen). Repeatable.
-    #[arg(long = "protocol", value_name = "CHANNEL=PROTOCOL")]
+    /// Protocol of a channel: CHANNEL=canopen|devicenet|cal, or canopen|devicenet|cal for
+    /// every channel (default canopen), as `cantwin dump --decode` takes it. Repeatable.
+    #[arg(long = "protocol", value_name = "[CHANNEL=]PROTOCOL")]
     protocol: Vec<String>,
     /// Name PDO values from a node's EDS or DCF: NODE=FILE (repeatable).
     #[arg(long = "eds", value_name = "NODE=FILE")]
@@ -60,13 +61,19 @@ fn options(args: &Args) -> Result<Options> {
         opts.window_ns = Some(ms.saturating_mul(1_000_000));
     }
     for spec in &args.protocol {
-        let Some((ch, p)) = spec.split_once('=') else {
-            bail!("--protocol {spec:?}: expected CHANNEL=canopen|devicenet|cal");
+        let (channel, p) = match spec.split_once('=') {
+            Some((ch, p)) => (Some(ch), p),
+            None => (None, spec.as_str()),
         };
         let p: Protocol = p
             .parse()
             .map_err(|e| anyhow::anyhow!("--protocol {spec}: {e}"))?;
-        opts.protocols.insert(ch.to_string(), p);
+        match channel {
+            Some(ch) => {
+                opts.protocols.insert(ch.to_string(), p);
+            }
+            None => opts.default_protocol = p,
+        }
     }
     for spec in &args.eds {
         let (node, file) = spec

@@ -176,28 +176,29 @@ fn report_decodes_a_devicenet_channel_when_told() {
         log.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
-    let page = dir.join("dn.html");
-    let (ok, _, err) = cantwin(&[
-        "report",
-        log.to_str().unwrap(),
-        "--protocol",
-        "can0=devicenet",
-        "--bit-rate",
-        "125k",
-        "-o",
-        page.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
-    let html = std::fs::read_to_string(&page).unwrap();
-    let timeline = table(&html, "timeline");
-    // The drive's card checks its MAC ID (12) when it goes on line (DeviceNet duplicate
-    // MAC ID check, group 2 message 7).
-    assert!(
-        timeline
-            .iter()
-            .any(|r| r[2] == "devicenet"
+    // The protocol for the channel, or for every channel as `dump --decode` takes it.
+    for protocol in ["can0=devicenet", "devicenet"] {
+        let page = dir.join("dn.html");
+        let (ok, _, err) = cantwin(&[
+            "report",
+            log.to_str().unwrap(),
+            "--protocol",
+            protocol,
+            "--bit-rate",
+            "125k",
+            "-o",
+            page.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let html = std::fs::read_to_string(&page).unwrap();
+        let timeline = table(&html, "timeline");
+        // The drive's card checks its MAC ID (12) when it goes on line (DeviceNet duplicate
+        // MAC ID check, group 2 message 7).
+        assert!(
+            timeline.iter().any(|r| r[2] == "devicenet"
                 && r[4].starts_with("G2 MAC 12 msg 7: duplicate MAC ID check")),
-        "{timeline:?}"
-    );
+            "{protocol}: {timeline:?}"
+        );
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }
