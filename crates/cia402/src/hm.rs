@@ -12,13 +12,26 @@
 //! | 3, 19 | positive home switch: positive (fast) until it is active, back (slow) until it is inactive; started on the switch, only the second | 3: the first index pulse beyond the transition (on its negative side); 19: the transition |
 //! | 4, 20 | positive home switch: started on it, negative (fast) until inactive; then positive (slow) until it is active | 4: the first index pulse beyond the transition (its positive side); 20: the transition |
 //! | 5, 21 and 6, 22 | as 3, 19 and 4, 20 with the directions reversed (a negative home switch) | as 3, 4 |
+//! | 7–10, 23–26 | a home switch that is a cam between the limit switches: positive (fast) until it is active, reversing at the positive limit switch if it is met first (the cam lies behind); then as below | 7, 23: the cam's negative edge, left moving negative; 8, 24: the negative edge, entered moving positive; 9, 25: the positive edge, entered moving negative; 10, 26: the positive edge, left moving positive |
+//! | 11–14, 27–30 | as 7–10 and 23–26 mirrored: negative first, reversing at the negative limit switch | 11, 27: the positive edge, left moving positive; 12, 28: the positive edge, entered moving negative; 13, 29: the negative edge, entered moving positive; 14, 30: the negative edge, left moving negative |
 //! | 33, 34 | negative (33) or positive (34), slow, to the first index pulse | the index pulse |
 //! | 35, 37 | nothing: the drive does not move | the current position |
 //!
-//! A limit switch met in the direction of a search that does not look for it is a homing
-//! error, and so is a method that needs a switch the drive has not got wired. Methods
-//! 7–14 and 23–30 (a home cam with reversal at the limit switches) and the
-//! manufacturer-specific negative methods are not supported: 0x6098 refuses them.
+//! In methods 7–14 the home position is the first index pulse beyond the edge in the
+//! direction it is crossed, in 23–30 (no index pulse) the edge itself. A method started on
+//! the cam first moves toward the edge it looks for (CiA 402-2, homing methods 7 to 14:
+//! the initial direction depends on the edge sought when the home switch is active). To
+//! leave the cam through an edge the drive moves off it slowly; to enter it through an
+//! edge the drive stands beyond the edge and moves onto it slowly, except that with an
+//! index pulse a search that has just entered the cam through that edge in that direction
+//! goes on to the pulse (the edge is not the home position, the pulse is). Methods 23–30
+//! always cross their edge at the search-for-zero speed, as 19–22 do, so the home
+//! position is the same from either side of the cam.
+//!
+//! A limit switch met in the direction of a search that does not look for it (nor
+//! reverses at it) is a homing error, and so is a method that needs a switch the drive has
+//! not got wired. The manufacturer-specific negative methods, 0 and the reserved 15, 16,
+//! 31, 32 and 36 are not supported: 0x6098 refuses them.
 //!
 //! Statusword bits 13, 12, 10 (CiA 402-2, homing mode statusword):
 //!
@@ -53,6 +66,12 @@ pub struct Search {
     pub fast: bool,
     /// The event that ends the step.
     pub until: Until,
+    /// The limit switch (0x60FD bit, 0: none) at which the step reverses once: the home
+    /// switch of methods 7–14 and 23–30 lies behind the start when it is met first.
+    pub reverse_at: u32,
+    /// Skip the step when the step before ended on a transition met moving in this
+    /// direction (the edge it crossed is the one sought, crossed the way it is sought).
+    pub skip_after: Option<i8>,
 }
 
 const fn s(direction: i8, fast: bool, until: Until) -> Search {
@@ -60,7 +79,44 @@ const fn s(direction: i8, fast: bool, until: Until) -> Search {
         direction,
         fast,
         until,
+        reverse_at: 0,
+        skip_after: None,
     }
+}
+
+/// Methods 7–14 and 23–30 (CiA 402-2 homing on the home switch, a cam, with reversal at
+/// the limit switch): search `d` first; the edge sought is on the `w` side of the cam,
+/// crossed moving `a`; `index`: home on the first index pulse beyond it.
+fn cam(d: i8, w: i8, a: i8, index: bool) -> Vec<Search> {
+    use Until::*;
+    let limit = if d > 0 {
+        POSITIVE_LIMIT_SWITCH
+    } else {
+        NEGATIVE_LIMIT_SWITCH
+    };
+    let mut v = vec![Search {
+        reverse_at: limit,
+        ..s(d, true, Active(HOME_SWITCH))
+    }];
+    if a == w {
+        // Leave the cam through the edge (slowly: it is the home position of 23–30).
+        v.push(s(w, false, Inactive(HOME_SWITCH)));
+    } else {
+        // Stand beyond the edge, then move onto the cam through it.
+        let skip = index.then_some(a);
+        v.push(Search {
+            skip_after: skip,
+            ..s(w, true, Inactive(HOME_SWITCH))
+        });
+        v.push(Search {
+            skip_after: skip,
+            ..s(a, false, Active(HOME_SWITCH))
+        });
+    }
+    if index {
+        v.push(s(a, false, Index));
+    }
+    v
 }
 
 /// The steps of homing `method`; `None` for a method not supported. The event ending the
@@ -110,6 +166,24 @@ pub fn plan(method: i8) -> Option<Vec<Search>> {
         20 => onto(1, false),
         21 => away(-1, false),
         22 => onto(-1, false),
+        7..=14 | 23..=30 => {
+            let index = method <= 14;
+            let k = (method - if index { 7 } else { 23 }) as usize;
+            // (first direction, side of the edge, direction it is crossed), in the order
+            // of the methods.
+            const CAM: [(i8, i8, i8); 8] = [
+                (1, -1, -1),
+                (1, -1, 1),
+                (1, 1, -1),
+                (1, 1, 1),
+                (-1, 1, 1),
+                (-1, 1, -1),
+                (-1, -1, 1),
+                (-1, -1, -1),
+            ];
+            let (d, w, a) = CAM[k];
+            cam(d, w, a, index)
+        }
         33 => vec![s(-1, false, Index)],
         34 => vec![s(1, false, Index)],
         35 | 37 => Vec::new(),
@@ -127,8 +201,8 @@ pub fn needs(method: i8) -> u32 {
     plan(method).map_or(0, |p| {
         p.iter()
             .map(|s| match s.until {
-                Until::Active(b) | Until::Inactive(b) => b,
-                Until::Index => 0,
+                Until::Active(b) | Until::Inactive(b) => b | s.reverse_at,
+                Until::Index => s.reverse_at,
             })
             .fold(0, |a, b| a | b)
     })
@@ -189,6 +263,10 @@ pub struct Homing {
     /// The phase.
     pub phase: Phase,
     bit4: bool,
+    /// The present step has reversed at its limit switch.
+    reversed: bool,
+    /// The direction the last step ended moving in, when a transition ended it.
+    arrived: Option<i8>,
 }
 
 impl Default for Homing {
@@ -197,6 +275,8 @@ impl Default for Homing {
             plan: Vec::new(),
             phase: Phase::Idle,
             bit4: false,
+            reversed: false,
+            arrived: None,
         }
     }
 }
@@ -238,6 +318,8 @@ impl Homing {
             }
             Some(p) => {
                 self.plan = p;
+                self.reversed = false;
+                self.arrived = None;
                 self.phase = Phase::Searching { step: 0 };
             }
         }
@@ -264,27 +346,41 @@ impl Homing {
                 return Outcome::Stop;
             };
             let now = sample.inputs;
-            let hit = match search.until {
-                Until::Active(b) => now & b != 0,
-                Until::Inactive(b) => now & b == 0,
+            let last = step + 1 == self.plan.len();
+            let direction = if self.reversed {
+                -search.direction
+            } else {
+                search.direction
+            };
+            let holds = |inputs: u32| match search.until {
+                Until::Active(b) => inputs & b != 0,
+                Until::Inactive(b) => inputs & b == 0,
                 Until::Index => false,
             };
+            let skip = search.skip_after.is_some() && search.skip_after == self.arrived;
+            let hit = holds(now);
             let index = match search.until {
                 Until::Index => sample.index,
                 _ => None,
             };
-            let last = step + 1 == self.plan.len();
-            if hit || index.is_some() {
+            if skip || hit || index.is_some() {
                 if last {
                     self.phase = Phase::Attained;
                     return Outcome::Home(index.unwrap_or(sample.position));
                 }
+                if !skip {
+                    // A transition seen in this cycle, not an event that held before.
+                    self.arrived =
+                        (index.is_some() || !holds(sample.inputs_before)).then_some(direction);
+                }
+                self.reversed = false;
                 step += 1;
                 self.phase = Phase::Searching { step };
                 continue;
             }
-            // A limit switch in the direction of the search that it does not look for.
-            let ahead = if search.direction > 0 {
+            // A limit switch in the direction of the search that it does not look for:
+            // the step reverses at it once if it may, else a homing error.
+            let ahead = if direction > 0 {
                 POSITIVE_LIMIT_SWITCH
             } else {
                 NEGATIVE_LIMIT_SWITCH
@@ -294,11 +390,18 @@ impl Homing {
                 .iter()
                 .any(|s| matches!(s.until, Until::Active(b) | Until::Inactive(b) if b == ahead));
             if now & ahead != 0 && !looked_for {
+                if search.reverse_at & ahead != 0 && !self.reversed {
+                    self.reversed = true;
+                    return Outcome::Move {
+                        direction: f64::from(-direction),
+                        fast: search.fast,
+                    };
+                }
                 self.phase = Phase::Error;
                 return Outcome::Stop;
             }
             return Outcome::Move {
-                direction: f64::from(search.direction),
+                direction: f64::from(direction),
                 fast: search.fast,
             };
         }
@@ -329,14 +432,16 @@ mod tests {
 
     #[test]
     fn cia402_6098h_supported_methods() {
-        for m in (1..=6).chain(17..=22).chain([33, 34, 35, 37]) {
+        for m in (1..=14).chain(17..=30).chain([33, 34, 35, 37]) {
             assert!(supported(m), "{m}");
         }
-        for m in (7..=16).chain(23..=32).chain([0, 36, -1, 38]) {
+        for m in [15, 16, 31, 32, 0, 36, -1, 38] {
             assert!(!supported(m), "{m}");
         }
         assert_eq!(needs(1), NEGATIVE_LIMIT_SWITCH);
         assert_eq!(needs(20), HOME_SWITCH);
+        assert_eq!(needs(7), HOME_SWITCH | POSITIVE_LIMIT_SWITCH);
+        assert_eq!(needs(30), HOME_SWITCH | NEGATIVE_LIMIT_SWITCH);
         assert_eq!(needs(34), 0);
     }
 }

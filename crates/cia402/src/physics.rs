@@ -165,7 +165,9 @@ impl Encoder {
 /// `negative_limit`, a positive one above `positive_limit`, and a home switch whose edge
 /// is at `home`: active above it (a "positive home switch", CiA 402-2 homing methods 3, 4,
 /// 19, 20) or, with `home_below`, below it (a "negative home switch", methods 5, 6, 21,
-/// 22). Its edge is the home switch transition the methods search.
+/// 22). Its edge is the home switch transition the methods search. With `home_end` the
+/// home switch is a cam instead: active between `home` and `home_end` only, with an edge
+/// on either side (methods 7–14, 23–30), and `home_below` does not apply.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Switches {
     /// The negative limit switch is active at angles below this.
@@ -176,6 +178,8 @@ pub struct Switches {
     pub home: Option<f64>,
     /// The home switch is active below its edge rather than above.
     pub home_below: bool,
+    /// The upper edge of a home switch that is a cam from `home` to here.
+    pub home_end: Option<f64>,
 }
 
 /// 0x60FD bit 0: negative limit switch.
@@ -192,6 +196,7 @@ impl Switches {
         positive_limit: None,
         home: None,
         home_below: false,
+        home_end: None,
     };
 
     /// The 0x60FD bits at `angle`.
@@ -204,7 +209,9 @@ impl Switches {
             bits |= POSITIVE_LIMIT_SWITCH;
         }
         if self.home.is_some_and(|h| {
-            if self.home_below {
+            if let Some(end) = self.home_end {
+                angle > h && angle < end
+            } else if self.home_below {
                 angle < h
             } else {
                 angle > h
@@ -352,10 +359,18 @@ mod tests {
             positive_limit: Some(10.0),
             home: Some(0.0),
             home_below: false,
+            home_end: None,
         };
         assert_eq!(s.inputs(-11.0), NEGATIVE_LIMIT_SWITCH);
         assert_eq!(s.inputs(11.0), POSITIVE_LIMIT_SWITCH | HOME_SWITCH);
         assert_eq!(s.inputs(1.0), HOME_SWITCH);
+        let cam = Switches {
+            home_end: Some(2.0),
+            ..s
+        };
+        assert_eq!(cam.inputs(1.0), HOME_SWITCH);
+        assert_eq!(cam.inputs(3.0), 0);
+        assert_eq!(cam.inputs(-1.0), 0);
         let mut p = Inverter::new(InverterParams::default());
         assert_eq!(p.fault(true, 3.0), None);
         assert_eq!(p.fault(true, 13.0), Some(PowerFault::OverCurrent));

@@ -570,6 +570,7 @@ fn cia402_hm_methods_1_2_limit_switch_and_index_pulse() {
         positive_limit: Some(9.1),
         home: None,
         home_below: false,
+        home_end: None,
     };
     let mut a = homing_axis(switches);
     assert_eq!(home(&mut a, 1), 0x1400);
@@ -593,6 +594,7 @@ fn cia402_hm_methods_3_to_6_home_switch_and_index_pulse() {
         positive_limit: Some(40.0),
         home: Some(8.0),
         home_below: false,
+        home_end: None,
     };
     // Method 3 from below the switch: on, back off; home is the pulse below 8 rad (2 rev).
     // Method 4: onto the switch; home is the pulse above 8 rad (2 rev, 12.57 rad).
@@ -637,6 +639,7 @@ fn cia402_hm_methods_17_to_22_switch_transition() {
         positive_limit: Some(9.1),
         home: Some(2.0),
         home_below: false,
+        home_end: None,
     };
     for (method, edge) in [(17, -3.3), (18, 9.1), (19, 2.0), (20, 2.0)] {
         let mut a = homing_axis(switches);
@@ -649,6 +652,182 @@ fn cia402_hm_methods_17_to_22_switch_transition() {
             "method {method}: {p} {expected}"
         );
     }
+}
+
+/// A home switch that is a cam from 8 to 14 rad (index pulses at 2π, 4π, 6π: one below
+/// it, one on it, one above), between limit switches at −4 and 22 rad.
+const CAM: Switches = Switches {
+    negative_limit: Some(-4.0),
+    positive_limit: Some(22.0),
+    home: Some(8.0),
+    home_below: false,
+    home_end: Some(14.0),
+};
+
+/// Starts left of the cam, on it, and right of it (rad).
+const STARTS: [f64; 3] = [1.0, 11.0, 17.0];
+
+/// Homes with `method` from motor angle `start` on [`CAM`]: the statusword's bits 13, 12
+/// and 10, the motor angle the home position is at (position 0, home offset 0), the
+/// lowest and highest angles of the search, and how often it reversed before homing was
+/// attained.
+fn home_on_cam(method: i8, start: f64) -> (u16, f64, f64, f64, u32) {
+    let mut a = Axis::with(DriveConfig {
+        switches: CAM,
+        ..DriveConfig::default()
+    });
+    // Placed before the drive is enabled, so that it holds the start.
+    a.drive.motor_mut().state.angle = start;
+    a.enable(Mode::Homing);
+    a.set(HOMING_METHOD, 0, Value::Integer8(method));
+    a.cw(0x1F);
+    let (mut lo, mut hi) = (start, start);
+    let (mut sign, mut reversals) = (0.0, 0);
+    for _ in 0..20_000 {
+        a.run_ms(1);
+        lo = lo.min(angle(&a));
+        hi = hi.max(angle(&a));
+        // A reversal: the speed (rad/s) changes sign beyond a band around rest.
+        let speed = a.drive.motor().state.speed;
+        if speed.abs() > 1.0 && a.sw() & 0x1000 == 0 {
+            if sign != 0.0 && speed.signum() != sign {
+                reversals += 1;
+            }
+            sign = speed.signum();
+        }
+        let hm = a.sw() & 0x3400;
+        if hm == 0x1400 || hm & 0x2000 != 0 {
+            break;
+        }
+    }
+    a.run_ms(200);
+    assert!(a.bit(12) == (a.sw() & 0x3400 == 0x1400));
+    let home = angle(&a) - a.i(POSITION_ACTUAL_VALUE) as f64 / 4096.0 * TAU;
+    (a.sw() & 0x3400, home, lo, hi, reversals)
+}
+
+/// Methods 7–14 and 23–30 from each of [`STARTS`]: homing attained (bit 12) and completed
+/// at the `expected` angle (within `tol` rad) from every start; returns the searched
+/// ranges (lowest, highest angle) and the reversals per start.
+fn cam_method(method: i8, expected: f64, tol: f64) -> [(f64, f64, u32); 3] {
+    STARTS.map(|start| {
+        let (hm, home, lo, hi, reversals) = home_on_cam(method, start);
+        assert_eq!(
+            hm, 0x1400,
+            "method {method} from {start} rad: homing attained"
+        );
+        assert!(
+            (home - expected).abs() < tol,
+            "method {method} from {start} rad: home at {home} rad, not {expected}"
+        );
+        (lo, hi, reversals)
+    })
+}
+
+/// One increment in rad.
+const INC: f64 = TAU / 4096.0;
+
+#[test]
+fn cia402_hm_methods_7_to_10_home_switch_with_reversal_and_index_pulse() {
+    // Positive first; home on the index pulse beyond the cam's negative edge moving
+    // negative (7: 2π), moving positive (8: 4π), beyond its positive edge moving negative
+    // (9: 4π) and moving positive (10: 6π).
+    for (method, pulse) in [(7, 1.0), (8, 2.0), (9, 2.0), (10, 3.0)] {
+        let r = cam_method(method, pulse * TAU, 2.0 * INC);
+        // Started left of the cam it is found without the limit switch; started right of
+        // it, the search reverses at the positive limit switch (22 rad).
+        assert!(r[0].1 < 22.0, "method {method}: {:?}", r[0]);
+        assert!(r[2].1 > 22.0, "method {method}: {:?}", r[2]);
+        // None of them meets the negative limit switch.
+        assert!(
+            r.iter().all(|(lo, ..)| *lo > -4.0),
+            "method {method}: {r:?}"
+        );
+        // Method 7 from the left: onto the cam and back off it (one reversal); from it:
+        // none; from the right: at the limit switch only.
+        let want = match method {
+            7 => [1, 0, 1],
+            // From the left it enters the cam through the edge sought, the way it is
+            // sought, and goes on to the pulse; on the cam it moves off and back on; from
+            // the right it reverses at the limit switch and again beyond the cam.
+            8 => [0, 1, 2],
+            // Through the cam and back onto it; off it and back; from the right it enters
+            // it through the positive edge on the way back from the limit switch.
+            9 => [1, 1, 1],
+            // Through the cam; off it; back from the limit switch and off it again.
+            _ => [0, 0, 2],
+        };
+        assert_eq!(r.map(|r| r.2), want, "method {method}: {r:?}");
+    }
+}
+
+#[test]
+fn cia402_hm_methods_11_to_14_home_switch_with_reversal_and_index_pulse() {
+    // Negative first, mirrored: 11 beyond the positive edge moving positive (6π), 12
+    // beyond it moving negative (4π), 13 beyond the negative edge moving positive (4π),
+    // 14 moving negative (2π).
+    for (method, pulse) in [(11, 3.0), (12, 2.0), (13, 2.0), (14, 1.0)] {
+        let r = cam_method(method, pulse * TAU, 2.0 * INC);
+        // Started right of the cam it is found without the limit switch; started left of
+        // it, the search reverses at the negative limit switch (−4 rad).
+        assert!(r[2].0 > -4.0, "method {method}: {:?}", r[2]);
+        assert!(r[0].0 < -4.0, "method {method}: {:?}", r[0]);
+        assert!(
+            r.iter().all(|(_, hi, _)| *hi < 22.0),
+            "method {method}: {r:?}"
+        );
+        // The reversals of 7–10, mirrored (starts left, on, right of the cam).
+        let want = match method {
+            11 => [1, 0, 1],
+            12 => [2, 1, 0],
+            13 => [1, 1, 1],
+            _ => [2, 0, 0],
+        };
+        assert_eq!(r.map(|r| r.2), want, "method {method}: {r:?}");
+    }
+}
+
+#[test]
+fn cia402_hm_methods_23_to_30_home_switch_with_reversal() {
+    // As 7–14 without the index pulse: the cam's edge is the home position, sampled by the
+    // loop at the search-for-zero speed (4096 units/s, about one increment a cycle).
+    for (method, edge) in [
+        (23, 8.0),
+        (24, 8.0),
+        (25, 14.0),
+        (26, 14.0),
+        (27, 14.0),
+        (28, 14.0),
+        (29, 8.0),
+        (30, 8.0),
+    ] {
+        let r = cam_method(method, edge, 4.0 * INC);
+        let (reverses, found) = if method <= 26 {
+            (r[2].1 > 22.0, r[0].1 < 22.0)
+        } else {
+            (r[0].0 < -4.0, r[2].0 > -4.0)
+        };
+        assert!(reverses && found, "method {method}: {r:?}");
+    }
+}
+
+#[test]
+fn cia402_hm_methods_7_to_14_need_the_limit_switch_they_reverse_at() {
+    // Without the positive limit switch wired, method 7 is a homing error at once; with
+    // the cam missing (no home switch beyond the start), method 7 reverses at the positive
+    // limit switch and then meets the negative one: a homing error.
+    let mut a = homing_axis(Switches {
+        positive_limit: None,
+        ..CAM
+    });
+    assert_eq!(home(&mut a, 7), 0x2400);
+    let mut a = homing_axis(Switches {
+        negative_limit: Some(-2.0),
+        positive_limit: Some(3.0),
+        ..CAM
+    });
+    assert_eq!(home(&mut a, 7), 0x2400);
+    assert!(angle(&a) < -2.0);
 }
 
 #[test]
@@ -678,6 +857,7 @@ fn cia402_hm_error_on_a_limit_switch_in_the_search() {
         positive_limit: Some(3.0),
         home: Some(50.0),
         home_below: false,
+        home_end: None,
     });
     assert_eq!(home(&mut a, 3), 0x2400);
     assert!(angle(&a) > 3.0);
@@ -690,6 +870,7 @@ fn cia402_hm_interrupted_by_bit_4() {
         positive_limit: None,
         home: None,
         home_below: false,
+        home_end: None,
     });
     a.set(HOMING_METHOD, 0, Value::Integer8(1));
     a.cw(0x1F);
@@ -722,6 +903,7 @@ fn cia402_60fdh_limit_switch_stops_and_allows_moving_away() {
             positive_limit: Some(6.0),
             home: None,
             home_below: false,
+            home_end: None,
         },
         ..DriveConfig::default()
     });

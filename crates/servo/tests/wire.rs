@@ -105,7 +105,8 @@ fn cia402_3_tpdo1_follows_the_state_machine_driven_by_rpdo1() {
 fn cia402_6060h_refuses_an_unsupported_mode_by_sdo() {
     let mut s = Script::default();
     sdo_write(&mut s, 1.0, 0x6060, 0, &[5]);
-    sdo_write(&mut s, 2.0, 0x6098, 0, &[7]);
+    // 15 is reserved (CiA 402-2 homing methods).
+    sdo_write(&mut s, 2.0, 0x6098, 0, &[15]);
     sdo_write(&mut s, 3.0, 0x6060, 0, &[1]);
     let (sim, bus, tap) = run(s, 5);
     let answers = frames(&sim, bus, tap, 0x585);

@@ -128,6 +128,7 @@ fn config(s: &Settings<'_>, node_id: u8) -> Result<ServoConfig, ScenarioError> {
         positive_limit: at("positive_limit_switch")?,
         home: at("home_switch")?,
         home_below: s.get_or("home_switch_below", false)?,
+        home_end: None,
     };
     d.inverter.dc_link_nominal = positive(s, "dc_link", d.inverter.dc_link_nominal)?;
     d.inverter.trip_current = positive(s, "trip_current", d.inverter.trip_current)?;
