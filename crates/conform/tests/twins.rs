@@ -163,3 +163,31 @@ fn shipped_profiles_parse_and_name_cases_of_the_catalogue() {
         Err(cantwin_conform::ProfileError::UnknownCase(_))
     ));
 }
+
+#[test]
+fn an_eight_byte_writable_entry_is_downloaded_in_two_segments() {
+    // 0x2F00 (UNSIGNED64) is the only read-write entry of at most 8 bytes: a segment
+    // carries at most 7 (CiA 301 §7.2.4.3.5), so the download takes two.
+    let sc =
+        Scenario::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/u64-rw.toml"))
+            .unwrap();
+    let built = sc
+        .build(&Registry::builtin(), &BuildEnv::default())
+        .unwrap();
+    let dev = built.device("d").unwrap().clone();
+    let eds_text = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/u64-rw.eds"),
+    )
+    .unwrap();
+    let eds = cantwin_eds::parse(&eds_text).unwrap();
+    let mut bus = VirtualBus::new(built.sim, dev.port.bus()).unwrap();
+    let profile = Profile::from_eds(&eds);
+    let r = run(&mut bus, 9, &eds, &profile, &sdo_only(), &mut |_| {});
+    for id in ["sdo.segmented-download", "sdo.segmented-download-no-size"] {
+        let c = r.case(id).unwrap();
+        assert_eq!(c.verdict, Verdict::Pass, "{id}: {}", c.detail);
+    }
+    let c = r.case("sdo.segmented-download").unwrap();
+    assert!(c.detail.contains("0x2F00"), "{}", c.detail);
+    assert!(c.detail.contains("8 bytes in 2 segments"), "{}", c.detail);
+}

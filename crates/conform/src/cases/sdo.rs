@@ -396,29 +396,49 @@ fn segmented_download(ctx: &mut Ctx<'_>) -> Outcome {
             "answer {b:02X?} to the initiate is not scs 3"
         )));
     }
-    let n = u8::try_from(7 - size).unwrap_or(0);
-    let mut seg = [0u8; 8];
-    seg[0] = (n << 1) | 1;
-    seg[1..1 + size].copy_from_slice(&value);
-    let Some(b) = ctx.sdo_raw(seg)? else {
-        return Err(fail("no answer to the segment"));
-    };
-    if let Some(code) = abort_of(&b) {
-        return Err(fail_abort("the segment", code));
-    }
-    if b[0] != 0x20 {
-        return Err(fail(format!(
-            "answer {b:02X?} to segment 0 is not scs 1 with toggle 0"
-        )));
-    }
+    let segments = download_segments(ctx, &value)?;
     recovered(ctx, "a segmented download")?;
+    let plural = if segments == 1 { "" } else { "s" };
     Ok(format!(
-        "0x{index:04X} sub {sub}: {size} bytes in one segment"
+        "0x{index:04X} sub {sub}: {size} bytes in {segments} segment{plural}"
     ))
 }
 
+/// Sends `value` as download segments after an accepted initiate and checks each answer
+/// (CiA 301 §7.2.4.3.5: a segment carries up to 7 bytes, n the unused ones, c on the
+/// last, the toggle alternating from 0; the server answers scs 1 with the same toggle).
+/// Returns the number of segments.
+fn download_segments(ctx: &mut Ctx<'_>, value: &[u8]) -> Result<usize, Finding> {
+    let chunks: Vec<&[u8]> = if value.is_empty() {
+        vec![&[]]
+    } else {
+        value.chunks(7).collect()
+    };
+    let count = chunks.len();
+    for (i, chunk) in chunks.into_iter().enumerate() {
+        let toggle = u8::try_from(i % 2).unwrap_or(0);
+        let last = i + 1 == count;
+        let n = u8::try_from(7 - chunk.len()).unwrap_or(0);
+        let mut seg = [0u8; 8];
+        seg[0] = (toggle << 4) | (n << 1) | u8::from(last);
+        seg[1..1 + chunk.len()].copy_from_slice(chunk);
+        let Some(b) = ctx.sdo_raw(seg)? else {
+            return Err(fail(format!("no answer to segment {i}")));
+        };
+        if let Some(code) = abort_of(&b) {
+            return Err(fail_abort(format!("segment {i}"), code));
+        }
+        if b[0] != 0x20 | (toggle << 4) {
+            return Err(fail(format!(
+                "answer {b:02X?} to segment {i} is not scs 1 with toggle {toggle}"
+            )));
+        }
+    }
+    Ok(count)
+}
+
 fn segmented_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
-    let Some((index, sub, size, value)) = writable(ctx, 1..=8)? else {
+    let Some((index, sub, _, value)) = writable(ctx, 1..=8)? else {
         return Err(Finding::NotApplicable(
             "no writable entry of fixed size".into(),
         ));
@@ -434,15 +454,7 @@ fn segmented_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
             "answer {b:02X?} to the initiate is not scs 3"
         )));
     }
-    let n = u8::try_from(7 - size).unwrap_or(0);
-    let mut seg = [0u8; 8];
-    seg[0] = (n << 1) | 1;
-    seg[1..1 + size].copy_from_slice(&value);
-    match ctx.sdo_raw(seg)? {
-        Some(b) if b[0] == 0x20 => {}
-        Some(b) => return Err(fail(format!("answer {b:02X?} to the segment"))),
-        None => return Err(fail("no answer to the segment")),
-    }
+    download_segments(ctx, &value)?;
     recovered(ctx, "a segmented download without size")?;
     Ok(format!("0x{index:04X} sub {sub} written"))
 }
