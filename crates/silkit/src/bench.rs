@@ -17,7 +17,10 @@ use crate::bridge::{BridgeConfig, QUIET_CONFIGURATION};
 use crate::error::Error;
 use crate::ffi::{Participant, SilKit};
 use crate::netsim::{NetsimConfig, run_network_simulator};
-use crate::types::{CanFrame, DirectionMask, OperationMode, TransmitStatus};
+use crate::types::{CanFrame, DirectionMask, OperationMode, ParticipantState, TransmitStatus};
+
+/// The participants' step, 1 ms.
+const STEP_NS: u64 = 1_000_000;
 
 /// One measurement.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -72,7 +75,8 @@ pub fn run(kit: &SilKit, registry_uri: &str, config: BenchConfig) -> Result<Benc
         started: Mutex::new(None),
         stopped: Mutex::new(None),
     });
-    let step_ns = 1_000_000;
+    let step_ns = STEP_NS;
+    let failed = Arc::new(AtomicBool::new(false));
     let netsim_stop = Arc::new(AtomicBool::new(false));
     let netsim = if config.netsim {
         let kit = kit.clone();
@@ -81,14 +85,19 @@ pub fn run(kit: &SilKit, registry_uri: &str, config: BenchConfig) -> Result<Benc
             participant: "cantwin-netsim".into(),
             configuration: QUIET_CONFIGURATION.into(),
         };
-        let stop = Arc::clone(&netsim_stop);
+        let (stop, failed) = (Arc::clone(&netsim_stop), Arc::clone(&failed));
         Some(std::thread::spawn(move || {
             let cfg = NetsimConfig {
                 bit_rate: BitRate::R1M,
                 step: Duration::from_nanos(step_ns),
                 queue_depth: 16,
             };
-            run_network_simulator(&kit, &bridge, &["bench".into()], cfg, &stop).map(drop)
+            let r = run_network_simulator(&kit, &bridge, &["bench".into()], cfg, &stop).map(drop);
+            // Its participants cannot start without it: they give up instead of waiting.
+            if r.is_err() {
+                failed.store(true, Ordering::SeqCst);
+            }
+            r
         }))
     } else {
         None
@@ -107,101 +116,16 @@ pub fn run(kit: &SilKit, registry_uri: &str, config: BenchConfig) -> Result<Benc
         );
         let required: Vec<String> = required.iter().map(|s| s.to_string()).collect();
         let steps = config.steps;
+        let failed = Arc::clone(&failed);
         threads.push(std::thread::spawn(move || -> Result<(), Error> {
-            let p = Participant::create(&kit, &name, &uri, QUIET_CONFIGURATION)?;
-            let can = p.can_controller(&format!("{name}-CAN"), "bench")?;
-            if i == 0 {
-                let s = Arc::clone(&shared);
-                can.on_frame(DirectionMask::Receive, move |ev| {
-                    let (Some(&sender), Some(seq)) = (
-                        ev.frame.data.first(),
-                        ev.frame
-                            .data
-                            .get(1..5)
-                            .and_then(|b| <[u8; 4]>::try_from(b).ok())
-                            .map(u32::from_be_bytes),
-                    ) else {
-                        return;
-                    };
-                    let at = s
-                        .sent
-                        .get(sender as usize)
-                        .and_then(|v| {
-                            v.lock()
-                                .unwrap_or_else(PoisonError::into_inner)
-                                .get(seq as usize)
-                                .copied()
-                        })
-                        .flatten();
-                    if let Some(at) = at {
-                        s.latency_ns
-                            .fetch_add(at.elapsed().as_nanos() as u64, Ordering::Relaxed);
-                        s.latency_count.fetch_add(1, Ordering::Relaxed);
-                    }
-                })?;
+            let r = participant(i, &kit, &name, &uri, &shared, &required, steps, &failed);
+            if r.is_err() {
+                failed.store(true, Ordering::SeqCst);
             }
-            {
-                let s = Arc::clone(&shared);
-                can.on_transmit(move |ev| {
-                    if ev.status == TransmitStatus::Transmitted {
-                        s.transmitted.fetch_add(1, Ordering::Relaxed);
-                    }
-                })?;
-            }
-            let lifecycle = p.lifecycle(OperationMode::Coordinated)?;
-            {
-                let can = can.clone();
-                lifecycle.on_communication_ready(move || {
-                    let _ = can
-                        .set_baud_rate(1_000_000, 0, 0)
-                        .and_then(|()| can.start());
-                })?;
-            }
-            let ts = lifecycle.time_sync()?;
-            {
-                let (s, can, lc) = (Arc::clone(&shared), can.clone(), lifecycle.clone());
-                ts.on_step(step_ns, move |now, _| {
-                    let k = now / step_ns;
-                    if i == 0 && k == 1 {
-                        *s.started.lock().unwrap_or_else(PoisonError::into_inner) =
-                            Some(WallInstant::now());
-                    }
-                    if k >= 1 && k <= steps {
-                        let seq = k as u32;
-                        let mut data = vec![i as u8];
-                        data.extend_from_slice(&seq.to_be_bytes());
-                        let frame = CanFrame {
-                            id: 0x100 + i as u32,
-                            flags: 0,
-                            dlc: 5,
-                            data,
-                        };
-                        if let Some(slot) = s.sent[i]
-                            .lock()
-                            .unwrap_or_else(PoisonError::into_inner)
-                            .get_mut(k as usize)
-                        {
-                            *slot = Some(WallInstant::now());
-                        }
-                        let _ = can.send(&frame, k as usize);
-                    }
-                    // Two steps more than the frames, for the last ones to arrive.
-                    if i == 0 && k == steps + 2 {
-                        *s.stopped.lock().unwrap_or_else(PoisonError::into_inner) =
-                            Some(WallInstant::now());
-                        let _ = lc.stop("bench done");
-                    }
-                })?;
-            }
-            if i == 0 {
-                let names: Vec<&str> = required.iter().map(String::as_str).collect();
-                p.set_required_participants(&names)?;
-            }
-            lifecycle.start()?;
-            p.wait_for_lifecycle(&lifecycle)?;
-            Ok(())
+            r
         }));
     }
+
     let mut result = Ok(());
     for t in threads {
         let r = t.join().unwrap_or(Ok(()));
@@ -238,4 +162,143 @@ pub fn run(kit: &SilKit, registry_uri: &str, config: BenchConfig) -> Result<Benc
         frames_per_second: frames as f64 / wall.as_secs_f64().max(1e-9),
         latency_us: shared.latency_ns.load(Ordering::Relaxed) as f64 / count as f64 / 1000.0,
     })
+}
+
+/// How long the bench's participants, all in this process, may take to be running.
+const JOIN: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// Participant `i` of a run, until its lifecycle ends. A coordinated participant waits for
+/// every required one, so once another has `failed` (it never joins) this one gives up
+/// rather than wait for ever; it also gives up after [`JOIN`] without running.
+#[allow(clippy::too_many_arguments)]
+fn participant(
+    i: usize,
+    kit: &SilKit,
+    name: &str,
+    uri: &str,
+    shared: &Arc<Shared>,
+    required: &[String],
+    steps: u64,
+    failed: &AtomicBool,
+) -> Result<(), Error> {
+    let step_ns = STEP_NS;
+    let p = Participant::create(kit, name, uri, QUIET_CONFIGURATION)?;
+    let can = p.can_controller(&format!("{name}-CAN"), "bench")?;
+    if i == 0 {
+        let s = Arc::clone(shared);
+        can.on_frame(DirectionMask::Receive, move |ev| {
+            let (Some(&sender), Some(seq)) = (
+                ev.frame.data.first(),
+                ev.frame
+                    .data
+                    .get(1..5)
+                    .and_then(|b| <[u8; 4]>::try_from(b).ok())
+                    .map(u32::from_be_bytes),
+            ) else {
+                return;
+            };
+            let at = s
+                .sent
+                .get(sender as usize)
+                .and_then(|v| {
+                    v.lock()
+                        .unwrap_or_else(PoisonError::into_inner)
+                        .get(seq as usize)
+                        .copied()
+                })
+                .flatten();
+            if let Some(at) = at {
+                s.latency_ns
+                    .fetch_add(at.elapsed().as_nanos() as u64, Ordering::Relaxed);
+                s.latency_count.fetch_add(1, Ordering::Relaxed);
+            }
+        })?;
+    }
+    {
+        let s = Arc::clone(shared);
+        can.on_transmit(move |ev| {
+            if ev.status == TransmitStatus::Transmitted {
+                s.transmitted.fetch_add(1, Ordering::Relaxed);
+            }
+        })?;
+    }
+    let lifecycle = p.lifecycle(OperationMode::Coordinated)?;
+    {
+        let can = can.clone();
+        lifecycle.on_communication_ready(move || {
+            let _ = can
+                .set_baud_rate(1_000_000, 0, 0)
+                .and_then(|()| can.start());
+        })?;
+    }
+    let ts = lifecycle.time_sync()?;
+    {
+        let (s, can, lc) = (Arc::clone(shared), can.clone(), lifecycle.clone());
+        ts.on_step(step_ns, move |now, _| {
+            let k = now / step_ns;
+            if i == 0 && k == 1 {
+                *s.started.lock().unwrap_or_else(PoisonError::into_inner) =
+                    Some(WallInstant::now());
+            }
+            if k >= 1 && k <= steps {
+                let seq = k as u32;
+                let mut data = vec![i as u8];
+                data.extend_from_slice(&seq.to_be_bytes());
+                let frame = CanFrame {
+                    id: 0x100 + i as u32,
+                    flags: 0,
+                    dlc: 5,
+                    data,
+                };
+                if let Some(slot) = s.sent[i]
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .get_mut(k as usize)
+                {
+                    *slot = Some(WallInstant::now());
+                }
+                let _ = can.send(&frame, k as usize);
+            }
+            // Two steps more than the frames, for the last ones to arrive.
+            if i == 0 && k == steps + 2 {
+                *s.stopped.lock().unwrap_or_else(PoisonError::into_inner) =
+                    Some(WallInstant::now());
+                let _ = lc.stop("bench done");
+            }
+        })?;
+    }
+    if i == 0 {
+        let names: Vec<&str> = required.iter().map(String::as_str).collect();
+        p.set_required_participants(&names)?;
+    }
+    lifecycle.start()?;
+    let started = WallInstant::now();
+    let mut ran = false;
+    loop {
+        match p.wait_for_lifecycle_timeout(&lifecycle, std::time::Duration::from_millis(20)) {
+            Ok(_) => return Ok(()),
+            Err(Error::Timeout { state, .. }) => {
+                ran |= !matches!(
+                    state,
+                    ParticipantState::Invalid
+                        | ParticipantState::ServicesCreated
+                        | ParticipantState::CommunicationInitializing
+                        | ParticipantState::CommunicationInitialized
+                        | ParticipantState::ReadyToRun
+                );
+                if !ran && failed.load(Ordering::SeqCst) {
+                    // The participant that failed reports the run's error.
+                    return Ok(());
+                }
+                if !ran && started.elapsed() >= JOIN {
+                    return Err(Error::Timeout {
+                        waited_for: "every bench participant running",
+                        after: JOIN,
+                        state,
+                    });
+                }
+            }
+            Err(e) => return Err(e),
+        }
+    }
 }

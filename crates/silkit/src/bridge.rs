@@ -411,6 +411,9 @@ impl Deadlines {
     }
 }
 
+/// How long a run stopped at its bound may take to shut down before its participant leaves.
+const STOP_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
+
 /// What the system monitor saw of the others.
 #[derive(Default)]
 struct Peers {
@@ -529,7 +532,12 @@ pub(crate) fn run_coordinated(
         }
         if let Some(bound) = deadlines.run.filter(|b| waited >= *b) {
             if matches!(state, ParticipantState::Running | ParticipantState::Paused) {
-                let _ = lifecycle.stop("cantwin's run bound ran out");
+                // Stopped, not just left: the others would wait for our next step for ever.
+                // Their stop takes a round trip through the system controller, so the
+                // participant stays (a bounded while) until its lifecycle is over.
+                if lifecycle.stop("cantwin's run bound ran out").is_ok() {
+                    let _ = participant.wait_for_lifecycle_timeout(lifecycle, STOP_GRACE);
+                }
             }
             return Err(BridgeError::NotStopped {
                 after: bound,

@@ -320,3 +320,34 @@ fn a_participant_dying_before_it_joins_ends_the_run_naming_it_within_the_bound()
         "{took:?}"
     );
 }
+
+/// A run that never ends (the PLC runs without stopping) is stopped once the run bound runs
+/// out, with an error saying so; the PLC sees the stop.
+#[test]
+fn a_run_beyond_its_bound_is_stopped_with_an_error_saying_so() {
+    let Some(dir) = silkit_dir() else { return };
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "PLC"]);
+    let mut plc = plc(&dir, &registry.uri, &["--step", "1000000"]);
+    let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
+    let built = adv200();
+    let stop = AtomicBool::new(false);
+    let bound = WallDuration::from_millis(1500);
+    let err = run_synchronized_within(
+        &kit,
+        built.sim,
+        &built.buses,
+        &config(&registry.uri),
+        Duration::from_millis(1),
+        &stop,
+        &Deadlines::new(common::JOIN, bound).expecting(&["PLC"]),
+    )
+    .expect_err("the PLC never stops");
+    let BridgeError::NotStopped { after, state, .. } = err else {
+        panic!("{err:?}")
+    };
+    assert_eq!((after, state), (bound, ParticipantState::Running));
+    assert!(err.to_string().contains("did not end within"), "{err}");
+    let lines = plc.finish(WallDuration::from_secs(20));
+    assert_eq!(lines.last().map(String::as_str), Some("final Shutdown"));
+}
