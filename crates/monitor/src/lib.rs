@@ -57,7 +57,7 @@ use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
 use cantwin_can::{BitRate, Duration, Frame, Instant};
 use cantwin_canopen::master::pdo::PdoDecoder;
-use cantwin_canopen::wire::{self, ErrorControl, Message};
+use cantwin_canopen::wire::{self, ErrorControl, Message, NmtCs, NmtState};
 use cantwin_report::canopen::{describe, describe_pdo};
 use cantwin_report::sdo::{Outcome, Tracker, Transfer};
 
@@ -277,6 +277,20 @@ impl NetworkView {
         }
         let mut text = None;
         match msg {
+            Message::Nmt(cmd) => {
+                // CiA 301 §7.3.2.2.1: the state a command puts an addressed node in; a
+                // reset ends in a boot-up, which the node reports itself.
+                let state = match cmd.cs {
+                    NmtCs::Start => Some(NmtState::Operational as u8),
+                    NmtCs::Stop => Some(NmtState::Stopped as u8),
+                    NmtCs::EnterPreOperational => Some(NmtState::PreOperational as u8),
+                    NmtCs::ResetNode | NmtCs::ResetCommunication => None,
+                };
+                for info in self.nodes.values_mut().filter(|i| cmd.addresses(i.id)) {
+                    info.state = state;
+                    info.state_commanded = true;
+                }
+            }
             Message::ErrorControl(ErrorControl::GuardRequest { node }) => {
                 self.guard_pending.insert(node);
             }
@@ -300,6 +314,7 @@ impl NetworkView {
                     // A boot-up restarts the heartbeat: the gap before it is no period.
                     info.heartbeat_period = None;
                 } else if let Some(last) = info.last_heartbeat
+                    && !info.state_commanded
                     && info.state.is_some_and(|s| s != 0)
                 {
                     info.heartbeat_period = Some(Duration::from_nanos(
@@ -307,6 +322,7 @@ impl NetworkView {
                     ));
                 }
                 info.state = Some(state);
+                info.state_commanded = false;
                 info.last_heartbeat = Some(at);
             }
             Message::Emcy { node, emcy } => {

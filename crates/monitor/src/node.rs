@@ -123,8 +123,13 @@ pub struct NodeInfo {
     pub device_type: Option<u32>,
     /// Identity (0x1018) from SDO transfers on the bus.
     pub identity: Identity,
-    /// The last NMT state code reported by boot-up, heartbeat or node guarding.
+    /// The last NMT state code reported by boot-up, heartbeat or node guarding, or, for a
+    /// node that reports none after it, the state an NMT command put it in.
     pub state: Option<u8>,
+    /// Whether `state` comes from an NMT command rather than from the node itself: a node
+    /// without heartbeat or node guarding (CiA 301 §7.2.8.3.2) tells nothing of its state, and
+    /// the command is the best knowledge (§7.3.2.2.1, the NMT state machine).
+    pub state_commanded: bool,
     /// When the last heartbeat/boot-up/guarding answer was seen.
     pub last_heartbeat: Option<Instant>,
     /// The gap between the last two heartbeats (the producer's period, as observed).
@@ -160,6 +165,7 @@ impl NodeInfo {
             device_type: None,
             identity: Identity::default(),
             state: None,
+            state_commanded: false,
             last_heartbeat: None,
             heartbeat_period: None,
             boot_ups: 0,

@@ -454,3 +454,37 @@ fn cia301_7_5_2_1_a_declared_device_type_names_the_profile_in_the_kind_column() 
     v.declare_device_type(8, 0x0002_0196);
     assert_eq!(v.node(8).unwrap().kind_label().as_deref(), Some("CiA 406"));
 }
+
+/// A node without heartbeat (the TM3 island, a CiA 402 axis) takes the state its NMT
+/// commands put it in (CiA 301 §7.3.2.2.1), marked as commanded; its own report wins again
+/// when it comes, and a reset leaves the state unknown until the boot-up.
+#[test]
+fn cia301_7_3_2_2_1_nmt_commands_set_the_state_of_a_node_that_reports_none() {
+    let mut v = view();
+    v.push(ms(0), &f(0x703, &[0x00]));
+    v.push(ms(0), &f(0x705, &[0x00]));
+    v.push(ms(10), &f(0x000, &[0x01, 3]));
+    let n3 = v.node(3).unwrap();
+    assert_eq!(n3.nmt(), Some(NmtState::Operational));
+    assert!(n3.state_commanded);
+    assert_eq!(
+        v.node(5).unwrap().nmt(),
+        Some(NmtState::PreOperational),
+        "not addressed"
+    );
+    // A broadcast stop reaches both.
+    v.push(ms(20), &f(0x000, &[0x02, 0]));
+    assert_eq!(v.node(3).unwrap().nmt(), Some(NmtState::Stopped));
+    assert_eq!(v.node(5).unwrap().nmt(), Some(NmtState::Stopped));
+    // The node's own heartbeat is the better knowledge.
+    v.push(ms(30), &f(0x705, &[0x7F]));
+    let n5 = v.node(5).unwrap();
+    assert_eq!(n5.nmt(), Some(NmtState::PreOperational));
+    assert!(!n5.state_commanded);
+    // Reset node: unknown until the boot-up.
+    v.push(ms(40), &f(0x000, &[0x81, 3]));
+    assert_eq!(v.node(3).unwrap().state_name(), "-");
+    v.push(ms(41), &f(0x703, &[0x00]));
+    assert_eq!(v.node(3).unwrap().nmt(), Some(NmtState::PreOperational));
+    assert!(!v.node(3).unwrap().state_commanded);
+}

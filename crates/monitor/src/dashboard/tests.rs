@@ -82,7 +82,7 @@ fn a_device_is_named_by_the_node_id_of_its_heartbeat_and_its_frames_are_decoded(
         },
         Seen::Frame {
             at: ms(2),
-            frame: frame(0x000, &[0x01, 5]),
+            frame: frame(0x000, &[0x80, 5]),
             sender: master,
             dropped: false,
         },
@@ -96,7 +96,8 @@ fn a_device_is_named_by_the_node_id_of_its_heartbeat_and_its_frames_are_decoded(
     let s = m.update(sample(10, seen, 3));
     assert_eq!(m.devices()[0].node_id, Some(5));
     assert_eq!(s.nodes[0].node_id, Some(5));
-    // The dropped heartbeat reached nobody: the node is still pre-operational.
+    // The dropped heartbeat (operational) reached nobody: the node is still in the
+    // pre-operational state the master's command put it in.
     assert_eq!(s.nodes[0].nmt, Some("pre-operational"));
     let froms: Vec<&str> = s.frames.iter().map(|r| r.from.as_str()).collect();
     assert_eq!(froms, ["island", "dashboard", "island"], "oldest first");
