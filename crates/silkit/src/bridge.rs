@@ -411,7 +411,9 @@ impl Deadlines {
     }
 }
 
-/// How long a run stopped at its bound may take to shut down before its participant leaves.
+/// How long a stopped lifecycle may take to shut down before its participant leaves anyway
+/// (a run stopped at its bound: the stop goes round through the system controller; a paced
+/// bridge leaving: its autonomous lifecycle shuts down by itself in milliseconds).
 const STOP_GRACE: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// What the system monitor saw of the others.
@@ -709,8 +711,8 @@ impl PacedBridge {
         self.lifecycle.state()
     }
 
-    /// Leave the SIL Kit simulation: stop the lifecycle, wait for it to end, destroy the
-    /// participant. Returns the final counters.
+    /// Leave the SIL Kit simulation: stop the lifecycle, wait (at most 5 s) for it to end,
+    /// destroy the participant. Returns the final counters.
     pub fn stop(mut self) -> Result<CountersSnapshot, Error> {
         self.shut_down()?;
         Ok(self.counters.snapshot())
@@ -728,7 +730,7 @@ impl PacedBridge {
             Ok(ParticipantState::Running | ParticipantState::Paused) => self
                 .lifecycle
                 .stop("cantwin leaves")
-                .and_then(|()| participant.wait_for_lifecycle(&self.lifecycle))
+                .and_then(|()| participant.wait_for_lifecycle_timeout(&self.lifecycle, STOP_GRACE))
                 .map(drop),
             _ => Ok(()),
         };
