@@ -33,6 +33,7 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         ),
         Fault::EmcyCobIdChangeWhileValid => ("emcy.cob-id-change-valid", Area::SyncEmcyTime),
         Fault::BlockUploadSwitchedOnPst0 => ("sdo.block-upload", Area::Sdo),
+        Fault::AcyclicTpdoNeverSent => ("pdo.transmission-acyclic", Area::Pdo),
     }
 }
 
@@ -199,6 +200,11 @@ fn cia301_7_5_2_33_duplicate_heartbeat_consumer_entry_accepted_is_caught() {
 #[test]
 fn cia301_7_3_2_2_3_tpdo_in_pre_operational_is_caught() {
     caught(Fault::TpdoInPreOperational);
+}
+
+#[test]
+fn cia301_7_2_2_2_2_acyclic_tpdo_never_sent_is_caught() {
+    caught(Fault::AcyclicTpdoNeverSent);
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.

@@ -460,6 +460,35 @@ fn set_type(ctx: &mut Ctx<'_>, comm: u16, ty: u8) -> Result<bool, Finding> {
     }
 }
 
+/// A mapped object of the TPDO whose mapping is `map` that the case can change over SDO:
+/// writable and readable in the file, byte-aligned, and read back at its mapped length.
+/// `(index, sub, value now)`.
+fn sdo_writable_mapped(ctx: &mut Ctx<'_>, map: u16) -> Result<Option<(u16, u8, Vec<u8>)>, Finding> {
+    let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+    for s in 1..=u8::try_from(n.min(64)).unwrap_or(0) {
+        let e = ctx.read_u32(map, s, "a mapping entry")?;
+        let (index, sub, bits) = (
+            u16::try_from(e >> 16).unwrap_or(0),
+            u8::try_from((e >> 8) & 0xFF).unwrap_or(0),
+            e & 0xFF,
+        );
+        // Indices below 0x20 are dummy entries (§7.4.7.1): nothing to change.
+        if index < 0x20 || bits == 0 || bits % 8 != 0 {
+            continue;
+        }
+        if !eds_entry(ctx, index, sub).is_some_and(|e| access(e).writable() && access(e).readable())
+        {
+            continue;
+        }
+        if let Ok(d) = ctx.upload(index, sub)?
+            && d.len() == usize::try_from(bits / 8).unwrap_or(0)
+        {
+            return Ok(Some((index, sub, d)));
+        }
+    }
+    Ok(None)
+}
+
 fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
     if ctx.profile.features.sync == Some(false) {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
@@ -469,6 +498,14 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
             "no valid TPDO with a mapping".into(),
         ));
     };
+    // Type 0 is acyclic synchronous (CiA 301 §7.2.2.2.2): the TPDO goes out with the
+    // SYNC after an event of the device. The case makes the event itself by changing a
+    // mapped value; without one it can change, there is nothing to see.
+    let Some((index, sub, before)) = sdo_writable_mapped(ctx, comm + 0x200)? else {
+        return Err(Finding::NotApplicable(format!(
+            "no mapped object of the TPDO at 0x{comm:04X} is writable over SDO, so no event can be caused"
+        )));
+    };
     let tt = ctx
         .upload(comm, 2)?
         .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
@@ -476,15 +513,34 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("transmission type 0 refused with 0x06090030"));
     }
     let sync = sync_id(ctx)?;
+    let sync_frame = Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?;
+    let mut changed = before.clone();
+    changed[0] ^= 0x01;
     ctx.nmt(NmtCs::Start)?;
-    // Without SYNC nothing goes out.
+    // Without SYNC nothing goes out; the first SYNCs may carry a TPDO for the start, at
+    // most one each.
     let idle = ctx
         .collect(Duration::from_millis(200), |f| is_pdo(f, cob))?
         .len();
-    let mut per_sync = Vec::new();
-    for _ in 0..5 {
-        ctx.send(Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?)?;
-        per_sync.push(
+    let mut settling = Vec::new();
+    for _ in 0..2 {
+        ctx.send(sync_frame)?;
+        settling.push(
+            ctx.collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
+                .len(),
+        );
+    }
+    // The event: the mapped value changes. Nothing before the next SYNC, one with it.
+    // The SYNC after may carry one again: the device's own process may have changed a
+    // mapped value meanwhile, which is an event too.
+    let written = ctx.download(index, sub, &changed)?;
+    let early = ctx
+        .collect(Duration::from_millis(50), |f| is_pdo(f, cob))?
+        .len();
+    let mut after = Vec::new();
+    for _ in 0..2 {
+        ctx.send(sync_frame)?;
+        after.push(
             ctx.collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
                 .len(),
         );
@@ -492,15 +548,35 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.nmt(NmtCs::EnterPreOperational)?;
     ctx.idle(Duration::from_millis(10))?;
     ctx.write(comm, 2, &tt, "the transmission type")?;
+    if written.is_ok() {
+        ctx.write(index, sub, &before, "the mapped object")?;
+    }
+    if let Err(a) = written {
+        return Err(Finding::NotApplicable(format!(
+            "the mapped object 0x{index:04X} sub {sub} could not be written in OPERATIONAL ({a}), so no event was caused"
+        )));
+    }
     if idle != 0 {
         return Err(fail(format!(
             "{idle} TPDOs in 200 ms without SYNC at type 0"
         )));
     }
-    if per_sync.iter().any(|n| *n > 1) {
-        return Err(fail(format!("TPDOs per SYNC at type 0: {per_sync:?}")));
+    if settling.iter().any(|n| *n > 1) {
+        return Err(fail(format!("TPDOs per SYNC at type 0: {settling:?}")));
     }
-    Ok(format!("none without SYNC; per SYNC {per_sync:?}"))
+    if early != 0 {
+        return Err(fail(format!(
+            "{early} TPDOs after 0x{index:04X} sub {sub} changed, before the SYNC, at type 0"
+        )));
+    }
+    if after[0] != 1 || after[1] > 1 {
+        return Err(fail(format!(
+            "after 0x{index:04X} sub {sub} changed, TPDOs per SYNC at type 0: {after:?}, expected one with the first SYNC and at most one with the next"
+        )));
+    }
+    Ok(format!(
+        "none without SYNC; 0x{index:04X} sub {sub} changed: none before the SYNC, one with it; per SYNC {after:?}"
+    ))
 }
 
 fn rtr(ctx: &mut Ctx<'_>) -> Outcome {

@@ -65,11 +65,14 @@ pub enum Fault {
     /// upload, as a server without block upload might, although the client's protocol
     /// switch threshold pst = 0 allows no change of protocol (§7.2.4.3.13).
     BlockUploadSwitchedOnPst0,
+    /// Never sends a TPDO whose transmission type is 0, where §7.2.2.2.2 requires it on
+    /// the SYNC after an event of the device (a change of a mapped value).
+    AcyclicTpdoNeverSent,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 14] = [
+    pub const ALL: [Fault; 15] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -84,6 +87,7 @@ impl Fault {
         Fault::DuplicateHeartbeatConsumerAccepted,
         Fault::TpdoInPreOperational,
         Fault::BlockUploadSwitchedOnPst0,
+        Fault::AcyclicTpdoNeverSent,
     ];
 }
 
@@ -587,6 +591,18 @@ impl Broken {
                 }
             }
             return Some(frame);
+        }
+        if self.fault == Some(Fault::AcyclicTpdoNeverSent) && !frame.is_remote() {
+            let od = self.device.od();
+            let acyclic = (0..4u16).any(|k| {
+                let cob = od.get_unsigned(0x1800 + k, 1).unwrap_or(0x8000_0000) as u32;
+                cob & 0x8000_0000 == 0
+                    && cob & 0x7FF == u32::from(id)
+                    && od.get_unsigned(0x1800 + k, 2).unwrap_or(255) == 0
+            });
+            if acyclic {
+                return None;
+            }
         }
         if id != self.sdo_tx() || data.len() != 8 {
             return Some(frame);
