@@ -387,7 +387,14 @@ pub fn objects(spec: &Objects) -> Vec<Object> {
     let mut modes = SubObject::new("Modes of operation", DataType::Integer8, Access::Rw)
         .default(Value::Integer8(mode));
     if let Some((low, high)) = spec.modes.code_range() {
-        modes = modes.limits(Value::Integer8(low), Value::Integer8(high));
+        // The limits hold the default too: a drive that starts in no mode (0, CiA 402-2
+        // object 6060h) reads 0 and takes 0 back, and its EDS's DefaultValue lies inside
+        // its limits (CiA 306 §4.6.3). Which other codes are modes of the drive is its
+        // write hook's to say (0x06090030).
+        modes = modes.limits(
+            Value::Integer8(low.min(mode)),
+            Value::Integer8(high.max(mode)),
+        );
     }
     if spec.mode_mappable {
         modes = modes.mappable();
