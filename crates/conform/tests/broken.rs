@@ -34,6 +34,7 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::EmcyCobIdChangeWhileValid => ("emcy.cob-id-change-valid", Area::SyncEmcyTime),
         Fault::BlockUploadSwitchedOnPst0 => ("sdo.block-upload", Area::Sdo),
         Fault::AcyclicTpdoNeverSent => ("pdo.transmission-acyclic", Area::Pdo),
+        Fault::PdoCobIdChangeWhileValidUnanswered => ("pdo.cob-id-change-valid", Area::Pdo),
     }
 }
 
@@ -205,6 +206,11 @@ fn cia301_7_3_2_2_3_tpdo_in_pre_operational_is_caught() {
 #[test]
 fn cia301_7_2_2_2_2_acyclic_tpdo_never_sent_is_caught() {
     caught(Fault::AcyclicTpdoNeverSent);
+}
+
+#[test]
+fn cia301_7_5_2_37_pdo_cob_id_change_while_valid_unanswered_is_caught() {
+    caught(Fault::PdoCobIdChangeWhileValidUnanswered);
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.

@@ -203,7 +203,12 @@ fn cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let other = (cob & !0x7FF) | (((cob & 0x7FF) + 1) & 0x7FF);
     match ctx.download(comm, 1, &other.to_le_bytes())? {
-        Err(a) => Ok(format!("0x{comm:04X} sub 1 = 0x{other:08X} refused: {a}")),
+        // The refusal must be the server's abort: silence, or the client giving up,
+        // says nothing of the check (§7.5.2.35 – §7.5.2.38).
+        Err(a) if a.by_server => Ok(format!("0x{comm:04X} sub 1 = 0x{other:08X} refused: {a}")),
+        Err(a) => Err(fail(format!(
+            "writing 0x{other:08X} to 0x{comm:04X} sub 1: {a}"
+        ))),
         Ok(()) => {
             ctx.write(comm, 1, &(other | 0x8000_0000).to_le_bytes(), "the COB-ID")?;
             ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID")?;

@@ -68,11 +68,14 @@ pub enum Fault {
     /// Never sends a TPDO whose transmission type is 0, where §7.2.2.2.2 requires it on
     /// the SYNC after an event of the device (a change of a mapped value).
     AcyclicTpdoNeverSent,
+    /// Does not answer a write of a new CAN-ID to a valid PDO's COB-ID (sub 1), where
+    /// §7.5.2.35 – §7.5.2.38 require the server to refuse it with an abort.
+    PdoCobIdChangeWhileValidUnanswered,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 15] = [
+    pub const ALL: [Fault; 16] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -88,6 +91,7 @@ impl Fault {
         Fault::TpdoInPreOperational,
         Fault::BlockUploadSwitchedOnPst0,
         Fault::AcyclicTpdoNeverSent,
+        Fault::PdoCobIdChangeWhileValidUnanswered,
     ];
 }
 
@@ -417,6 +421,26 @@ impl Broken {
                     .err()
                     .map(|a| a.to_u32());
                 self.answer(out, data, abort);
+                None
+            }
+            Some(Fault::PdoCobIdChangeWhileValidUnanswered) if is_expedited_download(byte0) => {
+                let (index, sub, value) = expedited(data);
+                let comm = (0x1400..=0x15FF).contains(&index) || (0x1800..=0x19FF).contains(&index);
+                let cob = self
+                    .device
+                    .od()
+                    .get_unsigned(index, 1)
+                    .unwrap_or(0x8000_0000) as u32;
+                let new = u32::from_le_bytes(value);
+                if !comm
+                    || sub != 1
+                    || cob & 0x8000_0000 != 0
+                    || new & 0x8000_0000 != 0
+                    || new & 0x1FFF_FFFF == cob & 0x1FFF_FFFF
+                {
+                    return Some(*frame);
+                }
+                // Swallowed: the client hears nothing and the COB-ID keeps its value.
                 None
             }
             Some(Fault::ErrorHistoryWriteAccepted) if is_expedited_download(byte0) => {
