@@ -336,12 +336,21 @@ fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
         .upload(0x1014, 0)?
         .map(|d| u32_of(&d) & 0x7FF)
         .unwrap_or(ctx.emcy_id().as_raw());
+    // Only what comes after the command answers it: a boot-up or EMCY the transport still
+    // holds from before is read off first.
+    ctx.drain()?;
     ctx.nmt(cantwin_canopen::wire::NmtCs::ResetCommunication)?;
     let ec = ctx.ec_id();
     let within = ctx.options.boot_timeout;
-    let first = ctx.wait_for(within, |f| f.id() == ec || f.id().as_raw() == emcy)?;
+    // The boot-up message is the one with data 0x00 (CiA 301 §7.2.8.3.2.1); a heartbeat
+    // on the same COB-ID carries the state (0x04 stopped, 0x05 operational, 0x7F
+    // pre-operational) and is not it.
+    let boot_up = |f: &Frame| f.id() == ec && !f.is_remote() && f.data_bytes() == [0];
+    let first = ctx.wait_for(within, |f| {
+        boot_up(f) || (f.id().as_raw() == emcy && !f.is_remote())
+    })?;
     match first {
-        Some((_, f)) if f.id() == ec => Ok("the boot-up message comes first".into()),
+        Some((_, f)) if boot_up(&f) => Ok("the boot-up message comes first".into()),
         Some((_, f)) => Err(fail(format!("EMCY {f} before the boot-up message"))),
         None => Err(fail("no boot-up message after reset communication")),
     }
@@ -425,4 +434,86 @@ fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
         )));
     }
     Ok(format!("{f1} then {f2} {} ms later", gap.as_millis()))
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use std::collections::VecDeque;
+
+    use cantwin_can::Instant;
+    use cantwin_eds::Eds;
+
+    use super::*;
+    use crate::Options;
+    use crate::profile::Profile;
+    use crate::transport::{Transport, TransportError};
+
+    /// A node-5 device that answers an SDO request with an abort, behind which the
+    /// transport holds a boot-up from before the reset, and that answers NMT reset
+    /// communication with heartbeats reporting PRE-OPERATIONAL only.
+    struct HeartbeatsOnly {
+        now: Instant,
+        held: VecDeque<(Instant, Frame)>,
+        reset_seen: bool,
+        next_heartbeat: Instant,
+    }
+
+    impl Transport for HeartbeatsOnly {
+        fn send(&mut self, frame: Frame) -> Result<(), TransportError> {
+            if frame.id().as_raw() == 0x605 {
+                let d = frame.data_bytes();
+                // Abort 0x06020000: the object does not exist.
+                let abort = [0x80, d[1], d[2], d[3], 0x00, 0x00, 0x02, 0x06];
+                self.held
+                    .push_back((self.now, Frame::std(0x585, &abort).unwrap()));
+                self.held
+                    .push_back((self.now, Frame::std(0x705, &[0]).unwrap()));
+            }
+            if frame.id().as_raw() == 0 && frame.data_bytes() == [0x82, 5] {
+                self.reset_seen = true;
+                self.next_heartbeat = self.now + Duration::from_millis(10);
+            }
+            Ok(())
+        }
+        fn recv(&mut self, deadline: Instant) -> Result<Option<(Instant, Frame)>, TransportError> {
+            if let Some(f) = self.held.pop_front() {
+                return Ok(Some(f));
+            }
+            if self.reset_seen && self.next_heartbeat <= deadline {
+                let t = self.next_heartbeat;
+                self.now = self.now.max(t);
+                self.next_heartbeat = t + Duration::from_millis(10);
+                return Ok(Some((t, Frame::std(0x705, &[0x7F]).unwrap())));
+            }
+            self.now = self.now.max(deadline);
+            Ok(None)
+        }
+        fn now(&self) -> Instant {
+            self.now
+        }
+        fn describe(&self) -> String {
+            "heartbeats only".into()
+        }
+    }
+
+    #[test]
+    fn neither_a_held_boot_up_nor_a_heartbeat_is_the_boot_up_after_the_reset() {
+        let mut t = HeartbeatsOnly {
+            now: Instant::from_nanos(10_000_000),
+            held: VecDeque::new(),
+            reset_seen: false,
+            next_heartbeat: Instant::from_nanos(0),
+        };
+        let eds = Eds::default();
+        let profile = Profile::from_eds(&eds);
+        let options = Options::default();
+        let mut ctx = Ctx::new(&mut t, 5, &eds, &profile, &options);
+        let got = emcy_after_boot(&mut ctx);
+        assert!(
+            matches!(&got, Err(Finding::Fail { why, .. }) if why.contains("no boot-up")),
+            "{got:?}"
+        );
+    }
 }
