@@ -805,10 +805,12 @@ pub fn draw(f: &mut Frame<'_>, view: &NetworkView, ui: &Ui) {
                 "cantwin monitor",
                 Style::default().add_modifier(Modifier::BOLD),
             ),
+            // The source last: on a narrow terminal it is what the edge cuts, never the
+            // trace mode or the time.
             Span::raw(format!(
-                "  {}  bus time {} s  {mode}",
-                ui.source,
-                seconds(view.now())
+                "  {mode}  bus time {} s  {}",
+                seconds(view.now()),
+                ui.source
             )),
         ])),
         title,

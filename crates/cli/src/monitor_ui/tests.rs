@@ -499,6 +499,12 @@ fn an_80x24_terminal_shows_whole_names_states_kinds_and_decoded_text() {
         "{text}"
     );
     assert!(screen[23].starts_with("q quit"), "{}", screen[23]);
+    // The title keeps the trace mode and the bus time; only the source's tail may be cut.
+    assert!(
+        screen[0].starts_with("cantwin monitor  scrolling trace  bus time "),
+        "{}",
+        screen[0]
+    );
     assert!(HELP_NARROW.chars().count() <= 80);
     assert!(
         screen[23].trim_end().ends_with("/ filter"),
@@ -508,6 +514,11 @@ fn an_80x24_terminal_shows_whole_names_states_kinds_and_decoded_text() {
     // The fixed trace fits too, with its decoded text.
     ui.on_key(key(KeyCode::Char('t')), &view);
     let screen = render_at(&view, &ui, 80, 24);
+    assert!(
+        screen[0].starts_with("cantwin monitor  fixed trace  bus time "),
+        "{}",
+        screen[0]
+    );
     let line = fixed_row(&screen, "18C");
     assert!(
         line.contains("TPDO1 node 12: status word="),
