@@ -73,7 +73,7 @@ pub struct Args {
     /// each benchmark's default: 60 for bus, network and sdo, 2 per fleet trial).
     #[arg(long)]
     seconds: Option<f64>,
-    /// bus, network, sdo: trials of the same deterministic run; each figure measured in
+    /// bus, network, sdo, silkit: trials of the same run; each figure measured in
     /// wall time is reported as the best trial (the floors are judged on it) and the median.
     /// Twin benchmarks: the twin and its baselines are each reported at their best trial.
     #[arg(long, default_value_t = 5)]
@@ -162,7 +162,9 @@ pub fn run(args: &Args) -> Result<()> {
             "sdo" => bench_sdo(args, &spinner),
             "memory" => bench_memory(args),
             "cia402" => cia402::bench(args),
-            "silkit" => crate::silkit::bench(args.write, &args.file, !args.names.is_empty()),
+            "silkit" => {
+                crate::silkit::bench(args.write, &args.file, !args.names.is_empty(), args.trials)
+            }
             twin => bench_twin(args, twin),
         };
         spinner.finish_and_clear();

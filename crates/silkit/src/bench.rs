@@ -37,6 +37,21 @@ pub struct BenchReport {
     pub frames_per_second: f64,
     /// Mean wall time from `SendFrame` to reception, in microseconds.
     pub latency_us: f64,
+    /// Synchronisation steps in [`BenchReport::wall`]: from the first step to the stop.
+    pub steps: u64,
+}
+
+impl BenchReport {
+    /// Mean wall time of one synchronisation step, in microseconds.
+    pub fn step_us(&self) -> f64 {
+        self.wall.as_secs_f64() * 1e6 / self.steps.max(1) as f64
+    }
+
+    /// The latency in synchronisation steps: how many steps' wall time a frame takes from
+    /// `SendFrame` to its reception.
+    pub fn latency_steps(&self) -> f64 {
+        self.latency_us / self.step_us().max(1e-9)
+    }
 }
 
 /// What a run measures.
@@ -161,6 +176,8 @@ pub fn run(kit: &SilKit, registry_uri: &str, config: BenchConfig) -> Result<Benc
         wall,
         frames_per_second: frames as f64 / wall.as_secs_f64().max(1e-9),
         latency_us: shared.latency_ns.load(Ordering::Relaxed) as f64 / count as f64 / 1000.0,
+        // Timed from the start of step 1 to the start of step `steps + 2`.
+        steps: config.steps + 1,
     })
 }
 
