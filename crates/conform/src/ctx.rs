@@ -9,17 +9,19 @@ use cantwin_canopen::wire::NmtCs;
 use cantwin_eds::Eds;
 
 use crate::Options;
-use crate::profile::Profile;
+use crate::profile::{FailureKind, Profile};
 use crate::report::{Direction, LoggedFrame, MAX_LOGGED_FRAMES};
 use crate::transport::{Transport, TransportError};
 
 /// Why a case did not pass.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub(crate) enum Finding {
-    /// The device is wrong; `abort` is the code it answered with, if that was the fault.
+    /// The device is wrong; `abort` is the code it answered with, if that was the fault;
+    /// `kind` what kind of failure it is (what a deviation may excuse).
     Fail {
         why: String,
         abort: Option<AbortCode>,
+        kind: FailureKind,
     },
     /// The optional feature is not offered; `abort` is the code the device refused it
     /// with, if it did.
@@ -39,11 +41,17 @@ impl From<TransportError> for Finding {
     }
 }
 
-/// A failure with this reason.
+/// A failure with this reason: a wrong answer or content ([`FailureKind::Value`]).
 pub(crate) fn fail(why: impl Into<String>) -> Finding {
+    fail_kind(FailureKind::Value, why)
+}
+
+/// A failure of `kind` with this reason (not an abort: [`fail_abort`] has the code).
+pub(crate) fn fail_kind(kind: FailureKind, why: impl Into<String>) -> Finding {
     Finding::Fail {
         why: why.into(),
         abort: None,
+        kind,
     }
 }
 
@@ -52,6 +60,21 @@ pub(crate) fn fail_abort(why: impl Into<String>, code: AbortCode) -> Finding {
     Finding::Fail {
         why: format!("{}: abort 0x{:08X}", why.into(), code.to_u32()),
         abort: Some(code),
+        kind: FailureKind::Abort,
+    }
+}
+
+/// A failure of an SDO transfer `a`: the server's abort, or silence when the client gave
+/// up (a timeout, or an answer it could not take).
+pub(crate) fn fail_sdo(why: impl Into<String>, a: Aborted) -> Finding {
+    Finding::Fail {
+        why: format!("{}: {a}", why.into()),
+        abort: a.by_server.then_some(a.code),
+        kind: if a.by_server {
+            FailureKind::Abort
+        } else {
+            FailureKind::Silence
+        },
     }
 }
 
@@ -440,10 +463,10 @@ impl<'a> Ctx<'a> {
                 "{what} (0x{index:04X} sub {sub}) read {} bytes, expected 1 to 4",
                 d.len()
             ))),
-            Err(a) => Err(Finding::Fail {
-                why: format!("reading {what} (0x{index:04X} sub {sub}): {a}"),
-                abort: a.by_server.then_some(a.code),
-            }),
+            Err(a) => Err(fail_sdo(
+                format!("reading {what} (0x{index:04X} sub {sub})"),
+                a,
+            )),
         }
     }
 
@@ -451,10 +474,10 @@ impl<'a> Ctx<'a> {
     pub fn write(&mut self, index: u16, sub: u8, data: &[u8], what: &str) -> Result<(), Finding> {
         match self.download(index, sub, data)? {
             Ok(()) => Ok(()),
-            Err(a) => Err(Finding::Fail {
-                why: format!("writing {what} (0x{index:04X} sub {sub}): {a}"),
-                abort: a.by_server.then_some(a.code),
-            }),
+            Err(a) => Err(fail_sdo(
+                format!("writing {what} (0x{index:04X} sub {sub})"),
+                a,
+            )),
         }
     }
 

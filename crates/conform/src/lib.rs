@@ -53,7 +53,7 @@ pub mod transport_socketcan;
 use cantwin_can::Duration;
 use cantwin_eds::Eds;
 
-pub use profile::{Deviation, Profile, ProfileError, ProfileFile};
+pub use profile::{Deviation, FailureKind, Profile, ProfileError, ProfileFile};
 pub use report::{Area, CaseReport, Direction, LoggedFrame, Progress, Report, Severity, Verdict};
 pub use transport::{PortTransport, Transport, TransportError, VirtualBus};
 
@@ -116,10 +116,15 @@ fn verdict_of(
     profile: &Profile,
 ) -> (Verdict, String, Option<String>) {
     let dev = profile.deviation(info.id);
-    // A deviation with an abort code matches a refusal with that code; one without
-    // matches a behaviour that is not a refusal (never a device that does not answer).
-    let matches = |abort: Option<cantwin_canopen::AbortCode>| {
-        dev.is_some_and(|d| d.abort == abort.map(|a| a.to_u32()))
+    // A deviation with an abort code matches a refusal with that code; one without matches
+    // only a failure of the kind it names (timing, value, a missing event), never a
+    // device that does not answer (the profile's parser refuses a deviation for silence).
+    let matches = |abort: Option<cantwin_canopen::AbortCode>, kind: Option<FailureKind>| {
+        dev.is_some_and(|d| match (d.abort, abort) {
+            (Some(want), Some(got)) => want == got.to_u32(),
+            (Some(_), None) | (None, Some(_)) => false,
+            (None, None) => kind.is_some_and(|k| k != FailureKind::Silence && d.kind == Some(k)),
+        })
     };
     let section = dev.map(|d| d.section.clone());
     match outcome {
@@ -134,9 +139,12 @@ fn verdict_of(
             ),
             None => (Verdict::Pass, note, None),
         },
-        Err(Finding::Fail { why, abort }) | Err(Finding::NotSupported { why, abort })
-            if matches(abort) =>
-        {
+        Err(Finding::Fail { why, abort, kind }) if matches(abort, Some(kind)) => {
+            let behaviour = dev.map(|d| d.behaviour.as_str()).unwrap_or_default();
+            (Verdict::Deviation, format!("{behaviour}: {why}"), section)
+        }
+        // A feature not offered matches a deviation by its abort code only.
+        Err(Finding::NotSupported { why, abort }) if abort.is_some() && matches(abort, None) => {
             let behaviour = dev.map(|d| d.behaviour.as_str()).unwrap_or_default();
             (Verdict::Deviation, format!("{behaviour}: {why}"), section)
         }

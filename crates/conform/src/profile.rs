@@ -19,7 +19,8 @@
 //! ```
 //!
 //! A deviation names the case it excuses: when that case fails the way the deviation says
-//! (with its abort code, if one is given), the case is reported as a deviation with the
+//! (with its abort code, or, without one, with a failure of the kind it names: `timing`,
+//! `value` or `event`; never silence), the case is reported as a deviation with the
 //! manual's section; when it passes, the listed deviation was not observed and the case
 //! fails; a failure the profile does not list fails.
 
@@ -36,6 +37,9 @@ pub enum ProfileError {
     /// A deviation that names no case of the catalogue.
     #[error("deviation names the case {0:?}, which does not exist")]
     UnknownCase(String),
+    /// A deviation that does not say what failure it excuses, or says silence.
+    #[error("deviation of {0:?}: {1}")]
+    Excuse(String, &'static str),
 }
 
 /// A deviation the device's manual prescribes.
@@ -51,6 +55,30 @@ pub struct Deviation {
     /// The abort code the device answers with, where the deviation is an abort.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub abort: Option<u32>,
+    /// Without an abort code: the kind of failure the deviation excuses (`timing`,
+    /// `value` or `event`). Silence is never excused, and an abort needs its code.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub kind: Option<FailureKind>,
+}
+
+/// What kind of failure a case found: a deviation without an abort code excuses only a
+/// failure of the kind it names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FailureKind {
+    /// The server refused with an SDO abort code.
+    Abort,
+    /// The device did not answer a request addressed to it (an SDO timeout, an unanswered
+    /// guarding request, no boot-up message after a reset). Never excused: a device that
+    /// is not there must not pass as one with a deviation.
+    Silence,
+    /// A frame came at the wrong time.
+    Timing,
+    /// An answer or a frame came with the wrong content, or a request was taken that
+    /// should have been refused.
+    Value,
+    /// An event the device produces on its own (an EMCY, a TPDO) did not come.
+    Event,
 }
 
 /// SDO protocols beyond expedited (CiA 306 has no key for them).
@@ -131,6 +159,21 @@ impl ProfileFile {
         for d in &file.deviations {
             if !crate::catalogue().iter().any(|c| c.id == d.case) {
                 return Err(ProfileError::UnknownCase(d.case.clone()));
+            }
+            let excuse = match (d.abort, d.kind) {
+                (Some(_), None | Some(FailureKind::Abort)) => None,
+                (Some(_), Some(_)) => Some("an abort code excuses an abort only"),
+                (None, None) => Some(
+                    "give its abort code, or the kind of failure it excuses (kind = \"timing\", \"value\" or \"event\")",
+                ),
+                (None, Some(FailureKind::Abort)) => Some("an abort needs its abort code"),
+                (None, Some(FailureKind::Silence)) => {
+                    Some("silence is never a deviation: a device must answer")
+                }
+                (None, Some(_)) => None,
+            };
+            if let Some(why) = excuse {
+                return Err(ProfileError::Excuse(d.case.clone(), why));
             }
         }
         Ok(file)

@@ -45,8 +45,14 @@ fn conform(fault: Option<Fault>, area: Area) -> Report {
 
 /// As [`conform`], with the device powered `powered` before the runner attaches.
 fn conform_powered(fault: Option<Fault>, area: Area, powered: Duration) -> Report {
+    conform_profiled(fault, area, powered, "")
+}
+
+/// As [`conform_powered`], with the deviations and features of profile file `profile`.
+fn conform_profiled(fault: Option<Fault>, area: Area, powered: Duration, profile: &str) -> Report {
     let desc = Arc::new(broken::description());
     let eds = broken::eds(&desc);
+    let file = cantwin_conform::ProfileFile::parse(profile).unwrap();
     let (sim, bus, _) = broken::simulation_powered(&desc, fault, powered);
     let mut transport = VirtualBus::new(sim, bus).unwrap();
     let options = Options {
@@ -57,7 +63,7 @@ fn conform_powered(fault: Option<Fault>, area: Area, powered: Duration) -> Repor
         &mut transport,
         NODE_ID,
         &eds,
-        &Profile::from_eds(&eds),
+        &Profile::from_eds(&eds).with_file(&file, "test"),
         &options,
         &mut |_| {},
     )
@@ -222,5 +228,65 @@ fn every_case_named_is_in_the_catalogue() {
         let info = catalogue.iter().find(|c| c.id == id);
         assert!(info.is_some(), "{fault:?}: no case {id} in the catalogue");
         assert_eq!(info.unwrap().area, area, "{fault:?}: {id}");
+    }
+}
+
+/// A deviation without an abort code excuses only the kind of failure it names: one for a
+/// wrong value does not excuse a device that sends no boot-up (silence), nor one for a
+/// missing event a PDO COB-ID change that is taken (a value).
+#[test]
+fn a_deviation_without_an_abort_code_excuses_only_its_kind_of_failure() {
+    let listed = |case: &str, kind: &str| {
+        format!(
+            "[[deviation]]\ncase = \"{case}\"\nsection = \"§1\"\nbehaviour = \"x\"\nkind = \"{kind}\"\n"
+        )
+    };
+    let id = "nmt.boot-up-reset-communication";
+    let r = conform_profiled(
+        Some(Fault::NoBootUpAfterResetCommunication),
+        Area::Nmt,
+        broken::POWERED_BEFORE,
+        &listed(id, "value"),
+    );
+    let c = r.case(id).unwrap();
+    assert_eq!(c.verdict, Verdict::Fail, "{}", c.detail);
+    let id = "pdo.cob-id-change-valid";
+    let r = conform_profiled(
+        Some(Fault::PdoCobIdChangeWhileValid),
+        Area::Pdo,
+        broken::POWERED_BEFORE,
+        &listed(id, "event"),
+    );
+    let c = r.case(id).unwrap();
+    assert_eq!(c.verdict, Verdict::Fail, "{}", c.detail);
+    // Named with its kind, the same failure is the listed deviation.
+    let r = conform_profiled(
+        Some(Fault::PdoCobIdChangeWhileValid),
+        Area::Pdo,
+        broken::POWERED_BEFORE,
+        &listed(id, "value"),
+    );
+    let c = r.case(id).unwrap();
+    assert_eq!(c.verdict, Verdict::Deviation, "{}", c.detail);
+}
+
+#[test]
+fn a_deviation_for_silence_or_without_its_kind_is_refused() {
+    for body in [
+        "kind = \"silence\"\n",
+        "",
+        "kind = \"abort\"\n",
+        "abort = 0x05040001\nkind = \"value\"\n",
+    ] {
+        let text = format!(
+            "[[deviation]]\ncase = \"nmt.boot-up-reset-communication\"\nsection = \"§1\"\nbehaviour = \"x\"\n{body}"
+        );
+        assert!(
+            matches!(
+                cantwin_conform::ProfileFile::parse(&text),
+                Err(cantwin_conform::ProfileError::Excuse(..))
+            ),
+            "{body}"
+        );
     }
 }

@@ -3,7 +3,8 @@
 use cantwin_canopen::AbortCode;
 
 use super::{Case, a, access, data_type, default_bytes, entries, hex, m};
-use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail};
+use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail, fail_kind};
+use crate::profile::FailureKind;
 use crate::report::Area::Eds as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -71,9 +72,12 @@ fn scan<'c>(ctx: &'c mut Ctx<'_>) -> Result<&'c [ScanEntry], Finding> {
             out.push((index, sub, got));
             if silent == 5 {
                 ctx.scan = Some(out);
-                return Err(fail(format!(
-                    "the device stopped answering at 0x{index:04X} sub {sub} (5 requests in a row without an answer)"
-                )));
+                return Err(fail_kind(
+                    FailureKind::Silence,
+                    format!(
+                        "the device stopped answering at 0x{index:04X} sub {sub} (5 requests in a row without an answer)"
+                    ),
+                ));
             }
         }
         ctx.scan = Some(out);

@@ -6,7 +6,8 @@ use cantwin_can::{Duration, Frame, Id};
 use cantwin_canopen::AbortCode;
 
 use super::{Case, access, eds_entry, m, within};
-use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, not_supported};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, fail_kind, fail_sdo, not_supported};
+use crate::profile::FailureKind;
 use crate::report::Area::ErrorControl as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -74,7 +75,7 @@ fn heartbeat_period(ctx: &mut Ctx<'_>) -> Outcome {
     heartbeat_writable(ctx)?;
     let orig = ctx
         .upload(0x1017, 0)?
-        .map_err(|a| fail(format!("reading 0x1017: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1017", a))?;
     ctx.write(
         0x1017,
         0,
@@ -90,18 +91,21 @@ fn heartbeat_period(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.write(0x1017, 0, &orig, "the heartbeat producer time")?;
     let nominal = Duration::from_millis(100);
     if !(9..=11).contains(&beats.len()) {
-        return Err(fail(format!(
-            "{} heartbeats in 1.05 s at 100 ms",
-            beats.len()
-        )));
+        return Err(fail_kind(
+            FailureKind::Timing,
+            format!("{} heartbeats in 1.05 s at 100 ms", beats.len()),
+        ));
     }
     for w in beats.windows(2) {
         let d = w[1].0.saturating_duration_since(w[0].0);
         if !within(ctx, d, nominal) {
-            return Err(fail(format!(
-                "a heartbeat interval of {} µs, nominal 100 ms",
-                d.as_micros()
-            )));
+            return Err(fail_kind(
+                FailureKind::Timing,
+                format!(
+                    "a heartbeat interval of {} µs, nominal 100 ms",
+                    d.as_micros()
+                ),
+            ));
         }
     }
     for (_, f) in &beats {
@@ -121,7 +125,7 @@ fn heartbeat_off(ctx: &mut Ctx<'_>) -> Outcome {
     heartbeat_writable(ctx)?;
     let orig = ctx
         .upload(0x1017, 0)?
-        .map_err(|a| fail(format!("reading 0x1017: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1017", a))?;
     ctx.write(
         0x1017,
         0,
@@ -197,24 +201,31 @@ fn heartbeat_consumer(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.idle(Duration::from_millis(50))?;
     ctx.write(0x1016, 1, &0u32.to_le_bytes(), "a heartbeat consumer entry")?;
     if !early.is_empty() {
-        return Err(fail(
+        return Err(fail_kind(
+            FailureKind::Timing,
             "EMCY 0x8130 before the first heartbeat of the consumed node",
         ));
     }
     let Some((t, _)) = got else {
-        return Err(fail(format!(
-            "no EMCY 0x8130 within 600 ms of the last heartbeat of node {other} (consumer time 200 ms)"
-        )));
+        return Err(fail_kind(
+            FailureKind::Event,
+            format!(
+                "no EMCY 0x8130 within 600 ms of the last heartbeat of node {other} (consumer time 200 ms)"
+            ),
+        ));
     };
     let after = t.saturating_duration_since(sent);
     let lo = Duration::from_millis(200).saturating_sub(ctx.options.slack);
     if after < lo
         || !within(ctx, after, Duration::from_millis(200)) && after > Duration::from_millis(200)
     {
-        return Err(fail(format!(
-            "EMCY 0x8130 {} µs after the heartbeat, consumer time 200 ms",
-            after.as_micros()
-        )));
+        return Err(fail_kind(
+            FailureKind::Timing,
+            format!(
+                "EMCY 0x8130 {} µs after the heartbeat, consumer time 200 ms",
+                after.as_micros()
+            ),
+        ));
     }
     Ok(format!(
         "EMCY 0x8130 {} ms after the last heartbeat",
@@ -302,7 +313,10 @@ fn node_guarding(ctx: &mut Ctx<'_>) -> Outcome {
     let mut toggles = Vec::new();
     for a in &answers {
         let Some(f) = a else {
-            return Err(fail("a guarding request was not answered within 100 ms"));
+            return Err(fail_kind(
+                FailureKind::Silence,
+                "a guarding request was not answered within 100 ms",
+            ));
         };
         if f.len() != 1 || f.data_bytes()[0] & 0x7F != 0x7F {
             return Err(fail(format!(
@@ -336,19 +350,26 @@ fn life_guarding(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.idle(Duration::from_millis(50))?;
     guarding_off(ctx, &hb)?;
     if first.is_none() {
-        return Err(fail("the guarding request was not answered"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "the guarding request was not answered",
+        ));
     }
     let Some((t, _)) = got else {
-        return Err(fail(
+        return Err(fail_kind(
+            FailureKind::Event,
             "no EMCY 0x8130 within 900 ms of the last guarding request (life time 300 ms)",
         ));
     };
     let after = t.saturating_duration_since(sent);
     if after + ctx.options.slack < Duration::from_millis(300) {
-        return Err(fail(format!(
-            "EMCY 0x8130 {} ms after the last request, before the life time of 300 ms",
-            after.as_millis()
-        )));
+        return Err(fail_kind(
+            FailureKind::Timing,
+            format!(
+                "EMCY 0x8130 {} ms after the last request, before the life time of 300 ms",
+                after.as_millis()
+            ),
+        ));
     }
     Ok(format!(
         "EMCY 0x8130 {} ms after the last request",

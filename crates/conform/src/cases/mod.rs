@@ -7,7 +7,7 @@ use cantwin_canopen::od::{Access, DataType};
 use cantwin_eds::Entry;
 
 use crate::CaseInfo;
-use crate::ctx::{Ctx, Finding, Outcome, fail};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_sdo};
 use crate::report::{Area, Severity};
 
 mod eds;
@@ -171,9 +171,10 @@ pub(crate) fn recovered(ctx: &mut Ctx<'_>, after: &str) -> Result<(), Finding> {
             "after {after}, reading 0x1000 returned {} bytes",
             d.len()
         ))),
-        Err(a) => Err(fail(format!(
-            "after {after}, the server no longer serves 0x1000: {a}"
-        ))),
+        Err(a) => Err(fail_sdo(
+            format!("after {after}, the server no longer serves 0x1000"),
+            a,
+        )),
     }
 }
 

@@ -5,7 +5,8 @@ use cantwin_can::{Duration, Frame, Instant};
 use cantwin_canopen::wire::NmtCs;
 
 use super::{Case, access, eds_entry, m};
-use crate::ctx::{Ctx, Finding, Outcome, fail};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_kind, fail_sdo};
+use crate::profile::FailureKind;
 use crate::report::Area::Nmt as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -76,10 +77,13 @@ fn boot(ctx: &mut Ctx<'_>, cs: NmtCs, what: &str) -> Outcome {
             "boot-up {} ms after {what}",
             t.saturating_duration_since(sent).as_millis()
         )),
-        None => Err(fail(format!(
-            "no boot-up message within {} ms of {what}",
-            ctx.options.boot_timeout.as_millis()
-        ))),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            format!(
+                "no boot-up message within {} ms of {what}",
+                ctx.options.boot_timeout.as_millis()
+            ),
+        )),
     }
 }
 
@@ -99,7 +103,10 @@ fn broadcast(ctx: &mut Ctx<'_>) -> Outcome {
     let within = ctx.options.boot_timeout;
     match ctx.wait_for(within, |f| f.id() == ec && f.data_bytes() == [0])? {
         Some(_) => Ok("boot-up after a broadcast reset communication".into()),
-        None => Err(fail("no boot-up after reset communication to node-ID 0")),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            "no boot-up after reset communication to node-ID 0",
+        )),
     }
 }
 
@@ -168,7 +175,12 @@ fn states(ctx: &mut Ctx<'_>) -> Outcome {
                     "after {cs:?} the device reports state {s}, expected {want} ({name})"
                 )));
             }
-            None => return Err(fail(format!("no state report after {cs:?}"))),
+            None => {
+                return Err(fail_kind(
+                    FailureKind::Silence,
+                    format!("no state report after {cs:?}"),
+                ));
+            }
         }
     }
     if let Some(o) = orig {
@@ -251,11 +263,11 @@ fn pdo_operational_only(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let stimulus = if eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
         let et = ctx
             .upload(comm, 5)?
-            .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+            .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 5"), a))?;
         ctx.write(comm, 2, &[0xFF], "the transmission type")?;
         ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
         Stimulus::EventTimer(et)
@@ -315,7 +327,10 @@ fn restores(ctx: &mut Ctx<'_>, cs: NmtCs, what: &str) -> Outcome {
     )?;
     let t0: Instant = ctx.now();
     if ctx.reset(cs)?.is_none() {
-        return Err(fail(format!("no boot-up after {what}")));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            format!("no boot-up after {what}"),
+        ));
     }
     let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
     if after != before {

@@ -118,10 +118,7 @@ fn write_back(ctx: &mut Ctx<'_>) -> Outcome {
     if bad.is_empty() {
         Ok(format!("{written} entries written back"))
     } else {
-        Err(Finding::Fail {
-            why: super::listing(&bad),
-            abort: None,
-        })
+        Err(fail(super::listing(&bad)))
     }
 }
 

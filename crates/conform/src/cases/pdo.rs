@@ -6,7 +6,8 @@ use cantwin_can::{Duration, Frame, Id};
 use cantwin_canopen::wire::NmtCs;
 
 use super::{Case, a, access, eds_entry, m, within};
-use crate::ctx::{Ctx, Finding, Outcome, fail, not_supported};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_kind, fail_sdo, not_supported};
+use crate::profile::FailureKind;
 use crate::report::Area::Pdo as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -115,7 +116,7 @@ fn cob_ids(ctx: &mut Ctx<'_>) -> Outcome {
             bad.push(format!("0x{comm:04X} sub 1 = 0x{cob:08X}"));
         }
         ctx.upload(comm, 2)?
-            .map_err(|a| fail(format!("0x{comm:04X} sub 2 (transmission type): {a}")))?;
+            .map_err(|a| fail_sdo(format!("0x{comm:04X} sub 2 (transmission type)"), a))?;
     }
     if bad.is_empty() {
         Ok(format!("{valid} valid PDOs"))
@@ -151,7 +152,7 @@ fn dynamic_pdo(ctx: &mut Ctx<'_>) -> Result<Option<DynamicPdo>, Finding> {
         for s in 1..=u8::try_from(n).unwrap_or(0) {
             list.push(
                 ctx.upload(map, s)?
-                    .map_err(|a| fail(format!("reading 0x{map:04X} sub {s}: {a}")))?,
+                    .map_err(|a| fail_sdo(format!("reading 0x{map:04X} sub {s}"), a))?,
             );
         }
         return Ok(Some((comm, map, cob, list)));
@@ -206,9 +207,10 @@ fn cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
         // The refusal must be the server's abort: silence, or the client giving up,
         // says nothing of the check (§7.5.2.35 – §7.5.2.38).
         Err(a) if a.by_server => Ok(format!("0x{comm:04X} sub 1 = 0x{other:08X} refused: {a}")),
-        Err(a) => Err(fail(format!(
-            "writing 0x{other:08X} to 0x{comm:04X} sub 1: {a}"
-        ))),
+        Err(a) => Err(fail_sdo(
+            format!("writing 0x{other:08X} to 0x{comm:04X} sub 1"),
+            a,
+        )),
         Ok(()) => {
             ctx.write(comm, 1, &(other | 0x8000_0000).to_le_bytes(), "the COB-ID")?;
             ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID")?;
@@ -242,7 +244,7 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let sync = sync_id(ctx)?;
     let mut notes = Vec::new();
     for (ty, syncs, want) in [(1u8, 6usize, 6usize), (2, 6, 3)] {
@@ -255,9 +257,10 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
             }
             Err(a) => {
                 ctx.write(comm, 2, &tt, "the transmission type")?;
-                return Err(fail(format!(
-                    "writing type {ty} to 0x{comm:04X} sub 2: {a}"
-                )));
+                return Err(fail_sdo(
+                    format!("writing type {ty} to 0x{comm:04X} sub 2"),
+                    a,
+                ));
             }
         }
         ctx.nmt(NmtCs::Start)?;
@@ -299,10 +302,10 @@ fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     }
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let et = ctx
         .upload(comm, 5)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 5"), a))?;
     // Type 254 (manufacturer-specific event) if the device offers it, else 255.
     let ty = if ctx.download(comm, 2, &[0xFE])?.is_ok() {
         0xFE
@@ -319,18 +322,18 @@ fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.write(comm, 5, &et, "the event timer")?;
     ctx.write(comm, 2, &tt, "the transmission type")?;
     if !(9..=11).contains(&frames.len()) {
-        return Err(fail(format!(
-            "{} TPDOs in 525 ms with a 50 ms event timer",
-            frames.len()
-        )));
+        return Err(fail_kind(
+            FailureKind::Timing,
+            format!("{} TPDOs in 525 ms with a 50 ms event timer", frames.len()),
+        ));
     }
     for w in frames.windows(2) {
         let d = w[1].0.saturating_duration_since(w[0].0);
         if !within(ctx, d, Duration::from_millis(50)) {
-            return Err(fail(format!(
-                "a TPDO interval of {} µs, event timer 50 ms",
-                d.as_micros()
-            )));
+            return Err(fail_kind(
+                FailureKind::Timing,
+                format!("a TPDO interval of {} µs, event timer 50 ms", d.as_micros()),
+            ));
         }
     }
     Ok(format!(
@@ -354,13 +357,13 @@ fn inhibit_time(ctx: &mut Ctx<'_>) -> Outcome {
     }
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let it = ctx
         .upload(comm, 3)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 3: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 3"), a))?;
     let et = ctx
         .upload(comm, 5)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 5: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 5"), a))?;
     // The inhibit time changes only while the PDO is invalid (§7.5.2.36).
     ctx.write(
         comm,
@@ -387,19 +390,22 @@ fn inhibit_time(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.write(comm, 3, &it, "the inhibit time")?;
     ctx.write(comm, 1, &cob.to_le_bytes(), "the COB-ID back to valid")?;
     if frames.len() < 3 {
-        return Err(fail(format!(
-            "{} TPDOs in 650 ms (event timer 20 ms, inhibit 100 ms)",
-            frames.len()
-        )));
+        return Err(fail_kind(
+            FailureKind::Timing,
+            format!(
+                "{} TPDOs in 650 ms (event timer 20 ms, inhibit 100 ms)",
+                frames.len()
+            ),
+        ));
     }
     let min = Duration::from_millis(100).saturating_sub(ctx.options.slack);
     for w in frames.windows(2) {
         let d = w[1].0.saturating_duration_since(w[0].0);
         if d < min {
-            return Err(fail(format!(
-                "two TPDOs {} µs apart, inhibit time 100 ms",
-                d.as_micros()
-            )));
+            return Err(fail_kind(
+                FailureKind::Timing,
+                format!("two TPDOs {} µs apart, inhibit time 100 ms", d.as_micros()),
+            ));
         }
     }
     Ok(format!("{} TPDOs at least 100 ms apart", frames.len()))
@@ -446,10 +452,13 @@ fn rpdo_length(ctx: &mut Ctx<'_>) -> Outcome {
             "RPDO 0x{cob:03X} with {} of {len} bytes: EMCY 0x8210",
             len - 1
         )),
-        None => Err(fail(format!(
-            "RPDO 0x{cob:03X} with {} of {len} bytes: no EMCY 0x8210 within 200 ms",
-            len - 1
-        ))),
+        None => Err(fail_kind(
+            FailureKind::Event,
+            format!(
+                "RPDO 0x{cob:03X} with {} of {len} bytes: no EMCY 0x8210 within 200 ms",
+                len - 1
+            ),
+        )),
     }
 }
 
@@ -459,9 +468,10 @@ fn set_type(ctx: &mut Ctx<'_>, comm: u16, ty: u8) -> Result<bool, Finding> {
     match ctx.download(comm, 2, &[ty])? {
         Ok(()) => Ok(true),
         Err(a) if a.code == cantwin_canopen::AbortCode::INVALID_VALUE => Ok(false),
-        Err(a) => Err(fail(format!(
-            "writing type {ty} to 0x{comm:04X} sub 2: {a}"
-        ))),
+        Err(a) => Err(fail_sdo(
+            format!("writing type {ty} to 0x{comm:04X} sub 2"),
+            a,
+        )),
     }
 }
 
@@ -513,7 +523,7 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     if !set_type(ctx, comm, 0)? {
         return Err(not_supported("transmission type 0 refused with 0x06090030"));
     }
@@ -602,7 +612,7 @@ fn rtr(ctx: &mut Ctx<'_>) -> Outcome {
     }
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let et = match eds_entry(ctx, comm, 5) {
         Some(_) => ctx.upload(comm, 5)?.ok(),
         None => None,
@@ -636,9 +646,12 @@ fn rtr(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.write(comm, 2, &tt, "the transmission type")?;
     match got {
         Some((_, f)) => Ok(format!("type {ty}: a remote frame answered with {f}")),
-        None => Err(fail(format!(
-            "0x{comm:04X} sub 1 = 0x{cob:08X} allows RTR (bit 30 clear), but a remote frame got no TPDO within 100 ms (type {ty})"
-        ))),
+        None => Err(fail_kind(
+            FailureKind::Event,
+            format!(
+                "0x{comm:04X} sub 1 = 0x{cob:08X} allows RTR (bit 30 clear), but a remote frame got no TPDO within 100 ms (type {ty})"
+            ),
+        )),
     }
 }
 
@@ -665,7 +678,7 @@ fn sync_start_value(ctx: &mut Ctx<'_>) -> Outcome {
     }
     let overflow = ctx
         .upload(0x1019, 0)?
-        .map_err(|a| fail(format!("reading 0x1019: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1019", a))?;
     let period = match ctx.upload(0x1006, 0)? {
         Ok(p) => {
             // 0x1019 changes only while the communication cycle period is 0.
@@ -682,10 +695,10 @@ fn sync_start_value(ctx: &mut Ctx<'_>) -> Outcome {
     ctx.write(0x1019, 0, &[8], "the synchronous counter overflow value")?;
     let tt = ctx
         .upload(comm, 2)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 2: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
     let sv = ctx
         .upload(comm, 6)?
-        .map_err(|a| fail(format!("reading 0x{comm:04X} sub 6: {a}")))?;
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 6"), a))?;
     // The start value changes only while the PDO is invalid (§7.5.2.36).
     ctx.write(
         comm,

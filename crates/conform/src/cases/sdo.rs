@@ -9,7 +9,8 @@ use cantwin_canopen::sdo::crc::Crc16;
 use super::{
     Case, abort_of, absent_index, access, data_type, entries, hex, le, m, recovered, writable,
 };
-use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail, fail_abort};
+use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail, fail_abort, fail_kind};
+use crate::profile::FailureKind;
 use crate::report::Area::Sdo as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -217,7 +218,10 @@ fn block_refused(ctx: &Ctx<'_>, what: &str, a: Aborted) -> Finding {
 
 fn expedited_upload(ctx: &mut Ctx<'_>) -> Outcome {
     let Some(b) = ctx.sdo_raw(req(0x40, 0x1000, 0, [0; 4]))? else {
-        return Err(fail("no answer to an upload of 0x1000"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to an upload of 0x1000",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(fail_abort("upload of 0x1000", code));
@@ -254,7 +258,10 @@ fn expedited_download(ctx: &mut Ctx<'_>) -> Outcome {
     let mut d = [0u8; 4];
     d[..size].copy_from_slice(&value);
     let Some(b) = ctx.sdo_raw(req(0x23 | (n << 2), index, sub, d))? else {
-        return Err(fail("no answer to an expedited download"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to an expedited download",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(fail_abort(
@@ -277,7 +284,10 @@ fn expedited_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
     let mut d = [0u8; 4];
     d.copy_from_slice(&value);
     let Some(b) = ctx.sdo_raw(req(0x22, index, sub, d))? else {
-        return Err(fail("no answer to an expedited download without size"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to an expedited download without size",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(fail_abort(
@@ -329,7 +339,7 @@ fn segmented_upload(ctx: &mut Ctx<'_>) -> Outcome {
         ));
     };
     let Some(b) = ctx.sdo_raw(req(0x40, index, sub, [0; 4]))? else {
-        return Err(fail("no answer to the initiate"));
+        return Err(fail_kind(FailureKind::Silence, "no answer to the initiate"));
     };
     if let Some(code) = abort_of(&b) {
         return Err(segmented_refused(ctx, "upload", code));
@@ -345,7 +355,10 @@ fn segmented_upload(ctx: &mut Ctx<'_>) -> Outcome {
     let mut toggle = 0u8;
     loop {
         let Some(s) = ctx.sdo_raw([0x60 | (toggle << 4), 0, 0, 0, 0, 0, 0, 0])? else {
-            return Err(fail("no answer to an upload segment request"));
+            return Err(fail_kind(
+                FailureKind::Silence,
+                "no answer to an upload segment request",
+            ));
         };
         if let Some(code) = abort_of(&s) {
             return Err(fail_abort("during the segments", code));
@@ -386,7 +399,10 @@ fn segmented_download(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
     let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
-        return Err(fail("no answer to a segmented initiate"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to a segmented initiate",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(segmented_refused(ctx, "download", code));
@@ -423,7 +439,10 @@ fn download_segments(ctx: &mut Ctx<'_>, value: &[u8]) -> Result<usize, Finding> 
         seg[0] = (toggle << 4) | (n << 1) | u8::from(last);
         seg[1..1 + chunk.len()].copy_from_slice(chunk);
         let Some(b) = ctx.sdo_raw(seg)? else {
-            return Err(fail(format!("no answer to segment {i}")));
+            return Err(fail_kind(
+                FailureKind::Silence,
+                format!("no answer to segment {i}"),
+            ));
         };
         if let Some(code) = abort_of(&b) {
             return Err(fail_abort(format!("segment {i}"), code));
@@ -444,7 +463,10 @@ fn segmented_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
         ));
     };
     let Some(b) = ctx.sdo_raw(req(0x20, index, sub, [0; 4]))? else {
-        return Err(fail("no answer to a segmented initiate without size"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to a segmented initiate without size",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(segmented_refused(ctx, "download without size", code));
@@ -704,7 +726,10 @@ fn abort_toggle(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
     let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
-        return Err(fail("no answer to a segmented initiate"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to a segmented initiate",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(segmented_refused(ctx, "download", code));
@@ -715,7 +740,10 @@ fn abort_toggle(ctx: &mut Ctx<'_>) -> Outcome {
     seg[0] = 0x10 | (n << 1) | 1;
     seg[1..1 + size].copy_from_slice(&value);
     let Some(b) = ctx.sdo_raw(seg)? else {
-        return Err(fail("no answer to the segment with the wrong toggle bit"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to the segment with the wrong toggle bit",
+        ));
     };
     match abort_of(&b) {
         Some(AbortCode::TOGGLE_BIT_NOT_ALTERNATED) => {}
@@ -744,9 +772,10 @@ fn abort_block_size(ctx: &mut Ctx<'_>) -> Outcome {
     let mut notes = Vec::new();
     for blksize in [0u8, 128] {
         let Some(b) = ctx.sdo_raw(req(0xA0, 0x1000, 0, [blksize, 0, 0, 0]))? else {
-            return Err(fail(format!(
-                "no answer to a block upload initiate with block size {blksize}"
-            )));
+            return Err(fail_kind(
+                FailureKind::Silence,
+                format!("no answer to a block upload initiate with block size {blksize}"),
+            ));
         };
         match abort_of(&b) {
             Some(AbortCode::INVALID_BLOCK_SIZE) => notes.push(format!("{blksize}: 0x05040002")),
@@ -804,7 +833,10 @@ fn block_initiate(
             }
             Ok(b)
         }
-        None => Err(fail("no answer to a block download initiate")),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to a block download initiate",
+        )),
     }
 }
 
@@ -896,7 +928,10 @@ fn abort_crc(ctx: &mut Ctx<'_>) -> Outcome {
     seg[0] = 0x81;
     seg[1..1 + size].copy_from_slice(&value);
     let Some(ack) = ctx.sdo_raw(seg)? else {
-        return Err(fail("no acknowledgement of the block"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no acknowledgement of the block",
+        ));
     };
     if ack[0] != 0xA2 || ack[1] != 1 {
         return Err(fail(format!(
@@ -908,7 +943,10 @@ fn abort_crc(ctx: &mut Ctx<'_>) -> Outcome {
     let w = wrong.to_le_bytes();
     let end = [0xC1 | (n << 2), w[0], w[1], 0, 0, 0, 0, 0];
     let Some(b) = ctx.sdo_raw(end)? else {
-        return Err(fail("no answer to the end with a wrong CRC"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to the end with a wrong CRC",
+        ));
     };
     match abort_of(&b) {
         Some(AbortCode::CRC_ERROR) => {}
@@ -927,7 +965,10 @@ fn abort_timeout(ctx: &mut Ctx<'_>) -> Outcome {
     };
     let s = u32::try_from(size).unwrap_or(0).to_le_bytes();
     let Some(b) = ctx.sdo_raw(req(0x21, index, sub, s))? else {
-        return Err(fail("no answer to a segmented initiate"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to a segmented initiate",
+        ));
     };
     if let Some(code) = abort_of(&b) {
         return Err(segmented_refused(ctx, "download", code));
@@ -941,7 +982,8 @@ fn abort_timeout(ctx: &mut Ctx<'_>) -> Outcome {
             sub,
             AbortCode::TIMEOUT.to_u32().to_le_bytes(),
         ))?;
-        return Err(fail(
+        return Err(fail_kind(
+            FailureKind::Event,
             "the server did not time out an unfinished segmented download within 10 s",
         ));
     };

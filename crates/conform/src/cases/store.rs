@@ -5,7 +5,8 @@ use cantwin_canopen::AbortCode;
 use cantwin_canopen::wire::NmtCs;
 
 use super::{Case, access, default_bytes, eds_entry, m};
-use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, not_supported};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, fail_kind, not_supported};
+use crate::profile::FailureKind;
 use crate::report::Area::StoreRestore as A;
 
 /// "save" read as a little-endian UNSIGNED32 (§7.5.2.13).
@@ -111,7 +112,10 @@ fn store_survives(ctx: &mut Ctx<'_>) -> Outcome {
         (NmtCs::ResetNode, "reset node"),
     ] {
         if ctx.reset(cs)?.is_none() {
-            return Err(fail(format!("no boot-up after {name}")));
+            return Err(fail_kind(
+                FailureKind::Silence,
+                format!("no boot-up after {name}"),
+            ));
         }
         let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
         if after != u32::from(value) {
@@ -173,7 +177,10 @@ fn restore_defaults(ctx: &mut Ctx<'_>) -> Outcome {
     }
     ctx.write(0x1011, 1, &LOAD.to_le_bytes(), "\"load\" to 0x1011 sub 1")?;
     if ctx.reset(NmtCs::ResetNode)?.is_none() {
-        return Err(fail("no boot-up after reset node"));
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no boot-up after reset node",
+        ));
     }
     let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
     if after != default && Some(after) != power_on {

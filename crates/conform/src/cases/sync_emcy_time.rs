@@ -4,7 +4,8 @@ use cantwin_can::{Duration, Frame, Id};
 use cantwin_canopen::AbortCode;
 
 use super::{Case, access, eds_entry, m, u32_of, within};
-use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, not_supported};
+use crate::ctx::{Ctx, Finding, Outcome, fail, fail_abort, fail_kind, fail_sdo, not_supported};
+use crate::profile::FailureKind;
 use crate::report::Area::SyncEmcyTime as A;
 
 pub(super) fn cases() -> Vec<Case> {
@@ -108,7 +109,7 @@ fn producer_on(ctx: &mut Ctx<'_>, period_us: u32) -> Result<(u32, Vec<u8>), Find
     let cob = ctx.read_u32(0x1005, 0, "the COB-ID SYNC")?;
     let period = ctx
         .upload(0x1006, 0)?
-        .map_err(|a| fail(format!("reading 0x1006: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1006", a))?;
     ctx.write(
         0x1006,
         0,
@@ -153,10 +154,10 @@ fn sync_producer(ctx: &mut Ctx<'_>) -> Outcome {
     for w in frames.windows(2) {
         let d = w[1].0.saturating_duration_since(w[0].0);
         if !within(ctx, d, Duration::from_millis(20)) {
-            return Err(fail(format!(
-                "a SYNC interval of {} µs, period 20 ms",
-                d.as_micros()
-            )));
+            return Err(fail_kind(
+                FailureKind::Timing,
+                format!("a SYNC interval of {} µs, period 20 ms", d.as_micros()),
+            ));
         }
     }
     Ok(format!(
@@ -174,10 +175,10 @@ fn sync_counter(ctx: &mut Ctx<'_>) -> Outcome {
     // 0x1019 changes only while the producer is off (0x1006 = 0, §7.5.2.22).
     let overflow = ctx
         .upload(0x1019, 0)?
-        .map_err(|a| fail(format!("reading 0x1019: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1019", a))?;
     let period = ctx
         .upload(0x1006, 0)?
-        .map_err(|a| fail(format!("reading 0x1006: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1006", a))?;
     ctx.write(
         0x1006,
         0,
@@ -232,7 +233,7 @@ fn sync_counter(ctx: &mut Ctx<'_>) -> Outcome {
 fn emcy_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
     let reg = ctx
         .upload(0x1001, 0)?
-        .map_err(|a| fail(format!("reading 0x1001: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1001", a))?;
     if reg.len() != 1 {
         return Err(fail(format!("0x1001 reads {} bytes, not 1", reg.len())));
     }
@@ -284,7 +285,7 @@ fn emcy_cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
             }
             Ok(format!("0x1014 = 0x{other:08X} refused: {a}"))
         }
-        Err(a) => Err(fail(format!("writing 0x{other:08X} to 0x1014: {a}"))),
+        Err(a) => Err(fail_sdo(format!("writing 0x{other:08X} to 0x1014"), a)),
         Ok(()) => {
             // Put the original identifier back the way §7.3.5 allows: not valid first.
             ctx.write(
@@ -352,7 +353,10 @@ fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
     match first {
         Some((_, f)) if boot_up(&f) => Ok("the boot-up message comes first".into()),
         Some((_, f)) => Err(fail(format!("EMCY {f} before the boot-up message"))),
-        None => Err(fail("no boot-up message after reset communication")),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            "no boot-up message after reset communication",
+        )),
     }
 }
 
@@ -397,7 +401,7 @@ fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
     let emcy = emcy & 0x7FF;
     let inhibit = ctx
         .upload(0x1015, 0)?
-        .map_err(|a| fail(format!("reading 0x1015: {a}")))?;
+        .map_err(|a| fail_sdo("reading 0x1015", a))?;
     // 300 ms in units of 100 µs; the error is raised by a consumed heartbeat that stops
     // (EMCY 0x8130) and ended by its return (an EMCY of the error reset), at once.
     ctx.write(0x1015, 0, &3000u16.to_le_bytes(), "the inhibit time EMCY")?;
