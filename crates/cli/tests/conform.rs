@@ -158,6 +158,21 @@ fn adv200_ds402_conforms_with_its_manuals_deviations() {
 }
 
 #[test]
+fn cia402_servo_axis_conforms() {
+    // The axis of scenarios/servo-axis.toml alone: conform is the master, so the
+    // scenario's SYNC generator and scripted frames are left out.
+    let dir = tmp("cia402-scenario");
+    let scenario = dir.join("axis.toml");
+    std::fs::write(
+        &scenario,
+        "name = \"t\"\n[[bus]]\nname = \"can0\"\nbit_rate = \"1M\"\n\n[[device]]\nname = \"axis\"\nkind = \"cia402\"\nbus = \"can0\"\nnode_id = 5\nload_inertia = 1.0e-4\n",
+    )
+    .unwrap();
+    shipped("cia402", scenario.to_str().unwrap(), "axis", 5);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn eds_twin_of_example_io_conforms_to_its_own_file() {
     let dir = tmp("io6");
     conform(

@@ -7,6 +7,10 @@ use cantwin_conform::{Options, Profile, Report, Verdict, VirtualBus, run};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
 
 fn scenario(name: &str) -> PathBuf {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    if data.join(name).exists() {
+        return data.join(name);
+    }
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../scenarios")
         .join(name)
@@ -94,6 +98,14 @@ fn adv200_ds402_passes_every_mandatory_case() {
     let r = conform("adv200-ds402.toml", "drive");
     assert!(r.passed(), "{}", show(&r));
     deviations_observed(&r, "adv200");
+}
+
+#[test]
+fn cia402_servo_axis_passes_every_mandatory_case() {
+    // The axis of scenarios/servo-axis.toml without the scenario's SYNC generator.
+    let r = conform("servo-axis-alone.toml", "axis");
+    assert!(r.passed(), "{}", show(&r));
+    assert!(r.count(Verdict::Pass) > 30, "{}", show(&r));
 }
 
 fn sdo_only() -> Options {
