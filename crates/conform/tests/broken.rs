@@ -35,6 +35,8 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::BlockUploadSwitchedOnPst0 => ("sdo.block-upload", Area::Sdo),
         Fault::AcyclicTpdoNeverSent => ("pdo.transmission-acyclic", Area::Pdo),
         Fault::PdoCobIdChangeWhileValidUnanswered => ("pdo.cob-id-change-valid", Area::Pdo),
+        Fault::ResetIgnoredInStopped => ("nmt.reset-from-operational-stopped", Area::Nmt),
+        Fault::OperationalReportedAfterBootUp => ("nmt.pre-operational-after-boot-up", Area::Nmt),
     }
 }
 
@@ -98,6 +100,26 @@ fn caught(fault: Fault) {
         show(&bad)
     );
     assert!(!bad.passed(), "{fault:?}: the run passes\n{}", show(&bad));
+}
+
+/// As [`caught`], and no other case of the area fails: the case is the only one that
+/// catches the fault.
+fn caught_only(fault: Fault) {
+    caught(fault);
+    let (id, area) = case_for(fault);
+    let bad = conform(Some(fault), area);
+    for c in &bad.cases {
+        if c.id != id {
+            assert_ne!(
+                c.verdict,
+                Verdict::Fail,
+                "{fault:?} is caught by {} too: {}\n{}",
+                c.id,
+                c.detail,
+                show(&bad)
+            );
+        }
+    }
 }
 
 #[test]
@@ -220,6 +242,16 @@ fn cia301_7_5_2_37_pdo_cob_id_change_while_valid_unanswered_is_caught() {
 }
 
 /// Every case named above is in the catalogue, in the area the run is limited to.
+#[test]
+fn cia301_7_3_2_2_1_reset_ignored_in_stopped_is_caught() {
+    caught_only(Fault::ResetIgnoredInStopped);
+}
+
+#[test]
+fn cia301_7_3_2_2_1_operational_reported_after_boot_up_is_caught() {
+    caught_only(Fault::OperationalReportedAfterBootUp);
+}
+
 #[test]
 fn every_case_named_is_in_the_catalogue() {
     let catalogue = cantwin_conform::catalogue();

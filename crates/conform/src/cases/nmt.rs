@@ -26,6 +26,20 @@ pub(super) fn cases() -> Vec<Case> {
             boot_reset_node,
         ),
         m(
+            "nmt.reset-from-operational-stopped",
+            A,
+            "CiA 301 §7.3.2.2.1 figure 48, §7.3.2.2.2",
+            "reset node and reset communication from OPERATIONAL and from STOPPED end with a boot-up and PRE-OPERATIONAL",
+            reset_from_operational_stopped,
+        ),
+        m(
+            "nmt.pre-operational-after-boot-up",
+            A,
+            "CiA 301 §7.3.2.2.1 figure 48, §7.2.8.3.2.4",
+            "the first state the device reports after its boot-up (heartbeat or guarding answer) is PRE-OPERATIONAL (127)",
+            pre_operational_after_boot_up,
+        ),
+        m(
             "nmt.broadcast",
             A,
             "CiA 301 §7.2.8.3.1",
@@ -93,6 +107,113 @@ fn boot_reset_comm(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn boot_reset_node(ctx: &mut Ctx<'_>) -> Outcome {
     boot(ctx, NmtCs::ResetNode, "reset node")
+}
+
+/// Figure 48: from OPERATIONAL and from STOPPED, each reset leads through INITIALISATION
+/// (with its boot-up, §7.2.8.3.2.4) to PRE-OPERATIONAL.
+fn reset_from_operational_stopped(ctx: &mut Ctx<'_>) -> Outcome {
+    let heartbeat = eds_entry(ctx, 0x1017, 0).is_some_and(|e| access(e).writable());
+    if !heartbeat && !ctx.eds.objects.contains_key(&0x100C) {
+        return Err(Finding::NotApplicable(
+            "neither heartbeat nor node guarding to report the state".into(),
+        ));
+    }
+    let mut seen = Vec::new();
+    for (from, from_name) in [(NmtCs::Start, "OPERATIONAL"), (NmtCs::Stop, "STOPPED")] {
+        for (cs, what) in [
+            (NmtCs::ResetNode, "reset node"),
+            (NmtCs::ResetCommunication, "reset communication"),
+        ] {
+            ctx.nmt(from)?;
+            ctx.idle(Duration::from_millis(10))?;
+            if ctx.reset(cs)?.is_none() {
+                return Err(fail_kind(
+                    FailureKind::Silence,
+                    format!(
+                        "no boot-up within {} ms of {what} in {from_name}",
+                        ctx.options.boot_timeout.as_millis()
+                    ),
+                ));
+            }
+            // The reset set 0x1017 back to its power-on value: have the state reported
+            // again (an SDO write, which STOPPED would not answer).
+            let orig = state_reporting(ctx)?;
+            let state = reported_state(ctx, orig.is_some())?;
+            if let Some(o) = orig {
+                ctx.write(0x1017, 0, &o, "the heartbeat producer time")?;
+            }
+            match state {
+                Some(0x7F) => seen.push(format!("{what} in {from_name}")),
+                Some(s) => {
+                    return Err(fail(format!(
+                        "after {what} in {from_name} the device reports state {s}, not 127 (PRE-OPERATIONAL)"
+                    )));
+                }
+                None => {
+                    return Err(fail_kind(
+                        FailureKind::Silence,
+                        format!("no state report after {what} in {from_name}"),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(format!(
+        "boot-up and PRE-OPERATIONAL after {}",
+        seen.join(", ")
+    ))
+}
+
+/// §7.3.2.2.1: INITIALISATION ends with the boot-up and PRE-OPERATIONAL, so the first
+/// heartbeat after the boot-up (at the power-on producer time), or the first guarding
+/// answer if the device produces no heartbeat, reports 127.
+fn pre_operational_after_boot_up(ctx: &mut Ctx<'_>) -> Outcome {
+    let guarding = ctx.eds.objects.contains_key(&0x100C);
+    // The producer time the device runs with; read before the reset, since an SDO
+    // transfer after the boot-up could hide the first heartbeat.
+    let period = if ctx.eds.objects.contains_key(&0x1017) {
+        ctx.read_u32(0x1017, 0, "the heartbeat producer time")?
+    } else {
+        0
+    };
+    if period == 0 && !guarding {
+        return Err(Finding::NotApplicable(
+            "the device produces neither heartbeat (0x1017 = 0) nor node guarding".into(),
+        ));
+    }
+    let Some(booted) = ctx.reset(NmtCs::ResetCommunication)? else {
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no boot-up after reset communication",
+        ));
+    };
+    let ec = ctx.ec_id();
+    if guarding {
+        ctx.send(Frame::remote(ec, 1).map_err(|e| fail(e.to_string()))?)?;
+    }
+    let within = ctx
+        .options
+        .sdo_timeout
+        .max(Duration::from_millis(2 * u64::from(period) + 50));
+    match ctx.wait_for(within, |f| {
+        f.id() == ec && !f.is_remote() && f.len() == 1 && f.data_bytes()[0] != 0
+    })? {
+        Some((t, f)) if f.data_bytes()[0] & 0x7F == 0x7F => Ok(format!(
+            "the first state report after the boot-up ({} ms later) is 127 (PRE-OPERATIONAL)",
+            t.saturating_duration_since(booted).as_millis()
+        )),
+        Some((_, f)) => Err(fail(format!(
+            "the first state report after the boot-up is {}, not 127 (PRE-OPERATIONAL)",
+            f.data_bytes()[0] & 0x7F
+        ))),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            format!(
+                "no heartbeat or guarding answer within {} ms of the boot-up",
+                within.as_millis()
+            ),
+        )),
+    }
 }
 
 fn broadcast(ctx: &mut Ctx<'_>) -> Outcome {

@@ -71,11 +71,18 @@ pub enum Fault {
     /// Does not answer a write of a new CAN-ID to a valid PDO's COB-ID (sub 1), where
     /// §7.5.2.35 – §7.5.2.38 require the server to refuse it with an abort.
     PdoCobIdChangeWhileValidUnanswered,
+    /// Ignores NMT reset node and reset communication in STOPPED, where §7.3.2.2.1
+    /// (figure 48) has both lead from every state through INITIALISATION to
+    /// PRE-OPERATIONAL.
+    ResetIgnoredInStopped,
+    /// Reports OPERATIONAL (5) in its first heartbeat or guarding answer after a boot-up,
+    /// where §7.3.2.2.1 has INITIALISATION end in PRE-OPERATIONAL (127).
+    OperationalReportedAfterBootUp,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 16] = [
+    pub const ALL: [Fault; 18] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -92,6 +99,8 @@ impl Fault {
         Fault::BlockUploadSwitchedOnPst0,
         Fault::AcyclicTpdoNeverSent,
         Fault::PdoCobIdChangeWhileValidUnanswered,
+        Fault::ResetIgnoredInStopped,
+        Fault::OperationalReportedAfterBootUp,
     ];
 }
 
@@ -260,6 +269,8 @@ pub struct Broken {
     block_end_next: bool,
     /// When the next TPDO 1 of [`Fault::TpdoInPreOperational`] is due.
     tpdo_due: Option<Instant>,
+    /// A boot-up went out and no state report since ([`Fault::OperationalReportedAfterBootUp`]).
+    booted: bool,
 }
 
 /// The most block download data the node keeps to compute a CRC: the DOMAIN and then some
@@ -281,6 +292,7 @@ impl Broken {
             block_last: None,
             block_end_next: false,
             tpdo_due: None,
+            booted: false,
         }
     }
 
@@ -318,6 +330,15 @@ impl Broken {
             Id::Extended(_) => return Some(*frame),
         };
         let data = frame.data_bytes();
+        if self.fault == Some(Fault::ResetIgnoredInStopped)
+            && self.device.state() == State::Stopped
+            && id == 0x000
+            && data.len() == 2
+            && (data[0] == 0x81 || data[0] == 0x82)
+            && (data[1] == 0 || data[1] == NODE_ID)
+        {
+            return None;
+        }
         if id == 0x000 && data.len() == 2 && data[0] == 0x82 && (data[1] == 0 || data[1] == NODE_ID)
         {
             self.reset_communication = true;
@@ -603,11 +624,17 @@ impl Broken {
         let data = frame.data_bytes();
         if id == 0x700 + u16::from(NODE_ID) && data.len() == 1 {
             if data[0] == 0 {
+                self.booted = true;
                 let after_reset = std::mem::take(&mut self.reset_communication);
                 if after_reset && self.fault == Some(Fault::NoBootUpAfterResetCommunication) {
                     return None;
                 }
             } else {
+                if std::mem::take(&mut self.booted)
+                    && self.fault == Some(Fault::OperationalReportedAfterBootUp)
+                {
+                    return Some(Frame::std(id, &[(data[0] & 0x80) | 0x05]).unwrap());
+                }
                 self.heartbeats += 1;
                 if self.fault == Some(Fault::HeartbeatAtTwiceThePeriod) && self.heartbeats % 2 == 0
                 {
