@@ -209,6 +209,10 @@ struct NetsimArgs {
     /// Each controller's transmit queue depth.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=4096))]
     queue_depth: u64,
+    /// Apply this scenario's bus-level `[[at]]` actions (drop, corrupt, clear_faults) to the
+    /// simulated networks of their buses' names, at their times in SIL Kit's simulated time.
+    #[arg(long, value_name = "SCENARIO.toml")]
+    faults: Option<std::path::PathBuf>,
 }
 
 /// Run `cantwin silkit …`.
@@ -222,6 +226,21 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
     if args.step == 0 {
         bail!("--step must be at least 1 microsecond");
     }
+    // Before joining: a fault the simulator cannot apply is an error of the command line.
+    let faults = match &args.faults {
+        Some(path) => {
+            let scenario = cantwin_scenario::Scenario::load(path)
+                .with_context(|| format!("--faults {}", path.display()))?;
+            let faults = cantwin_silkit::faults_from_scenario(&scenario, &args.networks)
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("--faults {}", path.display()))?;
+            cantwin_silkit::NetsimFaults {
+                seed: scenario.seed,
+                faults,
+            }
+        }
+        None => cantwin_silkit::NetsimFaults::default(),
+    };
     let kit = load("cantwin silkit netsim")?;
     if !kit.has_network_simulator() {
         bail!(
@@ -262,13 +281,22 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
                     "registry": args.registry,
                     "networks": args.networks,
                     "step_us": args.step,
+                    "faults": faults.faults.len(),
                 }
             })
         },
     )?;
     let started = WallInstant::now();
-    let out = cantwin_silkit::run_network_simulator(&kit, &bridge, &args.networks, config, &stop)
-        .with_context(|| {
+    let out = cantwin_silkit::run_network_simulator_with_faults(
+        &kit,
+        &bridge,
+        &args.networks,
+        config,
+        &faults,
+        &stop,
+        &cantwin_silkit::Deadlines::default(),
+    )
+    .with_context(|| {
         format!(
             "simulating {} at {}",
             args.networks.join(", "),
@@ -300,6 +328,9 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
             c.refused,
             c.queue_full
         );
+        for (at, fault) in net.applied_faults() {
+            eprintln!("    at {at}: {fault}");
+        }
     }
     Ok(())
 }

@@ -36,6 +36,7 @@ mod error;
 #[allow(unsafe_code)]
 mod ffi;
 pub mod netsim;
+pub mod netsim_faults;
 mod types;
 
 pub use bridge::{
@@ -47,9 +48,10 @@ pub use ffi::{
     SimulatedCanNetwork, SystemMonitor, TimeSync,
 };
 pub use netsim::{
-    CanNetworkModel, NetsimConfig, NetsimOutcome, run_network_simulator,
-    run_network_simulator_within,
+    CanNetworkModel, NetsimConfig, NetsimFaults, NetsimOutcome, run_network_simulator,
+    run_network_simulator_with_faults, run_network_simulator_within,
 };
+pub use netsim_faults::{BusFault, NetsimFault, faults_from_scenario};
 pub use types::{
     CanFrame, ControllerState, Direction, DirectionMask, ErrorState, ErrorStateChangeEvent,
     FLAG_BRS, FLAG_ESI, FLAG_FDF, FLAG_IDE, FLAG_RTR, FLAG_SEC, FLAG_XLF, FrameConversionError,

@@ -23,6 +23,12 @@
 //! of twice theirs, for instance, with frames sent in odd steps) get fully reproducible
 //! frame times.
 //!
+//! # Faults
+//!
+//! A network may carry timed bus-level faults ([`crate::netsim_faults`]): each applies at
+//! its time in the step that contains it, the bus run to exactly that time first, so a
+//! fault at the start of a step meets the requests that step puts on the bus.
+//!
 //! The network simulator API is experimental in SIL Kit 5 (`docs/api/netsim.rst`): it may
 //! change or go away in a later SIL Kit.
 
@@ -35,6 +41,7 @@ use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outb
 
 use crate::bridge::{BridgeConfig, BridgeError, Deadlines, run_coordinated};
 use crate::ffi::{CanEventProducer, Participant, SilKit, SimulatedCanNetwork};
+use crate::netsim_faults::{BusFault, NetsimFault};
 use crate::types::{
     CanFrame, ControllerState, Direction, ErrorState, ErrorStateChangeEvent, FrameEvent,
     OperationMode, ParticipantState, StateChangeEvent, TransmitEvent, TransmitStatus,
@@ -149,7 +156,30 @@ struct ModelState {
     controllers: BTreeMap<u64, Controller>,
     inputs: Vec<Input>,
     producer: Option<CanEventProducer>,
+    /// Faults not applied yet, latest first (the next one due is last).
+    faults: Vec<(Instant, BusFault)>,
+    /// Faults applied, with their times.
+    applied: Vec<(Instant, BusFault)>,
+    /// The port `send` faults send from, when there are any.
+    script: Option<PortId>,
 }
+
+/// The port a scenario's `send` actions send from: it acknowledges and receives every frame
+/// and sends only what it is given, as the script port of `cantwin sim --check`.
+struct ScriptPort;
+
+impl Node for ScriptPort {
+    fn on_frame(&mut self, _frame: &Frame, _now: Instant, _out: &mut Outbox) {}
+
+    fn on_tick(&mut self, _now: Instant, _out: &mut Outbox) {}
+
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// Frames a script port holds before it refuses more (a scenario's burst of sends).
+const SCRIPT_QUEUE_DEPTH: usize = 64;
 
 /// One simulated CAN network: cantwin's bus model behind SIL Kit's controllers.
 pub struct CanNetworkModel {
@@ -171,8 +201,39 @@ impl core::fmt::Debug for CanNetworkModel {
 impl CanNetworkModel {
     /// A network named `name`.
     pub fn new(name: &str, config: NetsimConfig) -> Self {
+        Self::with_faults(name, config, 0, &[])
+    }
+
+    /// A network named `name` applying those of `faults` that are for it, each at its time;
+    /// `seed` seeds the bus's fault injection generator (a scenario's `seed`).
+    pub fn with_faults(
+        name: &str,
+        config: NetsimConfig,
+        seed: u64,
+        faults: &[NetsimFault],
+    ) -> Self {
         let mut sim = Simulation::new();
-        let bus = sim.add_bus(BusConfig::new(name, config.bit_rate));
+        let bus = sim.add_bus(BusConfig::new(name, config.bit_rate).with_seed(seed));
+        let mut due: Vec<(Instant, BusFault)> = faults
+            .iter()
+            .filter(|f| f.network == name)
+            .map(|f| (f.at, f.fault))
+            .collect();
+        // Stable: faults of one time apply in file order.
+        due.sort_by_key(|(at, _)| *at);
+        due.reverse();
+        let script = due
+            .iter()
+            .any(|(_, f)| f.sends())
+            .then(|| {
+                sim.attach(
+                    bus,
+                    ScriptPort,
+                    PortConfig::DEFAULT.with_queue_depth(SCRIPT_QUEUE_DEPTH),
+                )
+                .ok()
+            })
+            .flatten();
         CanNetworkModel {
             name: name.to_string(),
             config,
@@ -182,6 +243,9 @@ impl CanNetworkModel {
                 controllers: BTreeMap::new(),
                 inputs: Vec::new(),
                 producer: None,
+                faults: due,
+                applied: Vec::new(),
+                script,
             }),
             events: Arc::new(Mutex::new(Vec::new())),
             counters: NetCounters::default(),
@@ -200,6 +264,11 @@ impl CanNetworkModel {
             refused: self.counters.refused.load(Ordering::Relaxed),
             queue_full: self.counters.queue_full.load(Ordering::Relaxed),
         }
+    }
+
+    /// The faults applied so far, with their times.
+    pub fn applied_faults(&self) -> Vec<(Instant, BusFault)> {
+        self.lock().applied.clone()
     }
 
     /// Run `f` on the bus simulation (statistics, fault injection).
@@ -222,15 +291,46 @@ impl CanNetworkModel {
         let mut st = self.lock();
         let t = Instant::from_nanos(now);
         st.sim.run_until(t);
+        // Faults due by the step's start first, so that they meet its requests.
+        Self::apply_faults(&mut st, t);
         let inputs = std::mem::take(&mut st.inputs);
         for i in inputs {
             self.apply(&mut st, i, now);
         }
-        let end = now.saturating_add(duration.max(1)) - 1;
-        st.sim.run_until(Instant::from_nanos(end));
+        let end = Instant::from_nanos(now.saturating_add(duration.max(1)) - 1);
+        while let Some(&(at, _)) = st.faults.last()
+            && at <= end
+        {
+            st.sim.run_until(at);
+            Self::apply_faults(&mut st, at);
+        }
+        st.sim.run_until(end);
         let events =
             std::mem::take(&mut *self.events.lock().unwrap_or_else(PoisonError::into_inner));
         self.produce(&mut st, &events);
+    }
+
+    /// Apply every fault due at or before `now`.
+    fn apply_faults(st: &mut ModelState, now: Instant) {
+        while let Some(&(at, fault)) = st.faults.last()
+            && at <= now
+        {
+            st.faults.pop();
+            if let Some(b) = st.sim.bus_mut(st.bus) {
+                match fault {
+                    BusFault::Inject(rule) => b.inject(rule),
+                    BusFault::Clear => b.clear_faults(),
+                    BusFault::Send(frame) => {
+                        // A full script queue drops the frame, counted in the bus's
+                        // statistics, as in `cantwin sim --check`.
+                        if let Some(p) = st.script {
+                            let _ = b.transmit(p, frame);
+                        }
+                    }
+                }
+            }
+            st.applied.push((now, fault));
+        }
     }
 
     fn apply(&self, st: &mut ModelState, input: Input, now: u64) {
@@ -541,12 +641,43 @@ pub fn run_network_simulator_within(
     stop: &AtomicBool,
     deadlines: &Deadlines,
 ) -> Result<NetsimOutcome, BridgeError> {
+    let faults = NetsimFaults::default();
+    run_network_simulator_with_faults(kit, bridge, networks, config, &faults, stop, deadlines)
+}
+
+/// Timed faults for the simulated networks, with the seed of their buses' fault injection
+/// generators ([`crate::netsim_faults::faults_from_scenario`] makes them from a scenario).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NetsimFaults {
+    /// The seed (a scenario's `seed`).
+    pub seed: u64,
+    /// The faults, each for one network.
+    pub faults: Vec<NetsimFault>,
+}
+
+/// [`run_network_simulator_within`], applying `faults` at their times.
+pub fn run_network_simulator_with_faults(
+    kit: &SilKit,
+    bridge: &BridgeConfig,
+    networks: &[String],
+    config: NetsimConfig,
+    faults: &NetsimFaults,
+    stop: &AtomicBool,
+    deadlines: &Deadlines,
+) -> Result<NetsimOutcome, BridgeError> {
     if config.step.is_zero() {
         return Err(BridgeError::ZeroStep);
     }
     let models: Vec<Arc<CanNetworkModel>> = networks
         .iter()
-        .map(|n| Arc::new(CanNetworkModel::new(n, config)))
+        .map(|n| {
+            Arc::new(CanNetworkModel::with_faults(
+                n,
+                config,
+                faults.seed,
+                &faults.faults,
+            ))
+        })
         .collect();
     let participant = Participant::create(
         kit,

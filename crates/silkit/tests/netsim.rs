@@ -11,10 +11,12 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration as WallDuration;
 
 use cantwin_bus::{BusConfig, PortConfig, Simulation};
+use cantwin_bus::{FaultRule, FrameSelector};
 use cantwin_can::{BitRate, ControllerEvent, Duration, Frame, Instant, Node, Outbox};
+use cantwin_scenario::Scenario;
 use cantwin_silkit::{
-    BridgeConfig, BridgeError, NetsimConfig, NetsimOutcome, ParticipantState, SilKit,
-    run_network_simulator_within,
+    BridgeConfig, BridgeError, BusFault, NetsimConfig, NetsimFaults, NetsimOutcome,
+    ParticipantState, SilKit, faults_from_scenario, run_network_simulator_with_faults,
 };
 use common::{
     Lines, QUIET_CONFIG, Registry, deadlines, example_participant, silkit_dir, system_controller,
@@ -37,6 +39,16 @@ fn netsim(
     uri: &str,
     peers: &'static [&'static str],
 ) -> std::thread::JoinHandle<Result<NetsimOutcome, BridgeError>> {
+    netsim_with_faults(dir, uri, peers, NetsimFaults::default())
+}
+
+/// [`netsim`] applying `faults`.
+fn netsim_with_faults(
+    dir: &Path,
+    uri: &str,
+    peers: &'static [&'static str],
+    faults: NetsimFaults,
+) -> std::thread::JoinHandle<Result<NetsimOutcome, BridgeError>> {
     let kit = SilKit::load_from(&dir.join("libSilKit.so")).expect("load");
     let bridge = BridgeConfig {
         registry_uri: uri.to_string(),
@@ -51,11 +63,12 @@ fn netsim(
             step: Duration::from_millis(2),
             ..NetsimConfig::default()
         };
-        run_network_simulator_within(
+        run_network_simulator_with_faults(
             &kit,
             &bridge,
             &["can0".to_string()],
             config,
+            &faults,
             &stop,
             &deadlines(peers),
         )
@@ -249,4 +262,128 @@ fn stopping_a_controller_cancels_its_pending_requests() {
         lines.contains(&"state 10000000 Stopped".to_string()),
         "{lines:#?}"
     );
+}
+
+/// A node on a bus recording when its frames were sent (the reference).
+struct Sender(Vec<u64>);
+
+impl Node for Sender {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_sent(&mut self, _: &Frame, now: Instant, _: &mut Outbox) {
+        self.0.push(now.as_nanos());
+    }
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+#[test]
+fn scenario_at_actions_corrupt_the_frame_of_their_step_and_send_the_scripts_frame() {
+    let Some(dir) = silkit_dir() else { return };
+    let scenario = Scenario::parse(
+        "name = \"corrupt at 6 ms\"\nseed = 7\n\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+         [[at]]\ntime_ms = 6\naction = \"corrupt\"\nbus = \"can0\"\nfraction = 1.0\ncount = 1\n\n\
+         [[at]]\ntime_ms = 10\naction = \"send\"\nbus = \"can0\"\nframe = \"300#AA\"\n",
+        "corrupt.toml",
+    )
+    .expect("scenario");
+    let faults = NetsimFaults {
+        seed: scenario.seed,
+        faults: faults_from_scenario(&scenario, &["can0".to_string()]).expect("faults"),
+    };
+    // cantwin's bus model with two controllers: the frame on the bus at 2 ms goes out as it
+    // is; the one at 6 ms is corrupted once (error frame, ISO 11898-1 §10.11) and sent again.
+    let frame = Frame::std(0x200, &[0x11]).expect("frame");
+    let mut reference = Simulation::new();
+    let bus = reference.add_bus(BusConfig::new("can0", BitRate::R500K).with_seed(7));
+    let a = reference
+        .attach(bus, Sender(Vec::new()), PortConfig::DEFAULT)
+        .expect("attach");
+    reference
+        .attach(bus, Sender(Vec::new()), PortConfig::DEFAULT)
+        .expect("attach");
+    reference.run_until(Instant::from_nanos(2_000_000));
+    reference.transmit(a, frame).expect("transmit");
+    reference.run_until(Instant::from_nanos(6_000_000));
+    reference
+        .bus_mut(bus)
+        .expect("bus")
+        .inject(FaultRule::corrupt(FrameSelector::Fraction(1.0)).times(1));
+    reference.transmit(a, frame).expect("transmit");
+    reference.run_until(Instant::from_nanos(20_000_000));
+    let sent = reference.node::<Sender>(a).expect("node").0.clone();
+    let [clean, corrupted] = sent[..] else {
+        panic!("the reference sends twice: {sent:?}")
+    };
+    let length = (u64::from(frame.bit_length()) - 3) * BIT_NS;
+    assert_eq!(clean, 2_000_000 + length);
+    assert!(corrupted > 6_000_000 + length, "{corrupted}");
+
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
+    let sim = netsim_with_faults(&dir, &registry.uri, &["A", "B"], faults);
+    let mut a = participant(
+        &dir,
+        &registry.uri,
+        "A",
+        &[
+            "--send",
+            "1000000:200#11",
+            "--send",
+            "5000000:200#11",
+            "--stop-at",
+            "20000000",
+        ],
+    );
+    let mut b = participant(&dir, &registry.uri, "B", &[]);
+    let a_lines = a.finish(WallDuration::from_secs(30));
+    let b_lines = b.finish(WallDuration::from_secs(30));
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+    for t in [clean, corrupted] {
+        let ack = format!("ack {t} Transmitted 200");
+        assert!(a_lines.contains(&ack), "{ack:?} missing: {a_lines:#?}");
+        let rx = format!("rx {t} 200#11");
+        assert!(b_lines.contains(&rx), "{rx:?} missing: {b_lines:#?}");
+    }
+    let acks = a_lines.iter().filter(|l| l.starts_with("ack ")).count();
+    assert_eq!(acks, 2, "{a_lines:#?}");
+    // The scenario's own frame, from its script port, at 10 ms.
+    let script = Frame::std(0x300, &[0xAA]).expect("frame");
+    let rx = format!(
+        "rx {} 300#AA",
+        10_000_000 + (u64::from(script.bit_length()) - 3) * BIT_NS
+    );
+    for lines in [&a_lines, &b_lines] {
+        assert!(lines.contains(&rx), "{rx:?} missing: {lines:#?}");
+    }
+    let net = &out.networks[0];
+    assert_eq!(
+        net.applied_faults(),
+        [
+            (
+                Instant::from_nanos(6_000_000),
+                BusFault::Inject(FaultRule::corrupt(FrameSelector::Fraction(1.0)).times(1))
+            ),
+            (Instant::from_nanos(10_000_000), BusFault::Send(script)),
+        ]
+    );
+    let (frames, error_frames, mut tecs) = net.with_simulation(|sim, bus| {
+        let b = sim.bus(bus).expect("bus");
+        let tecs: Vec<u16> = b
+            .ports()
+            .filter_map(|p| b.port_status(p).ok())
+            .map(|s| s.counters.tec())
+            .collect();
+        (b.stats().frames(), b.stats().error_frames(), tecs)
+    });
+    assert_eq!((frames, error_frames), (3, 1));
+    // A's transmit error counter: + 8 for the error, − 1 for the frame sent again
+    // (ISO 11898-1 §12.1.4.2); B's and the script port's untouched.
+    tecs.sort_unstable();
+    assert_eq!(tecs, [0, 0, 7]);
 }
