@@ -329,7 +329,7 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
             c.queue_full
         );
         for (at, fault) in net.applied_faults() {
-            eprintln!("    at {at}: {fault}");
+            eprintln!("    at {at} s: {fault}");
         }
     }
     Ok(())
