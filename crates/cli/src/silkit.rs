@@ -488,6 +488,23 @@ pub fn bench(write: bool, file: &std::path::Path, named: bool, trials: usize) ->
         })
         .unwrap_or_default();
     let load = format!("Load average (1, 5, 15 min) before: {load_before}; after: {load_after}.");
+    // The latency floor in steps, for the record: what a step costs and how many a frame
+    // waits, through cantwin and alone, with 8 participants (best trials).
+    let in_steps = rows
+        .iter()
+        .find(|(n, _, _)| *n == 8)
+        .map(|(_, alone, net)| {
+            format!(
+                "With 8 participants a step takes {:.2} ms of wall time through cantwin against \
+                 {:.2} ms alone, and a frame arrives {:.1} steps after it was sent through cantwin \
+                 against {:.1} alone: the latency ratio is about the product of the two ratios.",
+                net.step_us.0 / 1000.0,
+                alone.step_us.0 / 1000.0,
+                net.latency_steps.0,
+                alone.latency_steps.0
+            )
+        })
+        .unwrap_or_default();
     if crate::output::json() {
         let pair = |(best, median): (f64, f64)| serde_json::json!({"best": best, "median": median});
         crate::output::emit(&serde_json::json!({
@@ -539,7 +556,8 @@ pub fn bench(write: bool, file: &std::path::Path, named: bool, trials: usize) ->
              arbitrate them by identifier, and each step takes longer with one more \
              participant to synchronise; the floor on latency would need the simulator to take \
              each request alone as it comes, in wall-clock order, which gives up arbitration \
-             between participants and the reproducible frame times. {load} SIL Kit {}; {}; {}.\n\n\
+             between participants and the reproducible frame times. {in_steps} {load} SIL Kit \
+             {}; {}; {}.\n\n\
              Reproduce: `scripts/fetch-silkit.sh`, then \
              `CANTWIN_SILKIT_DIR=target/silkit/silkit-py-1.0.5 cargo run --release --bin cantwin -- bench silkit --write`.\n",
             kit.version().unwrap_or_default(),
