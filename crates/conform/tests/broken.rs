@@ -37,6 +37,10 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::PdoCobIdChangeWhileValidUnanswered => ("pdo.cob-id-change-valid", Area::Pdo),
         Fault::ResetIgnoredInStopped => ("nmt.reset-from-operational-stopped", Area::Nmt),
         Fault::OperationalReportedAfterBootUp => ("nmt.pre-operational-after-boot-up", Area::Nmt),
+        Fault::RpdoProcessedInStopped | Fault::SyncTpdoInStopped | Fault::EmcyInStopped => {
+            ("nmt.services-stopped", Area::Nmt)
+        }
+        Fault::RpdoProcessedInPreOperational => ("nmt.services-pre-operational", Area::Nmt),
     }
 }
 
@@ -250,6 +254,26 @@ fn cia301_7_3_2_2_1_reset_ignored_in_stopped_is_caught() {
 #[test]
 fn cia301_7_3_2_2_1_operational_reported_after_boot_up_is_caught() {
     caught_only(Fault::OperationalReportedAfterBootUp);
+}
+
+#[test]
+fn cia301_7_3_2_2_3_rpdo_processed_in_stopped_is_caught() {
+    caught_only(Fault::RpdoProcessedInStopped);
+}
+
+#[test]
+fn cia301_7_3_2_2_3_sync_tpdo_in_stopped_is_caught() {
+    caught_only(Fault::SyncTpdoInStopped);
+}
+
+#[test]
+fn cia301_7_3_2_2_3_emcy_in_stopped_is_caught() {
+    caught_only(Fault::EmcyInStopped);
+}
+
+#[test]
+fn cia301_7_3_2_2_3_rpdo_processed_in_pre_operational_is_caught() {
+    caught_only(Fault::RpdoProcessedInPreOperational);
 }
 
 #[test]

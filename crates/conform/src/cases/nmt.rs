@@ -68,6 +68,20 @@ pub(super) fn cases() -> Vec<Case> {
             pdo_operational_only,
         ),
         m(
+            "nmt.services-stopped",
+            A,
+            "CiA 301 §7.3.2.2.3 (NMT states and communication objects)",
+            "in STOPPED an RPDO is not processed, a SYNC triggers no TPDO and no EMCY is sent",
+            services_stopped,
+        ),
+        m(
+            "nmt.services-pre-operational",
+            A,
+            "CiA 301 §7.3.2.2.3 (NMT states and communication objects)",
+            "in PRE-OPERATIONAL an RPDO is not processed and a SYNC triggers no TPDO",
+            services_pre_operational,
+        ),
+        m(
             "nmt.reset-communication-restores",
             A,
             "CiA 301 §7.3.2.2.2",
@@ -430,6 +444,177 @@ fn pdo_operational_only(ctx: &mut Ctx<'_>) -> Outcome {
         "TPDO 0x{:03X} ({how}): {op} frames in 300 ms of OPERATIONAL, none otherwise",
         cob & 0x7FF
     ))
+}
+
+/// The first valid RPDO whose mapped objects all read back over SDO at their mapped
+/// length, byte-aligned: its COB-ID, the frame with its current values and the first
+/// mapped object `(index, sub, value now)`.
+type RpdoProbe = (u32, Vec<u8>, (u16, u8, Vec<u8>));
+
+fn rpdo_probe(ctx: &mut Ctx<'_>) -> Result<Option<RpdoProbe>, Finding> {
+    'pdo: for k in 0..512u16 {
+        let (comm, map) = (0x1400 + k, 0x1600 + k);
+        if !ctx.eds.objects.contains_key(&comm) || !ctx.eds.objects.contains_key(&map) {
+            continue;
+        }
+        let cob = ctx.read_u32(comm, 1, "an RPDO COB-ID")?;
+        let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+        if cob & 0x8000_0000 != 0 || cob & 0x2000_0000 != 0 || n == 0 || n > 64 {
+            continue;
+        }
+        let mut data = Vec::new();
+        let mut first = None;
+        for s in 1..=u8::try_from(n).unwrap_or(0) {
+            let e = ctx.read_u32(map, s, "a mapping entry")?;
+            let (index, sub, bits) = (
+                u16::try_from(e >> 16).unwrap_or(0),
+                u8::try_from((e >> 8) & 0xFF).unwrap_or(0),
+                e & 0xFF,
+            );
+            let len = usize::try_from(bits / 8).unwrap_or(0);
+            if bits == 0 || bits % 8 != 0 {
+                continue 'pdo;
+            }
+            // Dummy entries (§7.4.7.1) take any bytes.
+            if index < 0x20 {
+                data.extend(std::iter::repeat_n(0, len));
+                continue;
+            }
+            if !eds_entry(ctx, index, sub).is_some_and(|e| access(e).readable()) {
+                continue 'pdo;
+            }
+            match ctx.upload(index, sub)? {
+                Ok(d) if d.len() == len => {
+                    data.extend_from_slice(&d);
+                    first.get_or_insert((index, sub, d));
+                }
+                _ => continue 'pdo,
+            }
+        }
+        if let Some(first) = first
+            && (1..=8).contains(&data.len())
+        {
+            return Ok(Some((cob & 0x7FF, data, first)));
+        }
+    }
+    Ok(None)
+}
+
+/// What `state` (entered with `cs`) must not do by §7.3.2.2.3: process an RPDO (its
+/// first mapped object is sent changed and must read back unchanged), send a TPDO on
+/// SYNC (the first TPDO at type 1, five SYNCs) and, in STOPPED, send an EMCY (an RPDO
+/// one byte short, which OPERATIONAL answers with EMCY 0x8210, §7.2.2.2).
+fn services_in(ctx: &mut Ctx<'_>, cs: NmtCs, name: &str) -> Outcome {
+    let stopped = cs == NmtCs::Stop;
+    let rpdo = rpdo_probe(ctx)?;
+    let tpdo = if ctx.profile.features.sync == Some(false) {
+        None
+    } else {
+        first_tpdo(ctx)?
+    };
+    if rpdo.is_none() && tpdo.is_none() {
+        return Err(Finding::NotApplicable(
+            "no valid RPDO whose mapped objects read back, and no SYNC-driven TPDO".into(),
+        ));
+    }
+    let emcy = match ctx.upload(0x1014, 0)? {
+        Ok(d) if super::u32_of(&d) & 0x8000_0000 == 0 => Some(super::u32_of(&d) & 0x7FF),
+        _ => None,
+    };
+    let mut tt = None;
+    if let Some((comm, _)) = tpdo {
+        let old = ctx
+            .upload(comm, 2)?
+            .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
+        match ctx.download(comm, 2, &[1])? {
+            Ok(()) => tt = Some(old),
+            Err(a) if a.code == cantwin_canopen::AbortCode::INVALID_VALUE => {}
+            Err(a) => return Err(fail_sdo(format!("writing type 1 to 0x{comm:04X} sub 2"), a)),
+        }
+    }
+    let sync = if ctx.eds.objects.contains_key(&0x1005) {
+        ctx.read_u32(0x1005, 0, "the COB-ID SYNC")? & 0x7FF
+    } else {
+        0x80
+    };
+    let sync = cantwin_can::Id::standard(u16::try_from(sync).unwrap_or(0x80))
+        .map_err(|e| fail(e.to_string()))?;
+    if stopped {
+        ctx.nmt(NmtCs::Stop)?;
+    } else {
+        ctx.nmt(NmtCs::EnterPreOperational)?;
+    }
+    ctx.idle(Duration::from_millis(20))?;
+    let mut problems = Vec::new();
+    let mut checked = Vec::new();
+    if let Some((cob, data, _)) = &rpdo {
+        let mut changed = data.clone();
+        changed.iter_mut().for_each(|b| *b = !*b);
+        let id = cantwin_can::Id::standard(u16::try_from(*cob).unwrap_or(0))
+            .map_err(|e| fail(e.to_string()))?;
+        ctx.send(Frame::data(id, &changed).map_err(|e| fail(e.to_string()))?)?;
+        ctx.idle(Duration::from_millis(20))?;
+        if stopped && let Some(e) = emcy {
+            ctx.send(Frame::data(id, &data[..data.len() - 1]).map_err(|e| fail(e.to_string()))?)?;
+            let got = ctx.collect(Duration::from_millis(100), |f| {
+                f.id().as_raw() == e && !f.is_remote()
+            })?;
+            if let Some((_, f)) = got.first() {
+                problems.push(format!("EMCY {} after a short RPDO", f));
+            }
+            checked.push("no EMCY");
+        }
+    }
+    if let (Some((_, cob)), Some(_)) = (tpdo, &tt) {
+        let mut n = 0;
+        for _ in 0..5 {
+            ctx.send(Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?)?;
+            n += count_pdo(ctx, cob, Duration::from_millis(20))?;
+        }
+        if n != 0 {
+            problems.push(format!(
+                "{n} TPDO 0x{:03X} (type 1) after 5 SYNCs",
+                cob & 0x7FF
+            ));
+        }
+        checked.push("no TPDO on SYNC");
+    }
+    if stopped {
+        ctx.nmt(NmtCs::EnterPreOperational)?;
+        ctx.idle(Duration::from_millis(20))?;
+    }
+    if let Some((cob, _, (index, sub, value))) = &rpdo {
+        let now = ctx
+            .upload(*index, *sub)?
+            .map_err(|a| fail_sdo(format!("reading 0x{index:04X} sub {sub}"), a))?;
+        if &now != value {
+            let _ = ctx.download(*index, *sub, value)?;
+            problems.push(format!(
+                "RPDO 0x{cob:03X} processed: 0x{index:04X} sub {sub} went from {value:02X?} to {now:02X?}"
+            ));
+        }
+        checked.push("RPDO not processed");
+    }
+    if let (Some((comm, _)), Some(old)) = (tpdo, &tt) {
+        ctx.write(comm, 2, old, "the transmission type")?;
+    }
+    if !problems.is_empty() {
+        return Err(fail(format!("in {name}: {}", problems.join("; "))));
+    }
+    if checked.is_empty() {
+        return Err(Finding::NotApplicable(
+            "the TPDO takes no type 1 and no RPDO reads back".into(),
+        ));
+    }
+    Ok(format!("in {name}: {}", checked.join(", ")))
+}
+
+fn services_stopped(ctx: &mut Ctx<'_>) -> Outcome {
+    services_in(ctx, NmtCs::Stop, "STOPPED")
+}
+
+fn services_pre_operational(ctx: &mut Ctx<'_>) -> Outcome {
+    services_in(ctx, NmtCs::EnterPreOperational, "PRE-OPERATIONAL")
 }
 
 fn restores(ctx: &mut Ctx<'_>, cs: NmtCs, what: &str) -> Outcome {

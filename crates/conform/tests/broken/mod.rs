@@ -78,11 +78,22 @@ pub enum Fault {
     /// Reports OPERATIONAL (5) in its first heartbeat or guarding answer after a boot-up,
     /// where §7.3.2.2.1 has INITIALISATION end in PRE-OPERATIONAL (127).
     OperationalReportedAfterBootUp,
+    /// Processes RPDO 1 in STOPPED, where §7.3.2.2.3 allows PDOs only in OPERATIONAL.
+    RpdoProcessedInStopped,
+    /// Processes RPDO 1 in PRE-OPERATIONAL, where §7.3.2.2.3 allows PDOs only in
+    /// OPERATIONAL.
+    RpdoProcessedInPreOperational,
+    /// Sends TPDO 1 on each SYNC in STOPPED when its type is synchronous (1–240), where
+    /// §7.3.2.2.3 allows PDOs only in OPERATIONAL.
+    SyncTpdoInStopped,
+    /// Sends the RPDO length EMCY (0x8210) for a short RPDO 1 in STOPPED too, where
+    /// §7.3.2.2.3 allows no EMCY in STOPPED.
+    EmcyInStopped,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 18] = [
+    pub const ALL: [Fault; 22] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -101,6 +112,10 @@ impl Fault {
         Fault::PdoCobIdChangeWhileValidUnanswered,
         Fault::ResetIgnoredInStopped,
         Fault::OperationalReportedAfterBootUp,
+        Fault::RpdoProcessedInStopped,
+        Fault::RpdoProcessedInPreOperational,
+        Fault::SyncTpdoInStopped,
+        Fault::EmcyInStopped,
     ];
 }
 
@@ -338,6 +353,9 @@ impl Broken {
             && (data[1] == 0 || data[1] == NODE_ID)
         {
             return None;
+        }
+        if let Some(f) = self.outside_operational(id, data, out) {
+            return f;
         }
         if id == 0x000 && data.len() == 2 && data[0] == 0x82 && (data[1] == 0 || data[1] == NODE_ID)
         {
@@ -706,6 +724,58 @@ impl Broken {
             _ => {}
         }
         Some(frame)
+    }
+
+    /// The PDO faults outside OPERATIONAL: `Some(None)` when the fault took the frame.
+    fn outside_operational(
+        &mut self,
+        id: u16,
+        data: &[u8],
+        out: &mut Outbox,
+    ) -> Option<Option<Frame>> {
+        let state = self.device.state();
+        let od = self.device.od();
+        let rpdo1 = od.get_unsigned(0x1400, 1).unwrap_or(0x8000_0000) as u32;
+        let is_rpdo1 = rpdo1 & 0x8000_0000 == 0 && u32::from(id) == rpdo1 & 0x7FF;
+        match self.fault {
+            Some(Fault::RpdoProcessedInStopped) if state == State::Stopped => {}
+            Some(Fault::RpdoProcessedInPreOperational) if state == State::PreOperational => {}
+            Some(Fault::EmcyInStopped)
+                if state == State::Stopped && is_rpdo1 && data.len() != 4 =>
+            {
+                let reg = self.device.error_register() | 0x10;
+                out.push(
+                    Frame::std(0x80 + u16::from(NODE_ID), &[0x10, 0x82, reg, 0, 0, 0, 0, 0])
+                        .unwrap(),
+                );
+                return Some(None);
+            }
+            Some(Fault::SyncTpdoInStopped) if state == State::Stopped && id == 0x080 => {
+                let cob = od.get_unsigned(0x1800, 1).unwrap_or(0x8000_0000) as u32;
+                let ty = od.get_unsigned(0x1800, 2).unwrap_or(255);
+                if cob & 0x8000_0000 == 0 && (1..=240).contains(&ty) {
+                    let a = od.get_unsigned(INPUTS_INDEX, 1).unwrap_or(0) as u16;
+                    let b = od.get_unsigned(INPUTS_INDEX, 2).unwrap_or(0) as u16;
+                    let [a0, a1] = a.to_le_bytes();
+                    let [b0, b1] = b.to_le_bytes();
+                    out.push(Frame::std((cob & 0x7FF) as u16, &[a0, a1, b0, b1]).unwrap());
+                }
+                return None;
+            }
+            _ => return None,
+        }
+        if !is_rpdo1 || data.len() != 4 {
+            return None;
+        }
+        // RPDO 1 maps 0x2200 sub 1 and 2, 16 bits each.
+        for (sub, v) in [(1u8, [data[0], data[1]]), (2, [data[2], data[3]])] {
+            let _ = self.device.set_value(
+                OUTPUTS_INDEX,
+                sub,
+                &Value::Unsigned16(u16::from_le_bytes(v)),
+            );
+        }
+        Some(None)
     }
 
     /// TPDO 1 as the device would send it in OPERATIONAL: its COB-ID, if valid, and its
