@@ -41,6 +41,9 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
             ("nmt.services-stopped", Area::Nmt)
         }
         Fault::RpdoProcessedInPreOperational => ("nmt.services-pre-operational", Area::Nmt),
+        Fault::CyclicTypeAtEverySync => ("pdo.transmission-cyclic", Area::Pdo),
+        Fault::RtrSyncTypeSentOnSync => ("pdo.transmission-rtr-sync", Area::Pdo),
+        Fault::ReservedTransmissionTypeAccepted => ("pdo.transmission-reserved", Area::Pdo),
     }
 }
 
@@ -274,6 +277,21 @@ fn cia301_7_3_2_2_3_emcy_in_stopped_is_caught() {
 #[test]
 fn cia301_7_3_2_2_3_rpdo_processed_in_pre_operational_is_caught() {
     caught_only(Fault::RpdoProcessedInPreOperational);
+}
+
+#[test]
+fn cia301_7_5_2_35_cyclic_type_sent_at_every_sync_is_caught() {
+    caught_only(Fault::CyclicTypeAtEverySync);
+}
+
+#[test]
+fn cia301_7_5_2_35_type_252_sent_on_sync_is_caught() {
+    caught_only(Fault::RtrSyncTypeSentOnSync);
+}
+
+#[test]
+fn cia301_7_5_2_35_reserved_transmission_type_accepted_is_caught() {
+    caught_only(Fault::ReservedTransmissionTypeAccepted);
 }
 
 #[test]

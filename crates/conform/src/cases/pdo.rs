@@ -41,6 +41,27 @@ pub(super) fn cases() -> Vec<Case> {
             transmission_sync,
         ),
         m(
+            "pdo.transmission-cyclic",
+            A,
+            "CiA 301 §7.2.2.2, §7.5.2.35 table 71 (types 1–240), §7.5.2.37",
+            "transmission type 3 sends the TPDO at every third SYNC",
+            transmission_cyclic,
+        ),
+        m(
+            "pdo.transmission-rtr-sync",
+            A,
+            "CiA 301 §7.2.2.2, §7.5.2.35 table 71 (type 252), §7.5.2.37",
+            "with transmission type 252 a TPDO is sent on a remote frame only, never on a SYNC",
+            transmission_rtr_sync,
+        ),
+        m(
+            "pdo.transmission-reserved",
+            A,
+            "CiA 301 §7.5.2.35 table 71 (241–251 reserved), §7.2.4.3.17",
+            "the reserved transmission types 241–251 are refused with an abort",
+            transmission_reserved,
+        ),
+        m(
             "pdo.transmission-acyclic",
             A,
             "CiA 301 §7.2.2.2, §7.5.2.36 table 71 (type 0)",
@@ -591,6 +612,149 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
     }
     Ok(format!(
         "none without SYNC; 0x{index:04X} sub {sub} changed: none before the SYNC, one with it; per SYNC {after:?}"
+    ))
+}
+
+/// The SYNCs (counted from 1) of `syncs` sent 20 ms apart in OPERATIONAL after which the
+/// TPDO with `cob` came.
+fn tpdos_on_syncs(ctx: &mut Ctx<'_>, cob: u32, syncs: usize) -> Result<Vec<usize>, Finding> {
+    let sync = sync_id(ctx)?;
+    let mut at = Vec::new();
+    for k in 1..=syncs {
+        ctx.send(Frame::data(sync, &[]).map_err(|e| fail(e.to_string()))?)?;
+        let n = ctx
+            .collect(Duration::from_millis(20), |f| is_pdo(f, cob))?
+            .len();
+        at.extend(std::iter::repeat_n(k, n));
+    }
+    Ok(at)
+}
+
+fn transmission_cyclic(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
+    }
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
+    if !set_type(ctx, comm, 3)? {
+        return Err(not_supported(format!(
+            "0x{comm:04X} refuses type 3 with 0x06090030"
+        )));
+    }
+    ctx.nmt(NmtCs::Start)?;
+    ctx.idle(Duration::from_millis(30))?;
+    let at = tpdos_on_syncs(ctx, cob, 9)?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    // Nine SYNCs hold three periods whatever SYNC the device counts from.
+    let spaced = at.windows(2).all(|w| w[1] - w[0] == 3);
+    if at.len() != 3 || !spaced {
+        return Err(fail(format!(
+            "type 3: TPDO 0x{:03X} after SYNCs {at:?} of 9, expected one every third SYNC",
+            cob & 0x7FF
+        )));
+    }
+    Ok(format!(
+        "type 3: TPDO 0x{:03X} after SYNCs {at:?} of 9",
+        cob & 0x7FF
+    ))
+}
+
+fn transmission_rtr_sync(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.sync == Some(false) {
+        return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
+    }
+    let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    if cob & 0x4000_0000 != 0 {
+        return Err(not_supported(format!(
+            "0x{comm:04X} sub 1 = 0x{cob:08X}: no RTR (bit 30 set)"
+        )));
+    }
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
+    if !set_type(ctx, comm, 252)? {
+        return Err(not_supported(format!(
+            "0x{comm:04X} refuses type 252 with 0x06090030"
+        )));
+    }
+    let map = comm + 0x200;
+    let n = ctx.read_u32(map, 0, "the number of mapped objects")?;
+    let mut bits = 0u32;
+    for s in 1..=u8::try_from(n).unwrap_or(0) {
+        bits += ctx.read_u32(map, s, "a mapping entry")? & 0xFF;
+    }
+    let len = u8::try_from(bits.div_ceil(8).min(8)).unwrap_or(8);
+    let id =
+        Id::standard(u16::try_from(cob & 0x7FF).unwrap_or(0)).map_err(|e| fail(e.to_string()))?;
+    ctx.nmt(NmtCs::Start)?;
+    ctx.idle(Duration::from_millis(30))?;
+    // SYNCs alone: the data is sampled, nothing sent.
+    let on_sync = tpdos_on_syncs(ctx, cob, 3)?;
+    ctx.send(Frame::remote(id, len).map_err(|e| fail(e.to_string()))?)?;
+    let answered = ctx.wait_for(Duration::from_millis(100), |f| is_pdo(f, cob))?;
+    ctx.nmt(NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    if !on_sync.is_empty() {
+        return Err(fail(format!(
+            "type 252: TPDO 0x{:03X} sent after SYNCs {on_sync:?} without a remote frame",
+            cob & 0x7FF
+        )));
+    }
+    match answered {
+        Some((_, f)) => Ok(format!(
+            "type 252: nothing on 3 SYNCs, the remote frame answered with {f}"
+        )),
+        None => Err(fail_kind(
+            FailureKind::Event,
+            format!(
+                "type 252: a remote frame after 3 SYNCs got no TPDO 0x{:03X} within 100 ms",
+                cob & 0x7FF
+            ),
+        )),
+    }
+}
+
+fn transmission_reserved(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((comm, _)) = super::nmt::first_tpdo(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no valid TPDO with a mapping".into(),
+        ));
+    };
+    let tt = ctx
+        .upload(comm, 2)?
+        .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 2"), a))?;
+    let mut taken = Vec::new();
+    let mut codes = std::collections::BTreeSet::new();
+    for ty in 241u8..=251 {
+        match ctx.download(comm, 2, &[ty])? {
+            Ok(()) => taken.push(ty),
+            Err(a) => {
+                codes.insert(format!("0x{:08X}", a.code.to_u32()));
+            }
+        }
+    }
+    ctx.write(comm, 2, &tt, "the transmission type")?;
+    if !taken.is_empty() {
+        return Err(fail(format!(
+            "0x{comm:04X} sub 2 took the reserved types {taken:?}"
+        )));
+    }
+    Ok(format!(
+        "0x{comm:04X} sub 2: 241–251 refused ({})",
+        codes.into_iter().collect::<Vec<_>>().join(", ")
     ))
 }
 

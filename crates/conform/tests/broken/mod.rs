@@ -89,11 +89,20 @@ pub enum Fault {
     /// Sends the RPDO length EMCY (0x8210) for a short RPDO 1 in STOPPED too, where
     /// §7.3.2.2.3 allows no EMCY in STOPPED.
     EmcyInStopped,
+    /// Sends TPDO 1 at every SYNC when its type is 3–240, where §7.5.2.35 table 71 has
+    /// type n send it at every n-th SYNC.
+    CyclicTypeAtEverySync,
+    /// Sends TPDO 1 at every SYNC at type 252, where §7.5.2.35 table 71 has it sent only
+    /// on a remote frame.
+    RtrSyncTypeSentOnSync,
+    /// Takes the reserved transmission types 241–251 in 0x1800 sub 2, where §7.5.2.35
+    /// table 71 reserves them (the write must be refused with an abort).
+    ReservedTransmissionTypeAccepted,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 22] = [
+    pub const ALL: [Fault; 25] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -116,6 +125,9 @@ impl Fault {
         Fault::RpdoProcessedInPreOperational,
         Fault::SyncTpdoInStopped,
         Fault::EmcyInStopped,
+        Fault::CyclicTypeAtEverySync,
+        Fault::RtrSyncTypeSentOnSync,
+        Fault::ReservedTransmissionTypeAccepted,
     ];
 }
 
@@ -284,6 +296,9 @@ pub struct Broken {
     block_end_next: bool,
     /// When the next TPDO 1 of [`Fault::TpdoInPreOperational`] is due.
     tpdo_due: Option<Instant>,
+    /// A SYNC arrived that [`Fault::CyclicTypeAtEverySync`] or
+    /// [`Fault::RtrSyncTypeSentOnSync`] answers with TPDO 1 in place of the device.
+    sync_tpdo: bool,
     /// A boot-up went out and no state report since ([`Fault::OperationalReportedAfterBootUp`]).
     booted: bool,
 }
@@ -308,6 +323,7 @@ impl Broken {
             block_end_next: false,
             tpdo_due: None,
             booted: false,
+            sync_tpdo: false,
         }
     }
 
@@ -355,6 +371,9 @@ impl Broken {
             return None;
         }
         if let Some(f) = self.outside_operational(id, data, out) {
+            return f;
+        }
+        if let Some(f) = self.transmission_type_fault(id, data, out) {
             return f;
         }
         if id == 0x000 && data.len() == 2 && data[0] == 0x82 && (data[1] == 0 || data[1] == NODE_ID)
@@ -778,6 +797,51 @@ impl Broken {
         Some(None)
     }
 
+    /// TPDO 1 with the current values of its mapping (0x2100 sub 1 and 2), if valid.
+    fn tpdo1_frame(&self) -> Option<Frame> {
+        let od = self.device.od();
+        let cob = od.get_unsigned(0x1800, 1)? as u32;
+        if cob & 0x8000_0000 != 0 {
+            return None;
+        }
+        let a = od.get_unsigned(INPUTS_INDEX, 1)? as u16;
+        let b = od.get_unsigned(INPUTS_INDEX, 2)? as u16;
+        let [a0, a1] = a.to_le_bytes();
+        let [b0, b1] = b.to_le_bytes();
+        Frame::std((cob & 0x7FF) as u16, &[a0, a1, b0, b1]).ok()
+    }
+
+    /// The transmission type faults: `Some(None)` when the fault took the frame.
+    fn transmission_type_fault(
+        &mut self,
+        id: u16,
+        data: &[u8],
+        out: &mut Outbox,
+    ) -> Option<Option<Frame>> {
+        let ty = self.device.od().get_unsigned(0x1800, 2).unwrap_or(255);
+        let operational = self.device.state() == State::Operational;
+        let on_sync = match self.fault {
+            Some(Fault::CyclicTypeAtEverySync) => (3..=240).contains(&ty),
+            Some(Fault::RtrSyncTypeSentOnSync) => ty == 252,
+            Some(Fault::ReservedTransmissionTypeAccepted)
+                if id == self.sdo_rx()
+                    && data.len() == 8
+                    && is_expedited_download(data[0])
+                    && expedited(data).0 == 0x1800
+                    && expedited(data).1 == 2
+                    && (241..=251).contains(&data[4]) =>
+            {
+                self.answer(out, data, None);
+                return Some(None);
+            }
+            _ => false,
+        };
+        if on_sync && operational && id == 0x080 {
+            self.sync_tpdo = true;
+        }
+        None
+    }
+
     /// TPDO 1 as the device would send it in OPERATIONAL: its COB-ID, if valid, and its
     /// mapping (0x2100 sub 1 and 2, 16 bits each); with its event timer.
     fn tpdo1(&self) -> Option<(Frame, Duration)> {
@@ -851,6 +915,17 @@ impl Node for Broken {
         let mut produced = Outbox::new();
         if let Some(f) = self.incoming(frame, &mut produced) {
             self.device.on_frame(&f, now, &mut produced);
+        }
+        if std::mem::take(&mut self.sync_tpdo)
+            && let Some(tpdo) = self.tpdo1_frame()
+        {
+            // The device's own answer to the SYNC (none, or its every-n-th TPDO 1) is
+            // replaced by TPDO 1 at this SYNC.
+            let rest: Vec<Frame> = produced.drain().filter(|f| f.id() != tpdo.id()).collect();
+            for f in rest {
+                produced.push(f);
+            }
+            produced.push(tpdo);
         }
         self.flush(&mut produced, out);
         self.tpdo_outside_operational(now, out);
