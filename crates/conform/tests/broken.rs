@@ -44,6 +44,7 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::CyclicTypeAtEverySync => ("pdo.transmission-cyclic", Area::Pdo),
         Fault::RtrSyncTypeSentOnSync => ("pdo.transmission-rtr-sync", Area::Pdo),
         Fault::ReservedTransmissionTypeAccepted => ("pdo.transmission-reserved", Area::Pdo),
+        Fault::UploadToggleIgnored => ("sdo.abort-toggle-upload", Area::Sdo),
     }
 }
 
@@ -292,6 +293,11 @@ fn cia301_7_5_2_35_type_252_sent_on_sync_is_caught() {
 #[test]
 fn cia301_7_5_2_35_reserved_transmission_type_accepted_is_caught() {
     caught_only(Fault::ReservedTransmissionTypeAccepted);
+}
+
+#[test]
+fn cia301_7_2_4_3_7_unchecked_upload_toggle_bit_is_caught() {
+    caught_only(Fault::UploadToggleIgnored);
 }
 
 #[test]

@@ -128,6 +128,13 @@ pub(super) fn cases() -> Vec<Case> {
             abort_value_low,
         ),
         m(
+            "sdo.abort-toggle-upload",
+            A,
+            "CiA 301 §7.2.4.3.7, §7.2.4.3.17",
+            "an upload segment request with the wrong toggle bit is refused with 0x05030000",
+            abort_toggle_upload,
+        ),
+        m(
             "sdo.abort-toggle",
             A,
             "CiA 301 §7.2.4.3.4, §7.2.4.3.17",
@@ -755,6 +762,44 @@ fn abort_toggle(ctx: &mut Ctx<'_>) -> Outcome {
         }
     }
     recovered(ctx, "a toggle error")?;
+    Ok(format!("0x{index:04X} sub {sub}: 0x05030000"))
+}
+
+/// §7.2.4.3.7: the first upload segment request carries toggle 0; one with toggle 1 is
+/// a toggle error the server aborts with 0x05030000 (§7.2.4.3.17).
+fn abort_toggle_upload(ctx: &mut Ctx<'_>) -> Outcome {
+    let Some((index, sub, _)) = long_entry(ctx)? else {
+        return Err(Finding::NotApplicable(
+            "no readable entry longer than 4 bytes".into(),
+        ));
+    };
+    let Some(b) = ctx.sdo_raw(req(0x40, index, sub, [0; 4]))? else {
+        return Err(fail_kind(FailureKind::Silence, "no answer to the initiate"));
+    };
+    if let Some(code) = abort_of(&b) {
+        return Err(segmented_refused(ctx, "upload", code));
+    }
+    if b[0] & 0xE2 != 0x40 {
+        return Err(fail(format!(
+            "0x{index:04X} sub {sub}: the initiate answer {b:02X?} is not a segmented upload"
+        )));
+    }
+    let Some(b) = ctx.sdo_raw([0x70, 0, 0, 0, 0, 0, 0, 0])? else {
+        return Err(fail_kind(
+            FailureKind::Silence,
+            "no answer to the upload segment request with the wrong toggle bit",
+        ));
+    };
+    match abort_of(&b) {
+        Some(AbortCode::TOGGLE_BIT_NOT_ALTERNATED) => {}
+        Some(code) => return Err(fail_abort("expected 0x05030000", code)),
+        None => {
+            return Err(fail(format!(
+                "the upload segment request with toggle 1 first was answered: {b:02X?}"
+            )));
+        }
+    }
+    recovered(ctx, "an upload toggle error")?;
     Ok(format!("0x{index:04X} sub {sub}: 0x05030000"))
 }
 

@@ -98,11 +98,15 @@ pub enum Fault {
     /// Takes the reserved transmission types 241–251 in 0x1800 sub 2, where §7.5.2.35
     /// table 71 reserves them (the write must be refused with an abort).
     ReservedTransmissionTypeAccepted,
+    /// Does not check the toggle bit of upload segment requests (§7.2.4.3.7): each is
+    /// taken as if it carried the expected toggle, so a wrong one is never aborted with
+    /// 0x05030000. Download segments are checked.
+    UploadToggleIgnored,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 25] = [
+    pub const ALL: [Fault; 26] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -128,6 +132,7 @@ impl Fault {
         Fault::CyclicTypeAtEverySync,
         Fault::RtrSyncTypeSentOnSync,
         Fault::ReservedTransmissionTypeAccepted,
+        Fault::UploadToggleIgnored,
     ];
 }
 
@@ -400,13 +405,20 @@ impl Broken {
                 self.answer(out, data, Some(0x0800_0022));
                 None
             }
-            Some(Fault::ToggleIgnored) if self.transfer == Transfer::Idle => {
+            Some(fault @ (Fault::ToggleIgnored | Fault::UploadToggleIgnored))
+                if self.transfer == Transfer::Idle =>
+            {
                 let mut d: [u8; 8] = data.try_into().unwrap();
                 match byte0 >> 5 {
                     // Initiate download or upload: the first segment carries toggle 0.
                     1 | 2 => self.toggle = 0,
-                    // Download segment, upload segment request.
-                    0 | 3 => {
+                    // Download segment ([`Fault::ToggleIgnored`] only).
+                    0 if fault == Fault::ToggleIgnored => {
+                        d[0] = (byte0 & !0x10) | (self.toggle << 4);
+                        self.toggle ^= 1;
+                    }
+                    // Upload segment request.
+                    3 => {
                         d[0] = (byte0 & !0x10) | (self.toggle << 4);
                         self.toggle ^= 1;
                     }
