@@ -55,7 +55,8 @@ def dnet(host, port, *args):
 def recorded_pcap(tmp_path_factory):
     """Browse MAC IDs 11–13, Get the Identity product name (8/8 on the predefined set),
     Get PAR 600 through the Parameter object (instance 600: a UCMM connection, 8/16), and
-    poll the worked example's 4 bytes out, 6 bytes in."""
+    poll the worked example's 4 bytes out, 6 bytes in (after reading the PDC channel
+    parameters that name its words)."""
     pcap = tmp_path_factory.mktemp("dnet") / "run.pcap"
     sim = start_sim(DEVICENET_SCENARIO, extra=["--pcap", str(pcap)])
     try:
@@ -137,10 +138,13 @@ def test_tshark_decodes_the_group_3_explicit_get_on_the_ucmm_connection(tshark, 
                for g, s, d, rr, svc, data in rows]
     # Get_Attribute_Single (0x0E) on the connection's message 0: class 0x0F, instance 600
     # (0x0258, 16 bits in the 8/16 body), attribute 1 — tshark leaves the path as data.
-    assert (0, SCANNER, DRIVE, 0, 0x0E, "0f580201") in decoded, decoded
-    # The drive's answer (a DWORD) comes from the drive's message ID 0.
-    answers = [r for r in decoded if r[:5] == (0, DRIVE, SCANNER, 1, 0x0E)]
-    assert len(answers) == 1 and len(answers[0][5]) == 8, decoded
+    request = (0, SCANNER, DRIVE, 0, 0x0E, "0f580201")
+    assert request in decoded, decoded
+    # The drive's answer (a DWORD) comes from the drive's message ID 0, next after the
+    # request (`dnet poll` reads the PDC channel parameters on such connections too).
+    after = decoded[decoded.index(request) + 1:]
+    answer = next((r for r in after if r[:5] == (0, DRIVE, SCANNER, 1, 0x0E)), None)
+    assert answer is not None and len(answer[5]) == 8, decoded
 
 
 def test_tshark_decodes_the_poll_exchange(tshark, recorded_pcap):
