@@ -209,9 +209,17 @@ fn pre_operational_after_boot_up(ctx: &mut Ctx<'_>) -> Outcome {
         .options
         .sdo_timeout
         .max(Duration::from_millis(2 * u64::from(period) + 50));
-    match ctx.wait_for(within, |f| {
-        f.id() == ec && !f.is_remote() && f.len() == 1 && f.data_bytes()[0] != 0
-    })? {
+    // A state 0 after the boot-up is another boot-up message (INITIALISATION), not a
+    // report of PRE-OPERATIONAL: counted for the finding.
+    let mut initialising = 0usize;
+    let got = ctx.wait_for(within, |f| {
+        let ours = f.id() == ec && !f.is_remote() && f.len() == 1;
+        if ours && f.data_bytes()[0] == 0 {
+            initialising += 1;
+        }
+        ours && f.data_bytes()[0] != 0
+    })?;
+    match got {
         Some((t, f)) if f.data_bytes()[0] & 0x7F == 0x7F => Ok(format!(
             "the first state report after the boot-up ({} ms later) is 127 (PRE-OPERATIONAL)",
             t.saturating_duration_since(booted).as_millis()
@@ -219,6 +227,10 @@ fn pre_operational_after_boot_up(ctx: &mut Ctx<'_>) -> Outcome {
         Some((_, f)) => Err(fail(format!(
             "the first state report after the boot-up is {}, not 127 (PRE-OPERATIONAL)",
             f.data_bytes()[0] & 0x7F
+        ))),
+        None if initialising > 0 => Err(fail(format!(
+            "within {} ms of the boot-up the device reports only state 0 (INITIALISATION), {initialising} times, never 127 (PRE-OPERATIONAL)",
+            within.as_millis()
         ))),
         None => Err(fail_kind(
             FailureKind::Silence,
