@@ -16,6 +16,7 @@ mod cia402;
 mod memory_twins;
 mod process;
 mod python;
+mod silkit;
 mod table_json;
 mod trials;
 mod twins;
@@ -162,9 +163,7 @@ pub fn run(args: &Args) -> Result<()> {
             "sdo" => bench_sdo(args, &spinner),
             "memory" => bench_memory(args),
             "cia402" => cia402::bench(args),
-            "silkit" => {
-                crate::silkit::bench(args.write, &args.file, !args.names.is_empty(), args.trials)
-            }
+            "silkit" => silkit::bench(args.write, &args.file, !args.names.is_empty(), args.trials),
             twin => bench_twin(args, twin),
         };
         spinner.finish_and_clear();

@@ -199,8 +199,9 @@ fn cia402_pp_pv_and_hm_drive_commands_against_the_servo_twin() {
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert_eq!(v["statusword"].as_u64().unwrap() & 0x1400, 0x1400, "{out}");
     assert!(v["position"].as_i64().unwrap().abs() < 50, "{out}");
-    // A method the drive does not run is refused with its abort code.
-    let (ok, _, err) = run(&["home", "3", "7", "--enable"]);
+    // A method the drive does not run (15 is reserved, CiA 402-2 6098h) is refused with
+    // its abort code.
+    let (ok, _, err) = run(&["home", "3", "15", "--enable"]);
     assert!(!ok);
     assert!(
         err.contains("0x06090030") && err.contains("does not run this homing method"),

@@ -718,3 +718,76 @@ pub fn run_network_simulator_with_faults(
         left,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::netsim_faults::faults_from_scenario;
+    use crate::netsim_faults::tests::{networks, scenario};
+    use crate::{CanFrame, ControllerState};
+    use cantwin_bus::{FaultRule, FrameSelector};
+
+    #[test]
+    fn a_fault_applies_at_its_time_in_the_step_that_holds_it() {
+        let s = scenario(
+            "[[at]]\ntime_ms = 6\naction = \"corrupt\"\nbus = \"can0\"\nfraction = 1.0\ncount = 1\n\n\
+             [[at]]\ntime_ms = 7\naction = \"clear_faults\"\nbus = \"can0\"\n\n\
+             [[at]]\ntime_ms = 7.5\naction = \"send\"\nbus = \"can0\"\nframe = \"7FF#01\"\n",
+        );
+        let faults = faults_from_scenario(&s, &networks()).expect("faults");
+        let model = CanNetworkModel::with_faults("can0", NetsimConfig::default(), s.seed, &faults);
+        for d in [1, 2] {
+            model.controller_added(d);
+            model.controller_mode(d, ControllerState::Started, false, false);
+        }
+        let ms = 1_000_000;
+        let frame = CanFrame {
+            id: 0x200,
+            flags: 0,
+            dlc: 1,
+            data: vec![0x11],
+        };
+        let frames_and_errors = || {
+            model.with_simulation(|sim, bus| {
+                sim.bus(bus)
+                    .map(|b| (b.stats().frames(), b.stats().error_frames()))
+            })
+        };
+        let tecs = || {
+            model.with_simulation(|sim, bus| {
+                let b = sim.bus(bus).expect("bus");
+                let mut t: Vec<u16> = b
+                    .ports()
+                    .map(|p| b.port_status(p).expect("port").counters.tec())
+                    .collect();
+                t.sort_unstable();
+                t
+            })
+        };
+        model.step(0, 2 * ms);
+        // Before the fault's step: sent as it is.
+        model.frame_request(1, frame.clone(), 1);
+        model.step(2 * ms, 2 * ms);
+        model.step(4 * ms, 2 * ms);
+        assert_eq!((frames_and_errors(), tecs()), (Some((1, 0)), vec![0, 0, 0]));
+        // The step at 6 ms: corrupted once (an error frame, TEC + 8, ISO 11898-1 §12.1.4.2
+        // rule 3), then sent again and acknowledged (TEC − 1, rule 7).
+        model.frame_request(1, frame, 2);
+        model.step(6 * ms, 2 * ms);
+        assert_eq!((frames_and_errors(), tecs()), (Some((3, 1)), vec![0, 0, 7]));
+        assert_eq!(
+            model.applied_faults(),
+            [
+                (
+                    Instant::from_nanos(6 * ms),
+                    BusFault::Inject(FaultRule::corrupt(FrameSelector::Fraction(1.0)).times(1))
+                ),
+                (Instant::from_nanos(7 * ms), BusFault::Clear),
+                (
+                    Instant::from_nanos(7 * ms + ms / 2),
+                    BusFault::Send(Frame::std(0x7FF, &[0x01]).expect("frame"))
+                ),
+            ]
+        );
+    }
+}
