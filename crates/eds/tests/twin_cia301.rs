@@ -364,3 +364,20 @@ fn cia306_dcf_parameter_values_configure_heartbeat_and_emcy() {
     assert_eq!(emcy.len(), 1);
     assert_eq!(&emcy[0].2[..2], &[0x00, 0x50]);
 }
+
+/// A default text beyond ISO 646 (CiA 301 §7.1.6 defines none: a vendor's `€`, a German
+/// `ü`) reads over SDO as the file's text in UTF-8, in every protocol, not as `?`.
+#[test]
+fn cia301_7_1_6_a_visible_string_beyond_iso_646_reads_as_the_files_text() {
+    let (desc, _) = description("irregular/i16_utf8.eds");
+    let mut rig = Rig::new(desc, 6);
+    for mode in [Mode::Expedited, Mode::Segmented, Mode::Block { blksize: 7 }] {
+        let mode_name = format!("{mode:?}");
+        let got = rig.upload(0x2000, 0, mode);
+        assert_eq!(
+            got.as_deref(),
+            Ok("5 € pro Stück".as_bytes()),
+            "{mode_name}"
+        );
+    }
+}

@@ -23,7 +23,7 @@ pub enum DataType {
     Unsigned32 = 0x07,
     /// REAL32 (0x0008): IEEE 754 single precision.
     Real32 = 0x08,
-    /// VISIBLE_STRING (0x0009): ISO 646 characters, variable length.
+    /// VISIBLE_STRING (0x0009): ISO 646 characters (beyond them, UTF-8), variable length.
     VisibleString = 0x09,
     /// OCTET_STRING (0x000A): bytes, variable length.
     OctetString = 0x0A,
@@ -485,7 +485,7 @@ impl Value {
     /// The encoded length in bytes.
     pub fn encoded_len(&self) -> usize {
         match self {
-            Value::VisibleString(s) => s.chars().count(),
+            Value::VisibleString(s) => s.len(),
             Value::OctetString(b) | Value::Domain(b) => b.len(),
             Value::UnicodeString(u) => u.len() * 2,
             v => v.data_type().fixed_size().unwrap_or(0),
@@ -517,11 +517,9 @@ impl Value {
             Real32(v) => put(u64::from(v.to_bits())),
             Real64(v) => put(v.to_bits()),
             TimeOfDay(t) | TimeDifference(t) => out.copy_from_slice(&t.to_le_bytes()),
-            VisibleString(s) => {
-                for (o, c) in out.iter_mut().zip(s.chars()) {
-                    *o = u8::try_from(u32::from(c)).unwrap_or(b'?');
-                }
-            }
+            // ISO 646 text is one byte a character; beyond it (CiA 301 §7.1.6 defines
+            // none) the text's UTF-8 bytes, so a vendor's `€` survives a round trip.
+            VisibleString(s) => out.copy_from_slice(s.as_bytes()),
             OctetString(b) | Domain(b) => out.copy_from_slice(b),
             UnicodeString(u) => {
                 for (o, c) in out.chunks_exact_mut(2).zip(u) {
@@ -575,9 +573,12 @@ impl Value {
                     Value::TimeDifference(t)
                 }
             }
-            T::VisibleString => {
-                Value::VisibleString(bytes.iter().map(|&b| char::from(b)).collect())
-            }
+            // UTF-8 as encoded; bytes that are not UTF-8 read as ISO 8859-1, one character
+            // each (the raw bytes stay in the dictionary as written).
+            T::VisibleString => Value::VisibleString(match std::str::from_utf8(bytes) {
+                Ok(s) => s.to_owned(),
+                Err(_) => bytes.iter().map(|&b| char::from(b)).collect(),
+            }),
             T::OctetString => Value::OctetString(bytes.to_vec()),
             T::Domain => Value::Domain(bytes.to_vec()),
             T::UnicodeString => {
@@ -779,6 +780,23 @@ mod tests {
             Err(ValueError::Range(..))
         ));
         assert!(Value::parse(DataType::Unsigned8, "x").is_err());
+    }
+
+    #[test]
+    fn visible_strings_beyond_iso_646_keep_their_characters() {
+        let euro = Value::VisibleString("5 € pro Stück".into());
+        let bytes = euro.to_le_bytes();
+        assert_eq!(bytes, "5 € pro Stück".as_bytes());
+        assert_eq!(euro.encoded_len(), bytes.len());
+        assert_eq!(
+            Value::from_le_bytes(DataType::VisibleString, &bytes),
+            Ok(euro)
+        );
+        // A device's Latin-1 byte, not UTF-8, reads as its character.
+        assert_eq!(
+            Value::from_le_bytes(DataType::VisibleString, b"25 \xB0C"),
+            Ok(Value::VisibleString("25 °C".into()))
+        );
     }
 
     #[test]
