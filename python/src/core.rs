@@ -57,7 +57,13 @@ pub(crate) struct Core {
     pub reaction_time: std::time::Duration,
     /// The threads that acted and have not waited since (at most one entry per thread).
     pub acting: Vec<Acting>,
+    /// Every thread that ever acted and still runs (at most [`ACTORS`]): the threads a frame
+    /// handed to Python may wake (`crate::turns::note_woken`).
+    pub actors: Vec<u64>,
 }
+
+/// How many acting threads [`Core::actors`] remembers; the oldest is forgotten first.
+const ACTORS: usize = 16;
 
 /// What the simulation's objects share: the core and a condition variable signalled when
 /// Python sends a frame or the simulation changes mode.
@@ -89,6 +95,12 @@ pub(crate) fn secs(seconds: f64) -> PyResult<Duration> {
 impl Core {
     /// Note that `thread` acted just now; `returned`: it holds the GIL (module `turns`).
     pub fn acted(&mut self, thread: u64, returned: bool) {
+        if !self.actors.contains(&thread) {
+            if self.actors.len() == ACTORS {
+                self.actors.remove(0);
+            }
+            self.actors.push(thread);
+        }
         self.acting.retain(|a| a.thread != thread);
         self.acting.push(Acting {
             thread,

@@ -454,6 +454,9 @@ impl Port {
     ) -> PyResult<Option<PyFrame>> {
         let timeout = timeout.map(secs).transpose()?;
         let thread = crate::turns::thread_ident(py)?;
+        if wait_for_answers {
+            crate::turns::note_woken(py, &self.shared, thread)?;
+        }
         py.detach(|| self.receive(timeout, wait_for_answers, thread))
             .map(|r| r.map(to_py))
     }

@@ -46,6 +46,7 @@ fn build(
         devices: built.devices,
         reaction_time,
         acting: Vec::new(),
+        actors: Vec::new(),
     };
     Ok(Simulation {
         shared: Arc::new(Shared {

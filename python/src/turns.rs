@@ -18,6 +18,14 @@
 //! a trigger followed by `emcy.wait()` find the answer they wait for, as on a real bus where
 //! the device takes longer to answer than the host takes to start waiting.
 //!
+//! A frame handed to Python can wake a thread that waits: python-canopen's SDO client in
+//! `sdo.download()` is woken by the answer, returns, and only then calls `emcy.wait()` for
+//! the EMCY that the device sends right after that answer. Such a thread counts as acting
+//! from the moment it is found woken (notified in its `Condition.wait`, and not yet back
+//! from it) until it waits again, so the EMCY is not handed over before `emcy.wait()`
+//! listens, as on a real bus where a host's SDO answer reaches the script before the next
+//! frame does.
+//!
 //! Bus time is unaffected: a frame sent at bus time *t* is queued at *t* and the answer comes
 //! when the device gives it; only the moment (wall clock) at which the simulation computes it
 //! moves.
@@ -69,6 +77,89 @@ impl Shared {
         self.changed.notify_all();
         Ok(core)
     }
+}
+
+/// Note every thread that acted once and is now woken in its wait (a frame the calling
+/// receiver handed to Python notified it): bus time waits for it until it waits again
+/// (module documentation). `caller`, the receiver, is not looked at.
+///
+/// Called by a receiver as it comes back for the next frame, when the callbacks of the
+/// frame before have run. A thread that has ended is forgotten.
+pub(crate) fn note_woken(py: Python<'_>, shared: &Shared, caller: u64) -> PyResult<()> {
+    let actors: Vec<u64> = {
+        let core = shared.lock();
+        core.actors
+            .iter()
+            .copied()
+            .filter(|&t| t != caller && !core.acting.iter().any(|a| a.thread == t))
+            .collect()
+    };
+    if actors.is_empty() {
+        return Ok(());
+    }
+    let frames = py.import("sys")?.getattr("_current_frames")?.call0()?;
+    let frames = frames.cast::<PyDict>()?;
+    let mut woken = Vec::new();
+    let mut ended = Vec::new();
+    for thread in actors {
+        match frames.get_item(thread)? {
+            None => ended.push(thread),
+            Some(frame) => {
+                if condition_wait(&frame)? == Some(Wait::Notified) {
+                    woken.push(thread);
+                }
+            }
+        }
+    }
+    if woken.is_empty() && ended.is_empty() {
+        return Ok(());
+    }
+    let mut core = shared.lock();
+    core.actors.retain(|t| !ended.contains(t));
+    for thread in woken {
+        core.acted(thread, true);
+    }
+    Ok(())
+}
+
+/// Where a thread stands in `threading.Condition.wait` (through which `Event.wait` and
+/// `queue.Queue.get` wait).
+#[derive(Debug, PartialEq, Eq)]
+enum Wait {
+    /// Blocked on its waiter lock, which is still among the condition's waiters.
+    Blocked,
+    /// Its waiter was taken off the condition's waiters by `notify`: it is about to return.
+    Notified,
+}
+
+/// Whether `frame` is `Condition.wait` holding a waiter lock, and where it stands; `None`
+/// for any other frame (or one that cannot be read).
+fn condition_wait(frame: &Bound<'_, PyAny>) -> PyResult<Option<Wait>> {
+    let code = frame.getattr("f_code")?;
+    let name: String = code.getattr("co_name")?.extract()?;
+    if name != "wait" || !in_threading(&code)? {
+        return Ok(None);
+    }
+    let locals = frame.getattr("f_locals")?;
+    let (Ok(waiter), Ok(condition)) = (locals.get_item("waiter"), locals.get_item("self")) else {
+        return Ok(None);
+    };
+    let Ok(waiters) = condition.getattr("_waiters") else {
+        return Ok(None);
+    };
+    Ok(Some(if waiters.contains(waiter)? {
+        Wait::Blocked
+    } else {
+        Wait::Notified
+    }))
+}
+
+/// Whether `code` is a function of the standard library's `threading` module.
+fn in_threading(code: &Bound<'_, PyAny>) -> PyResult<bool> {
+    let file: String = code.getattr("co_filename")?.extract()?;
+    Ok(std::path::Path::new(&file)
+        .file_name()
+        .is_some_and(|f| f == "threading.py"))
 }
 
 /// `threading.get_ident()` of the calling thread.
@@ -150,13 +241,12 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
         };
         let code = frame.getattr("f_code")?;
         let name: String = code.getattr("co_name")?.extract()?;
-        let file: String = code.getattr("co_filename")?.extract()?;
-        let in_threading = std::path::Path::new(&file)
-            .file_name()
-            .is_some_and(|f| f == "threading.py");
-        if in_threading && THREADING_WAITS.contains(&name.as_str()) {
-            waiting.push(thread);
-            continue;
+        if in_threading(&code)? && THREADING_WAITS.contains(&name.as_str()) {
+            // A woken thread is on its way out of the wait, not in it.
+            if condition_wait(&frame)? != Some(Wait::Notified) {
+                waiting.push(thread);
+                continue;
+            }
         }
         let lasti: i64 = frame.getattr("f_lasti")?.extract()?;
         match spots.iter_mut().find(|s| s.thread == thread) {

@@ -190,16 +190,14 @@ def test_emcy_wait_after_a_fault_of_the_device(way):
     assert way.node.emcy.active == []
 
 
-@pytest.mark.parametrize("way", ["socketcand"], indirect=True)
 def test_emcy_wait_after_the_sdo_download_that_raises_it(way):
     # The habit: write the object that makes the device fail, then wait for its EMCY. The
     # device answers the write first and sends the EMCY after the answer (CiA 301 §7.2.7), so
-    # the wait that follows the download sees it, or the EMCY provably came before the wait
-    # began (a host slower than one frame time loses that race on any real bus). In process
-    # (virtual and paced) the EMCY, one frame after the answer, is within the reaction gap
-    # of the package's port (frames that follow the one handed to Python within 1 ms of bus
-    # time come as they come) and can reach the log before `download()` has returned: there
-    # `emcy.log` holds it.
+    # the wait that follows the download sees it. In process (virtual and paced) the SDO
+    # client woken by the answer holds bus time until it waits again (the package's turn
+    # rule), so the EMCY one frame later is handed over once `emcy.wait()` listens; through
+    # socketcand it may provably have come before the wait began (a host slower than one
+    # frame time loses that race on any real bus).
     emcy = emcy_after(way, 0x5000, lambda: way.node.sdo.download(0x2001, 0, u16(0x5000)))
     assert emcy is not None, way.node.emcy.log
     assert emcy.register & 0x01  # generic error
