@@ -11,7 +11,7 @@ use cantwin_bus::{BusId, SimHandle};
 use cantwin_can::Duration;
 use cantwin_scenario::Built;
 use cantwin_silkit::bridge::QUIET_CONFIGURATION;
-use cantwin_silkit::{BridgeConfig, PacedBridge, SilKit};
+use cantwin_silkit::{BridgeConfig, Deadlines, PacedBridge, SilKit};
 
 /// The participant name when `--participant` is not given.
 pub const DEFAULT_PARTICIPANT: &str = "cantwin";
@@ -25,6 +25,10 @@ pub struct SimOptions {
     pub participant: Option<String>,
     /// `--silkit-step` in microseconds: synchronised when given.
     pub step_us: Option<u64>,
+    /// `--silkit-join-timeout`: how long the synchronised simulation may take to start.
+    pub join_timeout: Option<WallDuration>,
+    /// `--silkit-expect`: the participants named when it did not start in time.
+    pub expect: Vec<String>,
 }
 
 impl SimOptions {
@@ -37,6 +41,31 @@ impl SimOptions {
                 .unwrap_or_else(|| DEFAULT_PARTICIPANT.to_string()),
             configuration: QUIET_CONFIGURATION.to_string(),
         }
+    }
+}
+
+/// `--join-timeout` and `--silkit-join-timeout`: seconds, positive and finite.
+pub fn parse_join_timeout(text: &str) -> Result<WallDuration, String> {
+    let seconds: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("{text:?} is not a number of seconds"))?;
+    if !seconds.is_finite() || seconds <= 0.0 {
+        return Err(format!(
+            "{text:?}: the join timeout must be a positive, finite number of seconds"
+        ));
+    }
+    WallDuration::try_from_secs_f64(seconds)
+        .map_err(|_| format!("{text:?}: too many seconds for a join timeout"))
+}
+
+/// The bounds of a coordinated run: at most `join` until it starts (naming `expect` when
+/// it did not), no bound on how long it then runs.
+fn deadlines(join: Option<WallDuration>, expect: &[String]) -> Deadlines {
+    Deadlines {
+        join,
+        run: None,
+        peers: expect.to_vec(),
     }
 }
 
@@ -97,7 +126,8 @@ pub fn leave_paced(bridge: PacedBridge) -> Result<()> {
 }
 
 /// Run the scenario as a coordinated, synchronised SIL Kit participant until the SIL Kit
-/// simulation stops, `stop` is set (Ctrl-C, SIGTERM) or `duration` of wall time has passed.
+/// simulation stops, `stop` is set (Ctrl-C, SIGTERM) or `duration` of wall time has passed;
+/// an error when it has not started within `--silkit-join-timeout`.
 pub fn run_synchronized(
     options: &SimOptions,
     built: Built,
@@ -128,13 +158,14 @@ pub fn run_synchronized(
         });
     }
     let started = WallInstant::now();
-    let outcome = cantwin_silkit::run_synchronized(
+    let outcome = cantwin_silkit::run_synchronized_within(
         &kit,
         built.sim,
         &built.buses,
         &config,
         Duration::from_micros(step_us),
         &stop,
+        &deadlines(options.join_timeout, &options.expect),
     )
     .with_context(|| {
         format!(
@@ -184,8 +215,9 @@ pub struct Args {
 enum SilkitCommand {
     /// Be SIL Kit's network simulator for CAN networks (SIL Kit's experimental network
     /// simulator API): every controller on them sends through cantwin's bus model, with
-    /// arbitration, exact frame times, ACK, error counters and error states. Runs as a
-    /// coordinated, synchronised participant until the SIL Kit simulation stops.
+    /// arbitration, exact frame times, ACK, error counters, error-passive and bus-off. Runs
+    /// as a coordinated, synchronised participant until the SIL Kit simulation stops (or, with
+    /// --join-timeout, fails when it has not started in time).
     Netsim(NetsimArgs),
 }
 
@@ -209,10 +241,22 @@ struct NetsimArgs {
     /// Each controller's transmit queue depth.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=4096))]
     queue_depth: u64,
-    /// Apply this scenario's bus-level `[[at]]` actions (drop, corrupt, clear_faults) to the
-    /// simulated networks of their buses' names, at their times in SIL Kit's simulated time.
+    /// Apply this scenario's bus-level `[[at]]` actions (drop, corrupt, clear_faults, send)
+    /// to the simulated networks of their buses' names, at their times in SIL Kit's
+    /// simulated time.
     #[arg(long, value_name = "SCENARIO.toml")]
     faults: Option<std::path::PathBuf>,
+    /// Give up when the simulation has not started within this many seconds (a required
+    /// participant that never joins keeps the system controller from starting it): an error
+    /// naming who did not run, and a non-zero exit. Without it the simulator waits until
+    /// Ctrl-C or SIGTERM, as SIL Kit participants do.
+    #[arg(long, value_name = "SECONDS", value_parser = parse_join_timeout)]
+    join_timeout: Option<WallDuration>,
+    /// A participant the system controller waits for, named in the --join-timeout error when
+    /// it never joined or never ran (repeat for several; SIL Kit does not tell a participant
+    /// whom the system controller requires).
+    #[arg(long, value_name = "NAME", requires = "join_timeout")]
+    expect: Vec<String>,
 }
 
 /// Run `cantwin silkit …`.
@@ -294,7 +338,7 @@ fn netsim(args: &NetsimArgs) -> Result<()> {
         config,
         &faults,
         &stop,
-        &cantwin_silkit::Deadlines::default(),
+        &deadlines(args.join_timeout, &args.expect),
     )
     .with_context(|| {
         format!(

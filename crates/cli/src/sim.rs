@@ -77,6 +77,18 @@ pub struct Args {
     #[arg(long, value_name = "MICROSECONDS", requires = "silkit",
           conflicts_with_all = ["socketcand", "slcan", "pcap", "candump", "web"])]
     silkit_step: Option<u64>,
+    /// Give up when the synchronised SIL Kit simulation has not started within this many
+    /// seconds (a required participant that never joins keeps the system controller from
+    /// starting it): an error naming who did not run, and a non-zero exit. Without it cantwin
+    /// waits until Ctrl-C or SIGTERM, as SIL Kit participants do.
+    #[arg(long, value_name = "SECONDS", requires = "silkit_step",
+          value_parser = crate::silkit::parse_join_timeout)]
+    silkit_join_timeout: Option<std::time::Duration>,
+    /// A participant the system controller waits for, named in the --silkit-join-timeout
+    /// error when it never joined or never ran (repeat for several; SIL Kit does not tell a
+    /// participant whom the system controller requires).
+    #[arg(long, value_name = "NAME", requires = "silkit_join_timeout")]
+    silkit_expect: Vec<String>,
 }
 
 /// `[ADDR:]PORT` with ADDR defaulting to loopback.
@@ -126,6 +138,8 @@ pub fn run(args: &Args) -> Result<()> {
         registry_uri: uri.clone(),
         participant: args.participant.clone(),
         step_us: args.silkit_step,
+        join_timeout: args.silkit_join_timeout,
+        expect: args.silkit_expect.clone(),
     });
     if let Some(options) = silkit.as_ref().filter(|o| o.step_us.is_some()) {
         return crate::silkit::run_synchronized(options, built, stop, args.duration);

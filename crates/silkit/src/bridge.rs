@@ -168,7 +168,11 @@ fn missing_text(never_joined: &[String], never_ran: &[String]) -> String {
         ));
     }
     if parts.is_empty() {
-        "no system controller started it".into()
+        // The system controller starts it only once every participant it requires has
+        // joined, and no participant is told whom it requires.
+        "no system controller started it (none is there, or one waits for a required \
+         participant that has not joined)"
+            .into()
     } else {
         parts.join("; ")
     }

@@ -6,9 +6,13 @@
 //! (ISO 11898-1 §10.4.4.2); a frame occupies the bus for its exact length including stuff
 //! bits; it is acknowledged only if another started controller is there, otherwise its
 //! sender sees ACK errors, counts them (TEC) and goes error-passive; repeated errors lead
-//! to bus-off and recovery, all reported as SIL Kit error-state events. Transmit
-//! acknowledgements carry `Transmitted` when the frame is out, `TransmitQueueFull` when the
-//! port's queue was full, `Canceled` when a stop, reset or bus-off discarded it.
+//! to bus-off and recovery, all reported as SIL Kit error-state events. Fault confinement is
+//! the bus's own (ISO 11898-1 §12.1.4.2, as for cantwin's nodes): bus-off, a controller
+//! takes no part in the bus and its pending requests are discarded; requests it gets then
+//! wait on its port until it recovers, by itself, 128 × 11 recessive bits later, or until a
+//! `Reset` and `Start` give it fresh counters. Transmit acknowledgements carry
+//! `Transmitted` when the frame is out, `TransmitQueueFull` when the port's queue was full,
+//! `Canceled` when a stop, reset or bus-off discarded it.
 //!
 //! # Time
 //!
@@ -789,5 +793,51 @@ mod tests {
                 ),
             ]
         );
+    }
+
+    #[test]
+    fn a_reset_ends_bus_off_at_once_and_a_start_sends_with_fresh_counters() {
+        let model = CanNetworkModel::new("can0", NetsimConfig::default());
+        for d in [1, 2] {
+            model.controller_added(d);
+            model.controller_mode(d, ControllerState::Started, false, false);
+        }
+        let ms = 1_000_000;
+        let frame = |id| CanFrame {
+            id,
+            flags: 0,
+            dlc: 1,
+            data: vec![0x11],
+        };
+        let a = |model: &CanNetworkModel| {
+            let st = model.lock();
+            let port = st.controllers[&1].port;
+            let b = st.sim.bus(st.bus).expect("bus");
+            let s = b.port_status(port).expect("port");
+            (s.counters.state(), s.counters.tec(), b.stats().frames())
+        };
+        model.step(0, 2 * ms);
+        model.with_simulation(|sim, bus| {
+            sim.bus_mut(bus)
+                .expect("bus")
+                .inject(FaultRule::corrupt(FrameSelector::All));
+        });
+        model.frame_request(1, frame(0x200), 1);
+        // 32 corrupted attempts in a row: bus-off above TEC 255 (ISO 11898-1 §12.1.4.2).
+        for t in [2, 4, 6] {
+            model.step(t * ms, 2 * ms);
+        }
+        let (state, tec, frames) = a(&model);
+        assert_eq!((state, frames), (cantwin_can::ErrorState::BusOff, 0));
+        assert!(tec > 255, "{tec}");
+        model.with_simulation(|sim, bus| sim.bus_mut(bus).expect("bus").clear_faults());
+        // SIL Kit's Reset (Uninit, clearing error handling), Start again and a request, all
+        // taken at 8 ms, well before bus-off would end by itself (1408 bit times after it
+        // began, past 9 ms): the frame goes out at once, error-active with TEC 0.
+        model.controller_mode(1, ControllerState::Uninit, true, true);
+        model.controller_mode(1, ControllerState::Started, false, false);
+        model.frame_request(1, frame(0x201), 2);
+        model.step(8 * ms, ms / 2);
+        assert_eq!(a(&model), (cantwin_can::ErrorState::Active, 0, 1));
     }
 }

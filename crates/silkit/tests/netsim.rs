@@ -387,3 +387,186 @@ fn scenario_at_actions_corrupt_the_frame_of_their_step_and_send_the_scripts_fram
     tecs.sort_unstable();
     assert_eq!(tecs, [0, 0, 7]);
 }
+
+/// A node on a bus recording its controller's events and its frames sent (the reference).
+#[derive(Default)]
+struct Recorder {
+    events: Vec<(ControllerEvent, u64)>,
+    sent: Vec<(u32, u64)>,
+}
+
+impl Node for Recorder {
+    fn on_frame(&mut self, _: &Frame, _: Instant, _: &mut Outbox) {}
+    fn on_sent(&mut self, frame: &Frame, now: Instant, _: &mut Outbox) {
+        self.sent.push((frame.id().as_raw(), now.as_nanos()));
+    }
+    fn on_controller_event(&mut self, e: ControllerEvent, now: Instant, _: &mut Outbox) {
+        self.events.push((e, now.as_nanos()));
+    }
+    fn on_tick(&mut self, _: Instant, _: &mut Outbox) {}
+    fn next_deadline(&self) -> Option<Instant> {
+        None
+    }
+}
+
+/// Every error counter of a bus, TECs and RECs each sorted (the ports' order depends on
+/// which participant's controller the simulator heard of first).
+fn error_counters(bus: &cantwin_bus::Bus) -> (Vec<u16>, Vec<u16>) {
+    let status: Vec<_> = bus
+        .ports()
+        .filter_map(|p| bus.port_status(p).ok())
+        .collect();
+    let mut tecs: Vec<u16> = status.iter().map(|s| s.counters.tec()).collect();
+    let mut recs: Vec<u16> = status.iter().map(|s| s.counters.rec()).collect();
+    tecs.sort_unstable();
+    recs.sort_unstable();
+    (tecs, recs)
+}
+
+/// A scenario's `corrupt` of every frame from 6 ms hits each of A's retransmissions: its TEC
+/// rises by 8 each time (ISO 11898-1 §12.1.4.2 rule c), error-passive above 127, bus-off
+/// above 255.
+/// Bus-off, A takes no part in the bus: its two pending requests are `Canceled`, no frame
+/// of it is sent again, B receives none. A request made during bus-off waits; after 128 × 11
+/// recessive bits (rule l) A is error-active again and that frame goes out. Every time is
+/// the reference bus's, to the nanosecond.
+#[test]
+fn repeated_corruption_takes_a_participant_bus_off_and_it_recovers_after_128_x_11_bits() {
+    let Some(dir) = silkit_dir() else { return };
+    let scenario = Scenario::parse(
+        "name = \"bus-off\"\nseed = 3\n\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
+         [[at]]\ntime_ms = 6\naction = \"corrupt\"\nbus = \"can0\"\nfraction = 1.0\n\n\
+         [[at]]\ntime_ms = 12\naction = \"clear_faults\"\nbus = \"can0\"\n",
+        "bus-off.toml",
+    )
+    .expect("scenario");
+    let faults = NetsimFaults {
+        seed: scenario.seed,
+        faults: faults_from_scenario(&scenario, &["can0".to_string()]).expect("faults"),
+    };
+    // cantwin's bus model with A and B. A's requests sent at 5 ms and 11 ms reach the bus at
+    // the simulator's steps of 6 ms and 12 ms.
+    let f200 = Frame::std(0x200, &[0x11]).expect("frame");
+    let f201 = Frame::std(0x201, &[0x22]).expect("frame");
+    let f202 = Frame::std(0x202, &[0x33]).expect("frame");
+    let mut reference = Simulation::new();
+    let bus = reference.add_bus(BusConfig::new("can0", BitRate::R500K).with_seed(3));
+    let a = reference
+        .attach(bus, Recorder::default(), PortConfig::DEFAULT)
+        .expect("attach");
+    reference
+        .attach(bus, Recorder::default(), PortConfig::DEFAULT)
+        .expect("attach");
+    reference.run_until(Instant::from_nanos(6_000_000));
+    reference
+        .bus_mut(bus)
+        .expect("bus")
+        .inject(FaultRule::corrupt(FrameSelector::Fraction(1.0)));
+    reference.transmit(a, f200).expect("transmit");
+    reference.transmit(a, f201).expect("transmit");
+    reference.run_until(Instant::from_nanos(12_000_000));
+    reference.bus_mut(bus).expect("bus").clear_faults();
+    reference.transmit(a, f202).expect("transmit");
+    reference.run_until(Instant::from_nanos(20_000_000));
+    let want_counters = error_counters(reference.bus(bus).expect("bus"));
+    let want_stats = {
+        let s = reference.bus(bus).expect("bus").stats();
+        (s.frames(), s.error_frames())
+    };
+    let rec = reference.node::<Recorder>(a).expect("node");
+    let at = |event: ControllerEvent| -> Vec<u64> {
+        rec.events
+            .iter()
+            .filter(|(e, _)| *e == event)
+            .map(|(_, t)| *t)
+            .collect()
+    };
+    let [passive] = at(ControllerEvent::ErrorPassive)[..] else {
+        panic!("the reference goes error-passive once: {:?}", rec.events)
+    };
+    let [bus_off] = at(ControllerEvent::BusOff)[..] else {
+        panic!("the reference goes bus-off once: {:?}", rec.events)
+    };
+    let [recovered] = at(ControllerEvent::BusOffRecovered)[..] else {
+        panic!("the reference recovers once: {:?}", rec.events)
+    };
+    // Both pending frames lost at bus-off (the one being retransmitted and the one behind
+    // it), nothing sent before the recovery, then only the frame asked for during bus-off.
+    assert_eq!(at(ControllerEvent::TxDropped), [bus_off, bus_off]);
+    assert_eq!(recovered, bus_off + 128 * 11 * BIT_NS);
+    assert!(passive < bus_off && bus_off < 12_000_000 && 12_000_000 < recovered);
+    let end202 = recovered + (u64::from(f202.bit_length()) - 3) * BIT_NS;
+    assert_eq!(rec.sent, [(0x202, end202)]);
+    // 32 errors of + 8 take TEC from 0 past 255; none after.
+    assert_eq!(want_stats, (1, 32));
+
+    let registry = Registry::start(&dir);
+    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
+    let sim = netsim_with_faults(&dir, &registry.uri, &["A", "B"], faults);
+    let mut a = participant(
+        &dir,
+        &registry.uri,
+        "A",
+        &[
+            "--send",
+            "5000000:200#11",
+            "--send",
+            "5000000:201#22",
+            "--send",
+            "11000000:202#33",
+            "--stop-at",
+            "20000000",
+        ],
+    );
+    let mut b = participant(&dir, &registry.uri, "B", &[]);
+    let a_lines = a.finish(WallDuration::from_secs(30));
+    let b_lines = b.finish(WallDuration::from_secs(30));
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+
+    let a_states: Vec<&String> = a_lines
+        .iter()
+        .filter(|l| l.starts_with("error-state "))
+        .collect();
+    let want_states = [
+        "error-state 0 ErrorActive".to_string(),
+        format!("error-state {passive} ErrorPassive"),
+        format!("error-state {bus_off} BusOff"),
+        format!("error-state {recovered} ErrorActive"),
+    ];
+    assert_eq!(
+        a_states,
+        want_states.iter().collect::<Vec<_>>(),
+        "{a_lines:#?}"
+    );
+    let a_acks: Vec<&String> = a_lines.iter().filter(|l| l.starts_with("ack ")).collect();
+    let want_acks = [
+        format!("ack {bus_off} Canceled 200"),
+        format!("ack {bus_off} Canceled 201"),
+        format!("ack {end202} Transmitted 202"),
+    ];
+    assert_eq!(a_acks, want_acks.iter().collect::<Vec<_>>(), "{a_lines:#?}");
+    // B heard nothing of A's corrupted frames, and the one after the recovery at its time;
+    // B itself stayed error-active (REC 32 at most).
+    let b_rx: Vec<&String> = b_lines.iter().filter(|l| l.starts_with("rx ")).collect();
+    assert_eq!(b_rx, [&format!("rx {end202} 202#33")], "{b_lines:#?}");
+    let b_states: Vec<&String> = b_lines
+        .iter()
+        .filter(|l| l.starts_with("error-state "))
+        .collect();
+    assert_eq!(b_states, ["error-state 0 ErrorActive"], "{b_lines:#?}");
+
+    let net = &out.networks[0];
+    let (stats, counters) = net.with_simulation(|sim, bus| {
+        let b = sim.bus(bus).expect("bus");
+        (
+            (b.stats().frames(), b.stats().error_frames()),
+            error_counters(b),
+        )
+    });
+    assert_eq!((stats, counters), (want_stats, want_counters));
+    assert_eq!(net.counters().frames, 1);
+}
