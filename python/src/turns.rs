@@ -33,6 +33,7 @@
 use std::time::{Duration, Instant};
 
 use pyo3::prelude::*;
+use pyo3::sync::PyOnceLock;
 use pyo3::types::PyDict;
 
 use std::sync::MutexGuard;
@@ -52,7 +53,7 @@ const STUCK: Duration = Duration::from_secs(1);
 /// [`STILL`], before it counts as blocked in a call into C.
 const STILL_LOOKS: u32 = 3;
 
-/// Pause between two looks at threads that have not reached their wait yet.
+/// Longest pause between two looks at threads that have not reached their wait yet.
 const POLL: Duration = Duration::from_micros(50);
 
 /// The `threading` functions a thread blocks in. Every python-canopen wait
@@ -97,8 +98,7 @@ pub(crate) fn note_woken(py: Python<'_>, shared: &Shared, caller: u64) -> PyResu
     if actors.is_empty() {
         return Ok(());
     }
-    let frames = py.import("sys")?.getattr("_current_frames")?.call0()?;
-    let frames = frames.cast::<PyDict>()?;
+    let frames = current_frames(py)?;
     let mut woken = Vec::new();
     let mut ended = Vec::new();
     for thread in actors {
@@ -162,12 +162,23 @@ fn in_threading(code: &Bound<'_, PyAny>) -> PyResult<bool> {
         .is_some_and(|f| f == "threading.py"))
 }
 
-/// `threading.get_ident()` of the calling thread.
+/// `threading.get_ident()` of the calling thread (`_thread.get_ident`, looked up once: every
+/// send and receive asks).
 pub(crate) fn thread_ident(py: Python<'_>) -> PyResult<u64> {
-    py.import("_thread")?
-        .getattr("get_ident")?
+    static GET_IDENT: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    GET_IDENT
+        .import(py, "_thread", "get_ident")?
         .call0()?
         .extract()
+}
+
+/// `sys._current_frames`, looked up once.
+fn current_frames<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    static CURRENT_FRAMES: PyOnceLock<Py<PyAny>> = PyOnceLock::new();
+    Ok(CURRENT_FRAMES
+        .import(py, "sys", "_current_frames")?
+        .call0()?
+        .cast_into::<PyDict>()?)
 }
 
 /// Where a thread was seen last: its top frame and instruction, since when, and how many
@@ -217,22 +228,26 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
             }
         });
         let left = core.acting.iter().any(|a| a.returned);
-        let any = !core.acting.is_empty();
-        drop(core);
-        if !any {
+        if core.acting.is_empty() {
             return true;
         }
         if left && Instant::now() >= deadline {
             return false;
         }
-        std::thread::sleep(POLL);
+        // Until the next look: a thread that acts again (its next request) wakes this at
+        // once, one on its way to a wait is looked at again after the pause.
+        drop(
+            shared
+                .changed
+                .wait_timeout(core, POLL)
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        );
     }
 }
 
 /// Which of `threads` wait now (module documentation); a thread that ended waits.
 fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> PyResult<Vec<u64>> {
-    let frames = py.import("sys")?.getattr("_current_frames")?.call0()?;
-    let frames = frames.cast::<PyDict>()?;
+    let frames = current_frames(py)?;
     let mut waiting = Vec::new();
     for &thread in threads {
         let Some(frame) = frames.get_item(thread)? else {
