@@ -24,6 +24,18 @@ fn scenario(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// Run `cmd`, which was given a join timeout of `timeout`, and check that it gives up: exit
+/// status 1 after at least `timeout` and within [`WITHIN`], its stderr saying every one of
+/// `wants`.
+fn assert_gives_up(cmd: Command, timeout: Duration, wants: &[&str]) {
+    let (status, stderr, took) = run_bounded(cmd, WITHIN + Duration::from_secs(10));
+    assert_eq!(status.code(), Some(1), "{stderr}");
+    for want in wants {
+        assert!(stderr.contains(want), "{want:?} missing: {stderr}");
+    }
+    assert!(took >= timeout && took < WITHIN, "{took:?}: {stderr}");
+}
+
 /// Run `cmd` to its end, at most `bound` of wall time (killed and failed beyond it): its
 /// exit status, stderr and how long it took.
 fn run_bounded(mut cmd: Command, bound: Duration) -> (ExitStatus, String, Duration) {
@@ -79,18 +91,14 @@ fn netsim_join_timeout_fails_naming_the_required_participant_that_never_joined()
         "--expect",
         "Ghost",
     ]);
-    let (status, stderr, took) = run_bounded(cmd, WITHIN + Duration::from_secs(10));
-    assert_eq!(status.code(), Some(1), "{stderr}");
-    for want in [
-        "error: simulating can0 at ",
-        "the SIL Kit simulation did not start within 1s",
-        "participant Ghost never joined",
-    ] {
-        assert!(stderr.contains(want), "{want:?} missing: {stderr}");
-    }
-    assert!(
-        took >= Duration::from_secs(1) && took < WITHIN,
-        "{took:?}: {stderr}"
+    assert_gives_up(
+        cmd,
+        Duration::from_secs(1),
+        &[
+            "error: simulating can0 at ",
+            "the SIL Kit simulation did not start within 1s",
+            "participant Ghost never joined",
+        ],
     );
 }
 
@@ -105,18 +113,14 @@ fn sim_silkit_join_timeout_fails_naming_the_required_participant_that_never_join
         .arg(scenario("adv200-ds402.toml"))
         .args(["--silkit", &registry.uri, "--silkit-step", "1000"])
         .args(["--silkit-join-timeout", "1.5", "--silkit-expect", "PLC"]);
-    let (status, stderr, took) = run_bounded(cmd, WITHIN + Duration::from_secs(10));
-    assert_eq!(status.code(), Some(1), "{stderr}");
-    for want in [
-        "error: running as SIL Kit participant cantwin at ",
-        "the SIL Kit simulation did not start within 1.5s",
-        "participant PLC never joined",
-    ] {
-        assert!(stderr.contains(want), "{want:?} missing: {stderr}");
-    }
-    assert!(
-        took >= Duration::from_millis(1500) && took < WITHIN,
-        "{took:?}: {stderr}"
+    assert_gives_up(
+        cmd,
+        Duration::from_millis(1500),
+        &[
+            "error: running as SIL Kit participant cantwin at ",
+            "the SIL Kit simulation did not start within 1.5s",
+            "participant PLC never joined",
+        ],
     );
 }
 

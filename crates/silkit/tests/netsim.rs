@@ -75,6 +75,29 @@ fn netsim_with_faults(
     })
 }
 
+/// A network simulator applying `faults` to participant A (sending as `a_args` say) and
+/// participant B (listening), each in its own process: what A and B printed, and the
+/// simulator's outcome, once the simulation has shut down.
+fn faulted_a_and_b(
+    dir: &Path,
+    faults: NetsimFaults,
+    a_args: &[&str],
+) -> (Vec<String>, Vec<String>, NetsimOutcome) {
+    let registry = Registry::start(dir);
+    let _sc = system_controller(dir, &registry.uri, &["cantwin", "A", "B"]);
+    let sim = netsim_with_faults(dir, &registry.uri, &["A", "B"], faults);
+    let mut a = participant(dir, &registry.uri, "A", a_args);
+    let mut b = participant(dir, &registry.uri, "B", &[]);
+    let a_lines = a.finish(WallDuration::from_secs(30));
+    let b_lines = b.finish(WallDuration::from_secs(30));
+    let out = sim
+        .join()
+        .expect("simulator thread")
+        .expect("network simulator");
+    assert_eq!(out.final_state, ParticipantState::Shutdown);
+    (a_lines, b_lines, out)
+}
+
 #[test]
 fn two_foreign_participants_arbitrate_through_cantwins_bus_with_exact_frame_times() {
     let Some(dir) = silkit_dir() else { return };
@@ -320,13 +343,9 @@ fn scenario_at_actions_corrupt_the_frame_of_their_step_and_send_the_scripts_fram
     assert_eq!(clean, 2_000_000 + length);
     assert!(corrupted > 6_000_000 + length, "{corrupted}");
 
-    let registry = Registry::start(&dir);
-    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
-    let sim = netsim_with_faults(&dir, &registry.uri, &["A", "B"], faults);
-    let mut a = participant(
+    let (a_lines, b_lines, out) = faulted_a_and_b(
         &dir,
-        &registry.uri,
-        "A",
+        faults,
         &[
             "--send",
             "1000000:200#11",
@@ -336,14 +355,6 @@ fn scenario_at_actions_corrupt_the_frame_of_their_step_and_send_the_scripts_fram
             "20000000",
         ],
     );
-    let mut b = participant(&dir, &registry.uri, "B", &[]);
-    let a_lines = a.finish(WallDuration::from_secs(30));
-    let b_lines = b.finish(WallDuration::from_secs(30));
-    let out = sim
-        .join()
-        .expect("simulator thread")
-        .expect("network simulator");
-    assert_eq!(out.final_state, ParticipantState::Shutdown);
     for t in [clean, corrupted] {
         let ack = format!("ack {t} Transmitted 200");
         assert!(a_lines.contains(&ack), "{ack:?} missing: {a_lines:#?}");
@@ -500,13 +511,9 @@ fn repeated_corruption_takes_a_participant_bus_off_and_it_recovers_after_128_x_1
     // 32 errors of + 8 take TEC from 0 past 255; none after.
     assert_eq!(want_stats, (1, 32));
 
-    let registry = Registry::start(&dir);
-    let _sc = system_controller(&dir, &registry.uri, &["cantwin", "A", "B"]);
-    let sim = netsim_with_faults(&dir, &registry.uri, &["A", "B"], faults);
-    let mut a = participant(
+    let (a_lines, b_lines, out) = faulted_a_and_b(
         &dir,
-        &registry.uri,
-        "A",
+        faults,
         &[
             "--send",
             "5000000:200#11",
@@ -518,14 +525,6 @@ fn repeated_corruption_takes_a_participant_bus_off_and_it_recovers_after_128_x_1
             "20000000",
         ],
     );
-    let mut b = participant(&dir, &registry.uri, "B", &[]);
-    let a_lines = a.finish(WallDuration::from_secs(30));
-    let b_lines = b.finish(WallDuration::from_secs(30));
-    let out = sim
-        .join()
-        .expect("simulator thread")
-        .expect("network simulator");
-    assert_eq!(out.final_state, ParticipantState::Shutdown);
 
     let a_states: Vec<&String> = a_lines
         .iter()
