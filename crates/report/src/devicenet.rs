@@ -112,40 +112,24 @@ impl BodyFormats {
         };
         let slave = mac.get();
         let d = frame.data_bytes();
-        let text = match msg {
-            group2::EXPLICIT_RESPONSE => {
-                self.learn_response(slave, d);
-                format!(
-                    "slave explicit response: {}",
-                    explicit(d, false, BodyFormat::F8_8)
-                )
-            }
-            group2::EXPLICIT_REQUEST => {
-                let format = self.format(slave);
-                self.learn_request(slave, d, format);
-                format!("master explicit request: {}", explicit(d, true, format))
-            }
+        // The format of the request is the one agreed before it (an Allocate's own answer
+        // changes it for the requests after).
+        let format = self.format(slave);
+        match msg {
+            group2::EXPLICIT_RESPONSE => self.learn_response(slave, d),
+            group2::EXPLICIT_REQUEST => self.learn_request(slave, d, format),
             // The group 2 only unconnected port carries Allocate and Release only, in 8/8
             // (DeviceNet Vol. 1 §3-5: no format is agreed before the allocation).
-            group2::UNCONNECTED_REQUEST => {
-                self.learn_request(slave, d, BodyFormat::F8_8);
-                format!(
-                    "unconnected explicit request: {}",
-                    explicit(d, true, BodyFormat::F8_8)
-                )
-            }
+            group2::UNCONNECTED_REQUEST => self.learn_request(slave, d, BodyFormat::F8_8),
             // A duplicate MAC ID check request: a node is coming on line at this MAC ID,
             // with no connection yet (DeviceNet Vol. 1 §6, network access). The response
             // comes from the node already there, whose connections stand.
-            group2::DUP_MAC_CHECK => {
-                if DupMac::decode(d).is_some_and(|m| !m.response) {
-                    self.slaves.remove(&slave);
-                }
-                return describe(frame);
+            group2::DUP_MAC_CHECK if DupMac::decode(d).is_some_and(|m| !m.response) => {
+                self.slaves.remove(&slave);
             }
-            _ => return describe(frame),
-        };
-        format!("G2 MAC {mac} msg {msg}: {text}")
+            _ => {}
+        }
+        format!("G2 MAC {mac} msg {msg}: {}", group2_text(msg, d, format))
     }
 
     /// Remembers an Allocate or Release request to `slave`, for its response.
@@ -308,6 +292,31 @@ pub fn node_of(frame: &Frame) -> Option<u8> {
     }
 }
 
+/// What a group 2 message says (DeviceNet Vol. 1 §3-7, the predefined master/slave
+/// connection set); a master's explicit request decoded in `format`, the slave's responses
+/// and the unconnected port's requests in 8/8.
+fn group2_text(msg: u8, d: &[u8], format: BodyFormat) -> String {
+    let raw = hex_bytes(d);
+    match msg {
+        group2::BIT_STROBE => format!("master bit-strobe command: {raw}"),
+        group2::MULTICAST_POLL => format!("master multicast poll: {raw}"),
+        group2::COS_ACK => format!("master change of state / cyclic acknowledge: {raw}"),
+        group2::EXPLICIT_RESPONSE => format!(
+            "slave explicit response: {}",
+            explicit(d, false, BodyFormat::F8_8)
+        ),
+        group2::EXPLICIT_REQUEST => {
+            format!("master explicit request: {}", explicit(d, true, format))
+        }
+        group2::POLL_COMMAND => format!("master poll command / COS / cyclic: {raw}"),
+        group2::UNCONNECTED_REQUEST => format!(
+            "unconnected explicit request: {}",
+            explicit(d, true, BodyFormat::F8_8)
+        ),
+        _ => format!("duplicate MAC ID check: {raw}"),
+    }
+}
+
 /// One line for a DeviceNet frame on its own, explicit messages decoded in 8/8; a listing
 /// decodes through [`BodyFormats`], which knows each slave's format.
 pub fn describe(frame: &Frame) -> String {
@@ -325,26 +334,10 @@ pub fn describe(frame: &Frame) -> String {
             format!("G1 msg {msg} from MAC {mac}: {what}: {raw}")
         }
         Ok(DnId::Group2 { mac, msg }) => {
-            let text = match msg {
-                0 => format!("master bit-strobe command: {raw}"),
-                1 => format!("master multicast poll: {raw}"),
-                2 => format!("master change of state / cyclic acknowledge: {raw}"),
-                3 => format!(
-                    "slave explicit response: {}",
-                    explicit(d, false, BodyFormat::F8_8)
-                ),
-                4 => format!(
-                    "master explicit request: {}",
-                    explicit(d, true, BodyFormat::F8_8)
-                ),
-                5 => format!("master poll command / COS / cyclic: {raw}"),
-                6 => format!(
-                    "unconnected explicit request: {}",
-                    explicit(d, true, BodyFormat::F8_8)
-                ),
-                _ => format!("duplicate MAC ID check: {raw}"),
-            };
-            format!("G2 MAC {mac} msg {msg}: {text}")
+            format!(
+                "G2 MAC {mac} msg {msg}: {}",
+                group2_text(msg, d, BodyFormat::F8_8)
+            )
         }
         Ok(DnId::Group3 { msg, mac }) => {
             let text = match msg {
