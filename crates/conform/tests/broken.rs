@@ -45,6 +45,26 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::RtrSyncTypeSentOnSync => ("pdo.transmission-rtr-sync", Area::Pdo),
         Fault::ReservedTransmissionTypeAccepted => ("pdo.transmission-reserved", Area::Pdo),
         Fault::UploadToggleIgnored => ("sdo.abort-toggle-upload", Area::Sdo),
+        Fault::BlockUploadBlockSizeIgnored => ("sdo.block-upload", Area::Sdo),
+        Fault::BlockDownloadBlockSizeZero => ("sdo.block-download", Area::Sdo),
+        Fault::BlockDownloadWithoutSizeRefused => ("sdo.block-download-no-size", Area::Sdo),
+        Fault::WriteOnlyEntryRead => ("sdo.abort-write-only", Area::Sdo),
+        Fault::LowLimitNotChecked => ("sdo.abort-value-low", Area::Sdo),
+        Fault::MappingEntryWrittenWhileEnabled => ("pdo.mapping-entry-while-enabled", Area::Pdo),
+        Fault::MappingLengthNotChecked => ("pdo.mapping-length", Area::Pdo),
+        Fault::NotMappableObjectMapped => ("pdo.mapping-not-mappable", Area::Pdo),
+        Fault::AbsentObjectMapped => ("pdo.mapping-no-object", Area::Pdo),
+        Fault::OldMappingSent => ("pdo.mapping-carried", Area::Pdo),
+        Fault::ErrorHistoryNotCounted => ("emcy.history-records", Area::SyncEmcyTime),
+        Fault::TimeProducerBitIgnored => ("time.producer", Area::SyncEmcyTime),
+        Fault::TimeConsumerBitIgnored => ("time.consumer", Area::SyncEmcyTime),
+        Fault::RestoreCommunicationIgnored => (
+            "restore.communication-after-reset-communication",
+            Area::StoreRestore,
+        ),
+        Fault::ResetCommunicationResetsApplication => {
+            ("restore.application-after-reset-node", Area::StoreRestore)
+        }
     }
 }
 
@@ -139,7 +159,7 @@ fn unbroken_device_passes_every_mandatory_case_of_every_area() {
 }
 
 #[test]
-fn cia301_7_3_2_2_3_sdo_answered_in_stopped_is_caught() {
+fn cia301_7_3_2_2_5_sdo_answered_in_stopped_is_caught() {
     caught(Fault::SdoInStopped);
 }
 
@@ -200,7 +220,7 @@ fn cia301_7_2_8_3_2_2_heartbeat_at_twice_the_period_is_caught() {
 }
 
 #[test]
-fn cia301_7_5_2_20_emcy_cob_id_change_while_valid_is_caught() {
+fn cia301_7_5_2_17_emcy_cob_id_change_while_valid_is_caught() {
     caught(Fault::EmcyCobIdChangeWhileValid);
 }
 
@@ -220,7 +240,7 @@ fn cia301_7_5_2_37_pdo_cob_id_change_while_valid_is_caught() {
 }
 
 #[test]
-fn cia301_7_5_2_3_error_history_write_of_1_accepted_is_caught() {
+fn cia301_7_5_2_4_error_history_write_of_1_accepted_is_caught() {
     caught(Fault::ErrorHistoryWriteAccepted);
 }
 
@@ -230,12 +250,12 @@ fn cia301_7_2_4_3_11_unchecked_block_download_crc_is_caught() {
 }
 
 #[test]
-fn cia301_7_5_2_33_duplicate_heartbeat_consumer_entry_accepted_is_caught() {
+fn cia301_7_5_2_19_duplicate_heartbeat_consumer_entry_accepted_is_caught() {
     caught(Fault::DuplicateHeartbeatConsumerAccepted);
 }
 
 #[test]
-fn cia301_7_3_2_2_3_tpdo_in_pre_operational_is_caught() {
+fn cia301_7_3_2_2_5_tpdo_in_pre_operational_is_caught() {
     caught(Fault::TpdoInPreOperational);
 }
 
@@ -261,43 +281,124 @@ fn cia301_7_3_2_2_1_operational_reported_after_boot_up_is_caught() {
 }
 
 #[test]
-fn cia301_7_3_2_2_3_rpdo_processed_in_stopped_is_caught() {
+fn cia301_7_3_2_2_5_rpdo_processed_in_stopped_is_caught() {
     caught_only(Fault::RpdoProcessedInStopped);
 }
 
 #[test]
-fn cia301_7_3_2_2_3_sync_tpdo_in_stopped_is_caught() {
+fn cia301_7_3_2_2_5_sync_tpdo_in_stopped_is_caught() {
     caught_only(Fault::SyncTpdoInStopped);
 }
 
 #[test]
-fn cia301_7_3_2_2_3_emcy_in_stopped_is_caught() {
+fn cia301_7_3_2_2_5_emcy_in_stopped_is_caught() {
     caught_only(Fault::EmcyInStopped);
 }
 
 #[test]
-fn cia301_7_3_2_2_3_rpdo_processed_in_pre_operational_is_caught() {
+fn cia301_7_3_2_2_5_rpdo_processed_in_pre_operational_is_caught() {
     caught_only(Fault::RpdoProcessedInPreOperational);
 }
 
 #[test]
-fn cia301_7_5_2_35_cyclic_type_sent_at_every_sync_is_caught() {
+fn cia301_7_5_2_37_cyclic_type_sent_at_every_sync_is_caught() {
     caught_only(Fault::CyclicTypeAtEverySync);
 }
 
 #[test]
-fn cia301_7_5_2_35_type_252_sent_on_sync_is_caught() {
+fn cia301_7_5_2_37_type_252_sent_on_sync_is_caught() {
     caught_only(Fault::RtrSyncTypeSentOnSync);
 }
 
 #[test]
-fn cia301_7_5_2_35_reserved_transmission_type_accepted_is_caught() {
+fn cia301_7_5_2_37_reserved_transmission_type_accepted_is_caught() {
     caught_only(Fault::ReservedTransmissionTypeAccepted);
 }
 
 #[test]
 fn cia301_7_2_4_3_7_unchecked_upload_toggle_bit_is_caught() {
     caught_only(Fault::UploadToggleIgnored);
+}
+
+#[test]
+fn cia301_7_2_4_3_12_block_size_ignored_by_the_block_upload_server_is_caught() {
+    caught_only(Fault::BlockUploadBlockSizeIgnored);
+}
+
+/// The block size 0 is caught by both block download cases, and by no case that gives it
+/// no meaning (the aborts of a block download send one segment).
+#[test]
+fn cia301_7_2_4_3_9_block_size_0_in_the_block_download_initiate_answer_is_caught() {
+    caught(Fault::BlockDownloadBlockSizeZero);
+    let bad = conform(Some(Fault::BlockDownloadBlockSizeZero), Area::Sdo);
+    let c = bad.case("sdo.block-download-no-size").unwrap();
+    assert_eq!(c.verdict, Verdict::Fail, "{}", c.detail);
+    assert!(c.detail.contains("blocks of 0 segments"), "{}", c.detail);
+}
+
+#[test]
+fn cia301_7_2_4_3_9_block_download_without_size_refused_is_caught() {
+    caught_only(Fault::BlockDownloadWithoutSizeRefused);
+}
+
+#[test]
+fn cia301_7_2_4_3_17_write_only_entry_answering_a_read_is_caught() {
+    caught_only(Fault::WriteOnlyEntryRead);
+}
+
+#[test]
+fn cia301_7_2_4_3_17_value_below_the_low_limit_taken_is_caught() {
+    caught_only(Fault::LowLimitNotChecked);
+}
+
+#[test]
+fn cia301_7_5_2_38_mapping_entry_written_while_sub_0_is_not_0_is_caught() {
+    caught_only(Fault::MappingEntryWrittenWhileEnabled);
+}
+
+#[test]
+fn cia301_7_5_2_38_mapping_longer_than_64_bits_taken_is_caught() {
+    caught_only(Fault::MappingLengthNotChecked);
+}
+
+#[test]
+fn cia301_7_5_2_38_object_that_cannot_be_mapped_taken_is_caught() {
+    caught_only(Fault::NotMappableObjectMapped);
+}
+
+#[test]
+fn cia301_7_5_2_38_absent_object_mapped_is_caught() {
+    caught_only(Fault::AbsentObjectMapped);
+}
+
+#[test]
+fn cia301_7_5_2_38_tpdo_sent_with_its_old_mapping_is_caught() {
+    caught_only(Fault::OldMappingSent);
+}
+
+#[test]
+fn cia301_7_5_2_4_error_history_that_does_not_count_is_caught() {
+    caught_only(Fault::ErrorHistoryNotCounted);
+}
+
+#[test]
+fn cia301_7_5_2_15_time_producer_bit_not_taken_is_caught() {
+    caught_only(Fault::TimeProducerBitIgnored);
+}
+
+#[test]
+fn cia301_7_5_2_15_time_consumer_bit_not_taken_is_caught() {
+    caught_only(Fault::TimeConsumerBitIgnored);
+}
+
+#[test]
+fn cia301_7_5_2_14_restore_of_the_communication_parameters_ignored_is_caught() {
+    caught_only(Fault::RestoreCommunicationIgnored);
+}
+
+#[test]
+fn cia301_7_3_2_2_1_application_area_reset_by_reset_communication_is_caught() {
+    caught_only(Fault::ResetCommunicationResetsApplication);
 }
 
 #[test]

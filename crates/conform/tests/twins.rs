@@ -176,25 +176,27 @@ fn shipped_profiles_parse_and_name_cases_of_the_catalogue() {
     ));
 }
 
-#[test]
-fn an_eight_byte_writable_entry_is_downloaded_in_two_segments() {
-    // 0x2F00 (UNSIGNED64) is the only read-write entry of at most 8 bytes: a segment
-    // carries at most 7 (CiA 301 §7.2.4.3.5), so the download takes two.
-    let sc =
-        Scenario::load(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/u64-rw.toml"))
-            .unwrap();
+/// Runs `options` against the `eds` twin "d" (node 9) of `name`.toml in tests/data, with
+/// the file `name`.eds as its EDS.
+fn conform_data_file(name: &str, options: &Options) -> Report {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let sc = Scenario::load(data.join(format!("{name}.toml"))).unwrap();
     let built = sc
         .build(&Registry::builtin(), &BuildEnv::default())
         .unwrap();
     let dev = built.device("d").unwrap().clone();
-    let eds_text = std::fs::read_to_string(
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/u64-rw.eds"),
-    )
-    .unwrap();
+    let eds_text = std::fs::read_to_string(data.join(format!("{name}.eds"))).unwrap();
     let eds = cantwin_eds::parse(&eds_text).unwrap();
     let mut bus = VirtualBus::new(built.sim, dev.port.bus()).unwrap();
     let profile = Profile::from_eds(&eds);
-    let r = run(&mut bus, 9, &eds, &profile, &sdo_only(), &mut |_| {});
+    run(&mut bus, 9, &eds, &profile, options, &mut |_| {})
+}
+
+#[test]
+fn an_eight_byte_writable_entry_is_downloaded_in_two_segments() {
+    // 0x2F00 (UNSIGNED64) is the only read-write entry of at most 8 bytes: a segment
+    // carries at most 7 (CiA 301 §7.2.4.3.5), so the download takes two.
+    let r = conform_data_file("u64-rw", &sdo_only());
     for id in ["sdo.segmented-download", "sdo.segmented-download-no-size"] {
         let c = r.case(id).unwrap();
         assert_eq!(c.verdict, Verdict::Pass, "{id}: {}", c.detail);
@@ -202,4 +204,21 @@ fn an_eight_byte_writable_entry_is_downloaded_in_two_segments() {
     let c = r.case("sdo.segmented-download").unwrap();
     assert!(c.detail.contains("0x2F00"), "{}", c.detail);
     assert!(c.detail.contains("8 bytes in 2 segments"), "{}", c.detail);
+}
+
+/// CiA 301 §7.2.4.3.17: an `eds` twin of a file with a write-only entry and an entry with a
+/// low limit inside its type's range gives the two aborts, so the cases run and pass (the
+/// broken device without the check is caught, tests/broken.rs).
+#[test]
+fn cia301_7_2_4_3_17_write_only_and_low_limit_aborts_run_on_an_eds_twin() {
+    let r = conform_data_file("access-limits", &sdo_only());
+    assert!(r.passed(), "{}", show(&r));
+    for (id, what) in [
+        ("sdo.abort-write-only", "0x2010 sub 0"),
+        ("sdo.abort-value-low", "-101 to 0x2011 sub 0"),
+    ] {
+        let c = r.case(id).unwrap();
+        assert_eq!(c.verdict, Verdict::Pass, "{id}: {}", c.detail);
+        assert!(c.detail.contains(what), "{id}: {}", c.detail);
+    }
 }

@@ -15,14 +15,14 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "error-control.heartbeat-period",
             A,
-            "CiA 301 §7.2.8.3.2.2, §7.5.2.34",
+            "CiA 301 §7.2.8.3.2.2, §7.5.2.20",
             "with 0x1017 = 100 ms, heartbeats every 100 ms reporting the state",
             heartbeat_period,
         ),
         m(
             "error-control.heartbeat-off",
             A,
-            "CiA 301 §7.5.2.34",
+            "CiA 301 §7.5.2.20",
             "with 0x1017 = 0 no heartbeat is sent",
             heartbeat_off,
         ),
@@ -36,7 +36,7 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "error-control.heartbeat-consumer-duplicate",
             A,
-            "CiA 301 §7.5.2.33",
+            "CiA 301 §7.5.2.19",
             "two 0x1016 entries for one node-ID are refused with 0x06040043",
             heartbeat_duplicate,
         ),
@@ -65,7 +65,7 @@ fn heartbeat_writable(ctx: &Ctx<'_>) -> Result<(), Finding> {
     }
     if !eds_entry(ctx, 0x1017, 0).is_some_and(|e| access(e).writable()) {
         return Err(fail(
-            "0x1017 is not writable in the file (CiA 301 §7.5.2.34: rw)",
+            "0x1017 is not writable in the file (CiA 301 §7.5.2.20: rw)",
         ));
     }
     Ok(())

@@ -10,8 +10,10 @@ use crate::CaseInfo;
 use crate::ctx::{Ctx, Finding, Outcome, fail, fail_sdo};
 use crate::report::{Area, Severity};
 
+mod block;
 mod eds;
 mod error_control;
+mod mapping;
 mod nmt;
 mod od;
 mod pdo;
@@ -75,6 +77,7 @@ pub(crate) fn all() -> &'static [Case] {
         v.extend(sdo::cases());
         v.extend(od::cases());
         v.extend(pdo::cases());
+        v.extend(mapping::cases());
         v.extend(sync_emcy_time::cases());
         v.extend(error_control::cases());
         v.extend(nmt::cases());

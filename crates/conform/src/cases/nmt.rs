@@ -56,28 +56,28 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "nmt.sdo-stopped",
             A,
-            "CiA 301 §7.3.2.2.3 table 40",
+            "CiA 301 §7.3.2.2.5 (NMT states and communication objects)",
             "no SDO answer in STOPPED; SDO again in PRE-OPERATIONAL",
             sdo_stopped,
         ),
         m(
             "nmt.pdo-operational-only",
             A,
-            "CiA 301 §7.3.2.2.3 table 40",
+            "CiA 301 §7.3.2.2.5 (NMT states and communication objects)",
             "a TPDO with an event timer is sent in OPERATIONAL only",
             pdo_operational_only,
         ),
         m(
             "nmt.services-stopped",
             A,
-            "CiA 301 §7.3.2.2.3 (NMT states and communication objects)",
+            "CiA 301 §7.3.2.2.5 (NMT states and communication objects)",
             "in STOPPED an RPDO is not processed, a SYNC triggers no TPDO and no EMCY is sent",
             services_stopped,
         ),
         m(
             "nmt.services-pre-operational",
             A,
-            "CiA 301 §7.3.2.2.3 (NMT states and communication objects)",
+            "CiA 301 §7.3.2.2.5 (NMT states and communication objects)",
             "in PRE-OPERATIONAL an RPDO is not processed and a SYNC triggers no TPDO",
             services_pre_operational,
         ),
@@ -512,7 +512,7 @@ fn rpdo_probe(ctx: &mut Ctx<'_>) -> Result<Option<RpdoProbe>, Finding> {
     Ok(None)
 }
 
-/// What `state` (entered with `cs`) must not do by §7.3.2.2.3: process an RPDO (its
+/// What `state` (entered with `cs`) must not do by §7.3.2.2.5: process an RPDO (its
 /// first mapped object is sent changed and must read back unchanged), send a TPDO on
 /// SYNC (the first TPDO at type 1, five SYNCs) and, in STOPPED, send an EMCY (an RPDO
 /// one byte short, which OPERATIONAL answers with EMCY 0x8210, §7.2.2.2).

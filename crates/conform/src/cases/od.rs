@@ -50,7 +50,7 @@ fn read_all(ctx: &mut Ctx<'_>) -> Outcome {
         .objects
         .iter()
         // Sub-index 0 of the error history and of the PDO mappings counts entries in
-        // use (§7.5.2.3, §7.5.2.37), not the highest sub-index.
+        // use (§7.5.2.4, §7.5.2.36, §7.5.2.38), not the highest sub-index.
         .filter(|(i, o)| {
             !o.subs.is_empty() && !matches!(**i, 0x1003 | 0x1600..=0x17FF | 0x1A00..=0x1BFF)
         })

@@ -15,84 +15,84 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "pdo.cob-ids",
             A,
-            "CiA 301 §7.5.2.35, §7.5.2.36, §7.3.5",
+            "CiA 301 §7.5.2.35, §7.5.2.37, §7.3.5",
             "every valid PDO uses an 11-bit COB-ID outside the restricted ones",
             cob_ids,
         ),
         m(
             "pdo.mapping-procedure",
             A,
-            "CiA 301 §7.5.2.37, §7.5.2.38",
+            "CiA 301 §7.5.2.36, §7.5.2.38",
             "a valid PDO's mapping cannot change; invalid, sub 0 = 0, entries, sub 0 = n, valid succeeds",
             mapping_procedure,
         ),
         m(
             "pdo.cob-id-change-valid",
             A,
-            "CiA 301 §7.5.2.36",
+            "CiA 301 §7.5.2.35, §7.5.2.37",
             "bits 0–29 of a valid PDO's COB-ID cannot change",
             cob_id_change_valid,
         ),
         m(
             "pdo.transmission-sync",
             A,
-            "CiA 301 §7.2.2.2, §7.5.2.36 table 71",
+            "CiA 301 §7.2.2.2, §7.5.2.37 table 71",
             "transmission types 1 and 2 send the TPDO at every and every second SYNC",
             transmission_sync,
         ),
         m(
             "pdo.transmission-cyclic",
             A,
-            "CiA 301 §7.2.2.2, §7.5.2.35 table 71 (types 1–240), §7.5.2.37",
+            "CiA 301 §7.2.2.2, §7.5.2.37 table 71 (types 1–240)",
             "transmission type 3 sends the TPDO at every third SYNC",
             transmission_cyclic,
         ),
         m(
             "pdo.transmission-rtr-sync",
             A,
-            "CiA 301 §7.2.2.2, §7.5.2.35 table 71 (type 252), §7.5.2.37",
+            "CiA 301 §7.2.2.2, §7.5.2.37 table 71 (type 252)",
             "with transmission type 252 a TPDO is sent on a remote frame only, never on a SYNC",
             transmission_rtr_sync,
         ),
         m(
             "pdo.transmission-reserved",
             A,
-            "CiA 301 §7.5.2.35 table 71 (241–251 reserved), §7.2.4.3.17",
+            "CiA 301 §7.5.2.37 table 71 (241–251 reserved), §7.2.4.3.17",
             "the reserved transmission types 241–251 are refused with an abort",
             transmission_reserved,
         ),
         m(
             "pdo.transmission-acyclic",
             A,
-            "CiA 301 §7.2.2.2, §7.5.2.36 table 71 (type 0)",
+            "CiA 301 §7.2.2.2, §7.5.2.37 table 71 (type 0)",
             "with transmission type 0 a TPDO goes out only after a SYNC, at most one per SYNC",
             transmission_acyclic,
         ),
         m(
             "pdo.rtr",
             A,
-            "CiA 301 §7.2.2.2, §7.5.2.36 (COB-ID bit 30)",
+            "CiA 301 §7.2.2.2, §7.5.2.37 (COB-ID bit 30)",
             "a TPDO whose COB-ID allows RTR answers a remote frame",
             rtr,
         ),
         m(
             "pdo.sync-start-value",
             A,
-            "CiA 301 §7.5.2.36 (sub 6), §7.2.5.2",
+            "CiA 301 §7.5.2.37 (sub 6), §7.2.5.2",
             "with SYNC start value 3 and type 2, the TPDO starts at the SYNC counting 3",
             sync_start_value,
         ),
         m(
             "pdo.event-timer",
             A,
-            "CiA 301 §7.5.2.36 (sub 5)",
+            "CiA 301 §7.5.2.37 (sub 5)",
             "transmission type 254 (or 255) with a 50 ms event timer sends every 50 ms",
             event_timer,
         ),
         m(
             "pdo.inhibit-time",
             A,
-            "CiA 301 §7.5.2.36 (sub 3)",
+            "CiA 301 §7.5.2.37 (sub 3)",
             "an inhibit time of 100 ms spaces the TPDO at least 100 ms apart",
             inhibit_time,
         ),
@@ -269,7 +269,7 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
     let sync = sync_id(ctx)?;
     let mut notes = Vec::new();
     for (ty, syncs, want) in [(1u8, 6usize, 6usize), (2, 6, 3)] {
-        // A device need not offer every synchronous type (§7.5.2.36): 0x06090030 says so.
+        // A device need not offer every synchronous type (§7.5.2.37): 0x06090030 says so.
         match ctx.download(comm, 2, &[ty])? {
             Ok(()) => {}
             Err(a) if a.code == cantwin_canopen::AbortCode::INVALID_VALUE => {
@@ -385,7 +385,7 @@ fn inhibit_time(ctx: &mut Ctx<'_>) -> Outcome {
     let et = ctx
         .upload(comm, 5)?
         .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 5"), a))?;
-    // The inhibit time changes only while the PDO is invalid (§7.5.2.36).
+    // The inhibit time changes only while the PDO is invalid (§7.5.2.37).
     ctx.write(
         comm,
         1,
@@ -484,7 +484,7 @@ fn rpdo_length(ctx: &mut Ctx<'_>) -> Outcome {
 }
 
 /// Sets transmission type `ty` on `comm`; `Ok(false)` when the device refuses it as an
-/// invalid value (it need not offer every type, §7.5.2.36).
+/// invalid value (it need not offer every type, §7.5.2.37).
 fn set_type(ctx: &mut Ctx<'_>, comm: u16, ty: u8) -> Result<bool, Finding> {
     match ctx.download(comm, 2, &[ty])? {
         Ok(()) => Ok(true),
@@ -863,7 +863,7 @@ fn sync_start_value(ctx: &mut Ctx<'_>) -> Outcome {
     let sv = ctx
         .upload(comm, 6)?
         .map_err(|a| fail_sdo(format!("reading 0x{comm:04X} sub 6"), a))?;
-    // The start value changes only while the PDO is invalid (§7.5.2.36).
+    // The start value changes only while the PDO is invalid (§7.5.2.37).
     ctx.write(
         comm,
         1,

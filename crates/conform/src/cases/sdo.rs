@@ -3,11 +3,11 @@
 
 use cantwin_can::Duration;
 use cantwin_canopen::AbortCode;
-use cantwin_canopen::master::Mode;
 use cantwin_canopen::sdo::crc::Crc16;
 
 use super::{
-    Case, abort_of, absent_index, access, data_type, entries, hex, le, m, recovered, writable,
+    Case, abort_of, absent_index, access, block, data_type, entries, hex, le, m, recovered,
+    writable,
 };
 use crate::ctx::{Aborted, Ctx, Finding, Outcome, fail, fail_abort, fail_kind};
 use crate::profile::FailureKind;
@@ -61,15 +61,22 @@ pub(super) fn cases() -> Vec<Case> {
             "sdo.block-upload",
             A,
             "CiA 301 §7.2.4.3.12–16",
-            "block upload with block sizes 1 and 127, CRC on and off",
+            "block upload with block sizes 1, 2, 7, 64, 126 and 127, CRC on and off: each sub-block has the segments asked for",
             block_upload,
         ),
         m(
             "sdo.block-download",
             A,
             "CiA 301 §7.2.4.3.9–11",
-            "block download, CRC on and off",
+            "block download with size indication, CRC on and off: the server's block sizes are 1 to 127 and the client keeps to them",
             block_download,
+        ),
+        m(
+            "sdo.block-download-no-size",
+            A,
+            "CiA 301 §7.2.4.3.9 (s = 0), §7.2.4.3.10, §7.2.4.3.11",
+            "block download without size indication, CRC on and off",
+            block_download_no_size,
         ),
         m(
             "sdo.abort-no-object",
@@ -488,53 +495,187 @@ fn segmented_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
     Ok(format!("0x{index:04X} sub {sub} written"))
 }
 
+/// The block sizes the upload case asks for: both ends of 1..=127 and sizes between,
+/// each with the CRC on or off (CiA 301 §7.2.4.3.12: blksize 1 to 127).
+const UPLOAD_BLOCK_SIZES: [(u8, bool); 8] = [
+    (127, true),
+    (1, false),
+    (2, true),
+    (7, false),
+    (64, true),
+    (126, false),
+    (127, false),
+    (1, true),
+];
+
+/// A block transfer that did not complete, as the case's finding.
+fn block_finding(ctx: &Ctx<'_>, what: &str, e: block::BlockError) -> Finding {
+    match e {
+        block::BlockError::Refused(code) => block_refused(
+            ctx,
+            what,
+            Aborted {
+                code,
+                by_server: true,
+            },
+        ),
+        block::BlockError::Finding(f) => f,
+    }
+}
+
 fn block_upload(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((index, sub, want)) = long_entry(ctx)? else {
         return Err(Finding::NotApplicable(
             "no readable entry longer than 4 bytes".into(),
         ));
     };
-    for (blksize, crc) in [(127u8, true), (1, false), (1, true), (127, false)] {
-        match ctx.upload_mode(index, sub, Mode::Block { blksize }, crc)? {
-            Ok(d) if d == want => {}
-            Ok(d) => {
-                return Err(fail(format!(
-                    "block size {blksize}, CRC {crc}: {} bytes, a normal read gave {}",
-                    d.len(),
-                    want.len()
-                )));
-            }
-            Err(a) => {
-                return Err(block_refused(
-                    ctx,
-                    &format!("upload (block size {blksize}, CRC {crc})"),
-                    a,
-                ));
-            }
+    for (blksize, crc) in UPLOAD_BLOCK_SIZES {
+        let what = format!("upload (block size {blksize}, CRC {crc})");
+        let seen = block::upload(ctx, index, sub, blksize, crc)
+            .map_err(|e| block_finding(ctx, &what, e))?;
+        if seen.data != want {
+            return Err(fail(format!(
+                "block size {blksize}, CRC {crc}: {} bytes, a normal read gave {}",
+                seen.data.len(),
+                want.len()
+            )));
         }
     }
     recovered(ctx, "block uploads")?;
+    let sizes: Vec<String> = UPLOAD_BLOCK_SIZES
+        .iter()
+        .filter(|(_, crc)| *crc)
+        .map(|(b, _)| b.to_string())
+        .collect();
     Ok(format!(
-        "0x{index:04X} sub {sub}: {} bytes with block sizes 1 and 127",
-        want.len()
+        "0x{index:04X} sub {sub}: {} bytes with block sizes 1, 2, 7, 64, 126 and 127 (CRC with {}), every sub-block of the size asked",
+        want.len(),
+        sizes.join(", ")
     ))
 }
 
-fn block_download(ctx: &mut Ctx<'_>) -> Outcome {
-    let Some((index, sub, _, value)) = writable(ctx, 1..=8)? else {
+/// A writable entry to download as a block: a readable and writable one longer than a
+/// segment and at most 4 KiB from the EDS scan (several sub-blocks where the server asks
+/// for small ones), else one of fixed size up to 8 bytes. (index, sub, its value).
+fn block_target(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u8, Vec<u8>)>, Finding> {
+    if let Some(scan) = &ctx.scan {
+        let long = scan.iter().find(|(i, s, r)| {
+            *i >= 0x2000
+                && r.as_ref().is_ok_and(|d| d.len() > 7 && d.len() <= 4096)
+                && super::eds_entry(ctx, *i, *s)
+                    .is_some_and(|e| access(e).writable() && access(e).readable())
+        });
+        if let Some((i, s, Ok(d))) = long {
+            let (i, s, d) = (*i, *s, d.clone());
+            // The scan is from the start of the run: read it again, the value may have moved.
+            if let Ok(now) = ctx.upload(i, s)?
+                && now == d
+            {
+                return Ok(Some((i, s, now)));
+            }
+        }
+    }
+    if ctx.scan.is_none() {
+        // No scan (the EDS area did not run): the first such entry whose upload initiate
+        // indicates a size in range, the transfer then aborted unread.
+        let candidates: Vec<(u16, u8)> = entries(ctx)
+            .into_iter()
+            .filter(|(i, _, e)| {
+                *i >= 0x2000
+                    && access(e).writable()
+                    && access(e).readable()
+                    && data_type(e).is_none_or(|d| d.fixed_size().is_none_or(|n| n > 7))
+            })
+            .map(|(i, s, _)| (i, s))
+            .collect();
+        for (i, s) in candidates {
+            if indicated_size(ctx, i, s)?.is_some_and(|n| (8..=4096).contains(&n))
+                && let Ok(d) = ctx.upload(i, s)?
+            {
+                return Ok(Some((i, s, d)));
+            }
+        }
+    }
+    Ok(writable(ctx, 1..=8)?.map(|(i, s, _, v)| (i, s, v)))
+}
+
+/// The size an upload initiate of `index`/`sub` indicates (§7.2.4.3.6), the transfer
+/// aborted after the answer; `None` when refused or not indicated.
+fn indicated_size(ctx: &mut Ctx<'_>, index: u16, sub: u8) -> Result<Option<usize>, Finding> {
+    let Some(b) = ctx.sdo_raw(req(0x40, index, sub, [0; 4]))? else {
+        return Ok(None);
+    };
+    if abort_of(&b).is_some() || b[0] & 0xE0 != 0x40 {
+        return Ok(None);
+    }
+    if b[0] & 0x02 != 0 {
+        // Expedited: the size is in the answer, and the transfer over.
+        let n = if b[0] & 0x01 != 0 {
+            4 - usize::from((b[0] >> 2) & 3)
+        } else {
+            4
+        };
+        return Ok(Some(n));
+    }
+    // Segmented: end it unread (§7.2.4.3.17, an abort is not answered).
+    let abort = req(
+        0x80,
+        index,
+        sub,
+        AbortCode::GENERAL_ERROR.to_u32().to_le_bytes(),
+    );
+    ctx.send(cantwin_can::Frame::data_array(ctx.sdo_rx(), abort))?;
+    Ok((b[0] & 0x01 != 0).then(|| u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize))
+}
+
+fn block_download_with(ctx: &mut Ctx<'_>, size_indicated: bool) -> Outcome {
+    let Some((index, sub, value)) = block_target(ctx)? else {
         return Err(Finding::NotApplicable(
             "no writable entry of fixed size".into(),
         ));
     };
+    let mut blksizes = std::collections::BTreeSet::new();
+    let mut sub_blocks = 0;
     for crc in [true, false] {
-        if let Err(a) = ctx.download_mode(index, sub, &value, Mode::Block { blksize: 127 }, crc)? {
-            return Err(block_refused(ctx, &format!("download (CRC {crc})"), a));
+        let what = format!(
+            "download ({}size indicated, CRC {crc})",
+            if size_indicated { "" } else { "no " }
+        );
+        let seen = block::download(ctx, index, sub, &value, size_indicated, crc)
+            .map_err(|e| block_finding(ctx, &what, e))?;
+        blksizes.extend(seen.server_blksizes);
+        sub_blocks += seen.sub_blocks.len();
+    }
+    match ctx.upload(index, sub)? {
+        Ok(d) if d == value => {}
+        Ok(d) => {
+            return Err(fail(format!(
+                "0x{index:04X} sub {sub} reads {} bytes after the block downloads of its own {} bytes",
+                d.len(),
+                value.len()
+            )));
+        }
+        Err(a) => {
+            return Err(crate::ctx::fail_sdo(
+                "reading back after the block downloads",
+                a,
+            ));
         }
     }
-    recovered(ctx, "block downloads")?;
+    let sizes: Vec<String> = blksizes.iter().map(u8::to_string).collect();
     Ok(format!(
-        "0x{index:04X} sub {sub} written with its own value"
+        "0x{index:04X} sub {sub}: {} bytes written with its own value, CRC on and off, {sub_blocks} sub-blocks; the server asked for blocks of {}",
+        value.len(),
+        sizes.join(", ")
     ))
+}
+
+fn block_download(ctx: &mut Ctx<'_>) -> Outcome {
+    block_download_with(ctx, true)
+}
+
+fn block_download_no_size(ctx: &mut Ctx<'_>) -> Outcome {
+    block_download_with(ctx, false)
 }
 
 /// Sends `request` and expects an abort with one of `codes`, then a server that serves.

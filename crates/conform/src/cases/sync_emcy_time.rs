@@ -34,28 +34,35 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "emcy.cob-id",
             A,
-            "CiA 301 §7.5.2.20, §7.5.2.2",
+            "CiA 301 §7.5.2.17, §7.5.2.2",
             "0x1014 is valid with an 11-bit COB-ID; 0x1001 reads one byte",
             emcy_cob_id,
         ),
         m(
             "emcy.cob-id-change-valid",
             A,
-            "CiA 301 §7.5.2.20, §7.3.5",
+            "CiA 301 §7.5.2.17, §7.3.5",
             "a new CAN-ID in 0x1014 while the EMCY is valid (bit 31 = 0) is refused",
             emcy_cob_id_change_valid,
         ),
         m(
             "emcy.history",
             A,
-            "CiA 301 §7.5.2.3",
+            "CiA 301 §7.5.2.4",
             "0x1003 sub 0 = 0 clears the history; any other value is refused with 0x06090030",
             emcy_history,
         ),
         m(
+            "emcy.history-records",
+            A,
+            "CiA 301 §7.5.2.4, §7.2.7.1",
+            "after an EMCY, 0x1003 sub 0 counts it and sub 1 holds its code; 0 written to sub 0 clears the history",
+            emcy_history_records,
+        ),
+        m(
             "emcy.inhibit",
             A,
-            "CiA 301 §7.2.7.1, §7.5.2.21",
+            "CiA 301 §7.2.7.1, §7.5.2.18",
             "with 0x1015 = 300 ms, two EMCYs of the device are at least 300 ms apart",
             emcy_inhibit,
         ),
@@ -69,9 +76,23 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "time.cob-id",
             A,
-            "CiA 301 §7.2.6, §7.5.2.16",
+            "CiA 301 §7.2.6, §7.5.2.15",
             "0x1012 holds an 11-bit COB-ID; a TIME message leaves the device serving",
             time_cob_id,
+        ),
+        m(
+            "time.producer",
+            A,
+            "CiA 301 §7.2.6, §7.5.2.15 (bit 30)",
+            "where the device produces TIME, 0x1012 bit 30 is set and read back; TIME frames carry 6 bytes, none in STOPPED",
+            time_producer,
+        ),
+        m(
+            "time.consumer",
+            A,
+            "CiA 301 §7.2.6, §7.5.2.15 (bit 31)",
+            "where the device consumes TIME, 0x1012 bit 31 is set and read back, and a TIME message leaves it serving",
+            time_consumer,
         ),
     ]
 }
@@ -262,7 +283,7 @@ fn emcy_cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
     if ctx.profile.features.emcy == Some(false) {
         return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
     }
-    // §7.5.2.20 lets 0x1014 be read-only (a fixed identifier): nothing to change then.
+    // §7.5.2.17 lets 0x1014 be read-only (a fixed identifier): nothing to change then.
     if !eds_entry(ctx, 0x1014, 0).is_some_and(|e| access(e).writable()) {
         return Err(Finding::NotApplicable(
             "0x1014 is not writable in the file".into(),
@@ -332,6 +353,120 @@ fn emcy_history(ctx: &mut Ctx<'_>) -> Outcome {
     }
 }
 
+/// The error the case raises the way CiA 301 defines one for every device with a heartbeat
+/// consumer: a consumed heartbeat that stops (EMCY 0x8130, §7.2.8.3.2.2).
+struct ConsumerError {
+    /// 0x1016 sub 1 as it was.
+    entry: Vec<u8>,
+    /// The heartbeat COB-ID of the node the entry monitors.
+    hb: Id,
+}
+
+/// Makes the device consume the heartbeat of the next node-ID with a time of 100 ms
+/// (0x1016 sub 1, CiA 301 §7.5.2.19) and sends one heartbeat of that node (operational), so
+/// that the consumer runs and times out 100 ms later: the heartbeat's identifier.
+fn monitor_the_next_node(ctx: &mut Ctx<'_>) -> Result<Id, Finding> {
+    let other = if ctx.node >= 127 { 1 } else { ctx.node + 1 };
+    let hb = Id::standard(0x700 + u16::from(other)).map_err(|e| fail(e.to_string()))?;
+    ctx.write(
+        0x1016,
+        1,
+        &((u32::from(other) << 16) | 100).to_le_bytes(),
+        "a heartbeat consumer entry",
+    )?;
+    ctx.send(Frame::data_array(hb, [0x05]))?;
+    Ok(hb)
+}
+
+impl ConsumerError {
+    /// Monitors the next node-ID for 100 ms and sends one heartbeat of it: the EMCYs the
+    /// device sends in the next `within`.
+    fn raise(
+        ctx: &mut Ctx<'_>,
+        emcy: u32,
+        within: Duration,
+    ) -> Result<(ConsumerError, Vec<u16>), Finding> {
+        let entry = ctx
+            .upload(0x1016, 1)?
+            .map_err(|a| fail_sdo("reading 0x1016 sub 1", a))?;
+        let hb = monitor_the_next_node(ctx)?;
+        let is_emcy = |f: &Frame| f.id().as_raw() == emcy && f.len() == 8 && !f.is_remote();
+        let codes = ctx
+            .collect(within, is_emcy)?
+            .into_iter()
+            .map(|(_, f)| {
+                let d = f.data_bytes();
+                u16::from_le_bytes([d[0], d[1]])
+            })
+            .collect();
+        Ok((ConsumerError { entry, hb }, codes))
+    }
+
+    /// Ends the error as the device's own logic does, by the heartbeat's return (an EMCY of
+    /// the error reset follows), then puts the consumer entry back before it times out again:
+    /// an error left standing would hide the next case's.
+    fn end(self, ctx: &mut Ctx<'_>) -> Result<(), Finding> {
+        ctx.send(Frame::data_array(self.hb, [0x05]))?;
+        ctx.idle(Duration::from_millis(20))?;
+        ctx.write(0x1016, 1, &self.entry, "the heartbeat consumer entry")?;
+        ctx.idle(Duration::from_millis(20))
+    }
+}
+
+fn emcy_history_records(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.error_history == Some(false) {
+        return Err(not_supported(
+            "no pre-defined error field (0x1003 not in the file)",
+        ));
+    }
+    if ctx.profile.features.heartbeat_consumer == Some(false)
+        || !eds_entry(ctx, 0x1016, 1).is_some_and(|e| access(e).writable())
+    {
+        return Err(Finding::NotApplicable(
+            "no writable heartbeat consumer entry to raise an error with".into(),
+        ));
+    }
+    let emcy = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+    if emcy & 0x8000_0000 != 0 {
+        return Err(Finding::NotApplicable("the EMCY producer is off".into()));
+    }
+    ctx.write(0x1003, 0, &[0], "0 to 0x1003 sub 0")?;
+    let (error, codes) = ConsumerError::raise(ctx, emcy & 0x7FF, Duration::from_millis(400))?;
+    let newest = codes.iter().rev().find(|c| **c != 0).copied();
+    // Read while the error stands: the history is what the device reports of it.
+    let read = match newest {
+        Some(_) => Some((
+            ctx.read_u32(0x1003, 0, "the number of errors")?,
+            ctx.read_u32(0x1003, 1, "the newest error")?,
+        )),
+        None => None,
+    };
+    error.end(ctx)?;
+    let (Some(newest), Some((n, e))) = (newest, read) else {
+        return Err(Finding::NotApplicable(
+            "the heartbeat consumer timeout raised no EMCY".into(),
+        ));
+    };
+    if n == 0 {
+        return Err(fail(format!(
+            "after EMCY 0x{newest:04X}, 0x1003 sub 0 reads 0"
+        )));
+    }
+    if e & 0xFFFF != u32::from(newest) {
+        return Err(fail(format!(
+            "after EMCY 0x{newest:04X}, 0x1003 sub 1 (the newest error) reads 0x{e:08X}"
+        )));
+    }
+    ctx.write(0x1003, 0, &[0], "0 to 0x1003 sub 0")?;
+    let after = ctx.read_u32(0x1003, 0, "the number of errors")?;
+    if after != 0 {
+        return Err(fail(format!("0x1003 sub 0 reads {after} after writing 0")));
+    }
+    Ok(format!(
+        "EMCY 0x{newest:04X}: 0x1003 sub 0 = {n}, sub 1 = 0x{e:08X}; cleared by 0"
+    ))
+}
+
 fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
     let emcy = ctx
         .upload(0x1014, 0)?
@@ -383,6 +518,81 @@ fn time_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
     Ok(format!("0x1012 = 0x{v:08X}"))
 }
 
+/// Sets `bit` of 0x1012 (30: producer, 31: consumer, §7.5.2.15): the original value, or
+/// the finding when the device does not offer it.
+fn time_bit(ctx: &mut Ctx<'_>, bit: u32, what: &str) -> Result<u32, Finding> {
+    if ctx.profile.features.time == Some(false) {
+        return Err(not_supported("no TIME (0x1012 not in the file)"));
+    }
+    if !eds_entry(ctx, 0x1012, 0).is_some_and(|e| access(e).writable()) {
+        return Err(not_supported(format!(
+            "0x1012 is not writable in the file: no TIME {what} to switch on"
+        )));
+    }
+    let v = ctx.read_u32(0x1012, 0, "the COB-ID TIME")?;
+    if v & bit == 0 {
+        match ctx.download(0x1012, 0, &(v | bit).to_le_bytes())? {
+            Ok(()) => {}
+            // §7.5.2.15: a device that cannot be TIME producer refuses bit 30.
+            Err(a) if a.by_server => {
+                return Err(Finding::NotSupported {
+                    why: format!("0x1012 = 0x{:08X} refused ({a}): no TIME {what}", v | bit),
+                    abort: Some(a.code),
+                });
+            }
+            Err(a) => return Err(fail_sdo(format!("writing 0x{:08X} to 0x1012", v | bit), a)),
+        }
+    }
+    let now = ctx.read_u32(0x1012, 0, "the COB-ID TIME")?;
+    if now & bit == 0 {
+        let _ = ctx.download(0x1012, 0, &v.to_le_bytes())?;
+        return Err(fail(format!(
+            "0x1012 = 0x{:08X} accepted, it reads 0x{now:08X}",
+            v | bit
+        )));
+    }
+    Ok(v)
+}
+
+fn time_producer(ctx: &mut Ctx<'_>) -> Outcome {
+    let v = time_bit(ctx, 0x4000_0000, "producer")?;
+    let id = v & 0x7FF;
+    let is_time = |f: &Frame| f.id().as_raw() == id && !f.is_remote();
+    // CiA 301 leaves the moment of a TIME message to the producer's application: what comes
+    // is checked, none is required.
+    let operating = ctx.collect(Duration::from_millis(500), is_time)?;
+    ctx.nmt(cantwin_canopen::wire::NmtCs::Stop)?;
+    let stopped = ctx.collect(Duration::from_millis(300), is_time)?;
+    ctx.nmt(cantwin_canopen::wire::NmtCs::EnterPreOperational)?;
+    ctx.idle(Duration::from_millis(10))?;
+    ctx.write(0x1012, 0, &v.to_le_bytes(), "the COB-ID TIME")?;
+    if let Some((_, f)) = operating.iter().find(|(_, f)| f.len() != 6) {
+        return Err(fail(format!(
+            "TIME {f}: {} bytes, a TIME_OF_DAY has 6",
+            f.len()
+        )));
+    }
+    if let Some((_, f)) = stopped.first() {
+        return Err(fail(format!("TIME {f} in STOPPED")));
+    }
+    Ok(format!(
+        "0x1012 bit 30 set and read back; {} TIME messages in 500 ms, none in STOPPED",
+        operating.len()
+    ))
+}
+
+fn time_consumer(ctx: &mut Ctx<'_>) -> Outcome {
+    let v = time_bit(ctx, 0x8000_0000, "consumer")?;
+    let id =
+        Id::standard(u16::try_from(v & 0x7FF).unwrap_or(0x100)).map_err(|e| fail(e.to_string()))?;
+    ctx.send(
+        Frame::data(id, &[0x00, 0x5C, 0x26, 0x05, 0x10, 0x3A]).map_err(|e| fail(e.to_string()))?,
+    )?;
+    super::recovered(ctx, "a TIME message")?;
+    ctx.write(0x1012, 0, &v.to_le_bytes(), "the COB-ID TIME")?;
+    Ok("0x1012 bit 31 set and read back; a TIME message consumed".into())
+}
+
 fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
     if ctx.profile.features.emcy_inhibit == Some(false) {
         return Err(not_supported(
@@ -405,15 +615,7 @@ fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
     // 300 ms in units of 100 µs; the error is raised by a consumed heartbeat that stops
     // (EMCY 0x8130) and ended by its return (an EMCY of the error reset), at once.
     ctx.write(0x1015, 0, &3000u16.to_le_bytes(), "the inhibit time EMCY")?;
-    let other = if ctx.node >= 127 { 1 } else { ctx.node + 1 };
-    let hb = Id::standard(0x700 + u16::from(other)).map_err(|e| fail(e.to_string()))?;
-    ctx.write(
-        0x1016,
-        1,
-        &((u32::from(other) << 16) | 100).to_le_bytes(),
-        "a heartbeat consumer entry",
-    )?;
-    ctx.send(Frame::data_array(hb, [0x05]))?;
+    let hb = monitor_the_next_node(ctx)?;
     let is_emcy = |f: &Frame| f.id().as_raw() == emcy && f.len() == 8 && !f.is_remote();
     let first = ctx.wait_for(Duration::from_millis(400), is_emcy)?;
     ctx.send(Frame::data_array(hb, [0x05]))?;

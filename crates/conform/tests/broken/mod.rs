@@ -21,7 +21,7 @@ use cantwin_eds::{DeviceInfo, Eds, FileInfo};
 /// The one fault of a broken device.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Fault {
-    /// Answers SDO requests in STOPPED (with abort 0x08000022), where CiA 301 §7.3.2.2.3
+    /// Answers SDO requests in STOPPED (with abort 0x08000022), where CiA 301 §7.3.2.2.5
     /// allows no SDO at all.
     SdoInStopped,
     /// Does not check the toggle bit of segmented transfers (§7.2.4.3.4, §7.2.4.3.7): every
@@ -40,7 +40,7 @@ pub enum Fault {
     /// heartbeat is left out.
     HeartbeatAtTwiceThePeriod,
     /// Accepts a new CAN-ID in 0x1014 while the EMCY is valid (bit 31 = 0), which
-    /// §7.5.2.20 forbids.
+    /// §7.5.2.17 forbids.
     EmcyCobIdChangeWhileValid,
     /// Stores (0x1010) whatever is written, where §7.5.2.13 requires the signature "save"
     /// and an abort 0x08000020 for anything else.
@@ -49,16 +49,16 @@ pub enum Fault {
     /// §7.5.2.35 – §7.5.2.38 forbid.
     PdoCobIdChangeWhileValid,
     /// Answers a write of a value other than 0 to 0x1003 sub 0 as a success (and ignores
-    /// it), where §7.5.2.3 allows only 0 and requires abort 0x06090030 otherwise.
+    /// it), where §7.5.2.4 allows only 0 and requires abort 0x06090030 otherwise.
     ErrorHistoryWriteAccepted,
     /// Does not check the CRC of a block download (§7.2.4.3.11): the end request reaches
     /// the device with the CRC of the data it took, so a wrong one is never aborted with
     /// 0x05040004.
     BlockDownloadCrcNotChecked,
     /// Takes a second 0x1016 entry for a node-ID another entry monitors already, where
-    /// §7.5.2.33 requires abort 0x06040043.
+    /// §7.5.2.19 requires abort 0x06040043.
     DuplicateHeartbeatConsumerAccepted,
-    /// Sends TPDO 1 on its event timer in PRE-OPERATIONAL too, where §7.3.2.2.3
+    /// Sends TPDO 1 on its event timer in PRE-OPERATIONAL too, where §7.3.2.2.5
     /// allows PDOs only in OPERATIONAL.
     TpdoInPreOperational,
     /// Answers every block upload initiate with an ordinary (expedited or segmented)
@@ -78,35 +78,84 @@ pub enum Fault {
     /// Reports OPERATIONAL (5) in its first heartbeat or guarding answer after a boot-up,
     /// where §7.3.2.2.1 has INITIALISATION end in PRE-OPERATIONAL (127).
     OperationalReportedAfterBootUp,
-    /// Processes RPDO 1 in STOPPED, where §7.3.2.2.3 allows PDOs only in OPERATIONAL.
+    /// Processes RPDO 1 in STOPPED, where §7.3.2.2.5 allows PDOs only in OPERATIONAL.
     RpdoProcessedInStopped,
-    /// Processes RPDO 1 in PRE-OPERATIONAL, where §7.3.2.2.3 allows PDOs only in
+    /// Processes RPDO 1 in PRE-OPERATIONAL, where §7.3.2.2.5 allows PDOs only in
     /// OPERATIONAL.
     RpdoProcessedInPreOperational,
     /// Sends TPDO 1 on each SYNC in STOPPED when its type is synchronous (1–240), where
-    /// §7.3.2.2.3 allows PDOs only in OPERATIONAL.
+    /// §7.3.2.2.5 allows PDOs only in OPERATIONAL.
     SyncTpdoInStopped,
     /// Sends the RPDO length EMCY (0x8210) for a short RPDO 1 in STOPPED too, where
-    /// §7.3.2.2.3 allows no EMCY in STOPPED.
+    /// §7.3.2.2.5 allows no EMCY in STOPPED.
     EmcyInStopped,
-    /// Sends TPDO 1 at every SYNC when its type is 3–240, where §7.5.2.35 table 71 has
+    /// Sends TPDO 1 at every SYNC when its type is 3–240, where §7.5.2.37 table 71 has
     /// type n send it at every n-th SYNC.
     CyclicTypeAtEverySync,
-    /// Sends TPDO 1 at every SYNC at type 252, where §7.5.2.35 table 71 has it sent only
+    /// Sends TPDO 1 at every SYNC at type 252, where §7.5.2.37 table 71 has it sent only
     /// on a remote frame.
     RtrSyncTypeSentOnSync,
-    /// Takes the reserved transmission types 241–251 in 0x1800 sub 2, where §7.5.2.35
+    /// Takes the reserved transmission types 241–251 in 0x1800 sub 2, where §7.5.2.37
     /// table 71 reserves them (the write must be refused with an abort).
     ReservedTransmissionTypeAccepted,
     /// Does not check the toggle bit of upload segment requests (§7.2.4.3.7): each is
     /// taken as if it carried the expected toggle, so a wrong one is never aborted with
     /// 0x05030000. Download segments are checked.
     UploadToggleIgnored,
+    /// Sends block-upload sub-blocks of 127 segments whatever valid block size the client asks
+    /// for, where §7.2.4.3.12 – §7.2.4.3.14 have the server send at most `blksize` segments
+    /// before the client's acknowledgement.
+    BlockUploadBlockSizeIgnored,
+    /// Answers a block download initiate with block size 0, outside the 1..=127 that
+    /// §7.2.4.3.9 allows.
+    BlockDownloadBlockSizeZero,
+    /// Refuses a block download initiate without size indication (s = 0) with 0x06070010,
+    /// where §7.2.4.3.9 makes the size indication optional for the client.
+    BlockDownloadWithoutSizeRefused,
+    /// Answers an upload of the write-only entry [`WRITE_ONLY_INDEX`] with data, where
+    /// §7.2.4.3.17 requires abort 0x06010001.
+    WriteOnlyEntryRead,
+    /// Takes a value below the low limit of [`OFFSET_INDEX`] (the write is answered as a
+    /// success and ignored), where §7.2.4.3.17 requires abort 0x06090032 (or 0x06090030).
+    LowLimitNotChecked,
+    /// Takes a write to a mapping entry of an invalid PDO while sub-index 0 is not 0 (by
+    /// disabling the mapping behind the client's back), where §7.5.2.36 and §7.5.2.38 allow
+    /// entries to change only while sub-index 0 is 0.
+    MappingEntryWrittenWhileEnabled,
+    /// Answers a sub-index 0 write that enables a mapping of more than 64 bits as a
+    /// success (and ignores it), where §7.5.2.36 and §7.5.2.38 require abort 0x06040042.
+    MappingLengthNotChecked,
+    /// Answers a mapping entry naming an object that cannot be mapped as a success (and
+    /// ignores it), where §7.5.2.36 and §7.5.2.38 require abort 0x06040041.
+    NotMappableObjectMapped,
+    /// Answers a mapping entry naming an object that does not exist as a success (and
+    /// ignores it), where §7.5.2.36 and §7.5.2.38 require abort 0x06020000.
+    AbsentObjectMapped,
+    /// Sends TPDO 1 with its power-on mapping (0x2100 sub 1 and 2) whatever mapping it was
+    /// given, where §7.5.2.38 has the PDO carry the objects its mapping names.
+    OldMappingSent,
+    /// Answers an upload of 0x1003 sub 0 with 0 whatever errors it recorded, where
+    /// §7.5.2.4 has sub 0 count the errors and sub 1 hold the newest.
+    ErrorHistoryNotCounted,
+    /// Answers a write of 0x1012 with bit 30 (produce TIME) as a success and ignores it,
+    /// where §7.5.2.15 requires the producer or abort 0x06090030.
+    TimeProducerBitIgnored,
+    /// Answers a write of 0x1012 with bit 31 (consume TIME) as a success and ignores it
+    /// (§7.5.2.15).
+    TimeConsumerBitIgnored,
+    /// Answers "load" to 0x1011 sub 2 as a success and restores nothing, where §7.5.2.14
+    /// has the communication parameters' defaults take effect at the next reset
+    /// communication.
+    RestoreCommunicationIgnored,
+    /// Sets the application parameter [`SET_POINT_INDEX`] to its default at reset
+    /// communication, where §7.3.2.2.1 has reset communication set only the communication
+    /// area to its power-on values (the application area waits for reset node).
+    ResetCommunicationResetsApplication,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 26] = [
+    pub const ALL: [Fault; 41] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -133,6 +182,21 @@ impl Fault {
         Fault::RtrSyncTypeSentOnSync,
         Fault::ReservedTransmissionTypeAccepted,
         Fault::UploadToggleIgnored,
+        Fault::BlockUploadBlockSizeIgnored,
+        Fault::BlockDownloadBlockSizeZero,
+        Fault::BlockDownloadWithoutSizeRefused,
+        Fault::WriteOnlyEntryRead,
+        Fault::LowLimitNotChecked,
+        Fault::MappingEntryWrittenWhileEnabled,
+        Fault::MappingLengthNotChecked,
+        Fault::NotMappableObjectMapped,
+        Fault::AbsentObjectMapped,
+        Fault::OldMappingSent,
+        Fault::ErrorHistoryNotCounted,
+        Fault::TimeProducerBitIgnored,
+        Fault::TimeConsumerBitIgnored,
+        Fault::RestoreCommunicationIgnored,
+        Fault::ResetCommunicationResetsApplication,
     ];
 }
 
@@ -141,6 +205,12 @@ pub const NODE_ID: u8 = 5;
 
 /// An UNSIGNED8 with limits 0–100, for the value range aborts.
 pub const SET_POINT_INDEX: u16 = 0x2002;
+/// A write-only UNSIGNED32, for abort 0x06010001.
+pub const WRITE_ONLY_INDEX: u16 = 0x2003;
+/// An INTEGER16 with limits -100–100, for the value range aborts below a low limit.
+pub const OFFSET_INDEX: u16 = 0x2004;
+/// The low limit of [`OFFSET_INDEX`].
+pub const OFFSET_LOW: i16 = -100;
 /// A DOMAIN of [`DOMAIN_SIZE`] bytes, for segmented and block transfers.
 pub const DOMAIN_INDEX: u16 = 0x2000;
 /// The DOMAIN's size: several block-upload sub-blocks of 127 segments.
@@ -187,6 +257,16 @@ pub fn description() -> OdDescription {
             SET_POINT_INDEX,
             SubObject::new("Set point", DataType::Unsigned8, Access::Rw)
                 .limits(Value::Unsigned8(0), Value::Unsigned8(100)),
+        )
+        .var(
+            WRITE_ONLY_INDEX,
+            SubObject::new("Command", DataType::Unsigned32, Access::Wo),
+        )
+        .var(
+            OFFSET_INDEX,
+            SubObject::new("Offset", DataType::Integer16, Access::Rw)
+                .default(Value::Integer16(0))
+                .limits(Value::Integer16(OFFSET_LOW), Value::Integer16(100)),
         )
         .array_of(INPUTS_INDEX, "Inputs", 8, io("Input"))
         .array_of(OUTPUTS_INDEX, "Outputs", 8, io("Output"));
@@ -384,6 +464,12 @@ impl Broken {
         if id == 0x000 && data.len() == 2 && data[0] == 0x82 && (data[1] == 0 || data[1] == NODE_ID)
         {
             self.reset_communication = true;
+            if self.fault == Some(Fault::ResetCommunicationResetsApplication) {
+                let _ = self
+                    .device
+                    .od_mut()
+                    .set(SET_POINT_INDEX, 0, &Value::Unsigned8(0));
+            }
         }
         if id != self.sdo_rx() || frame.is_remote() || data.len() != 8 {
             return Some(*frame);
@@ -399,6 +485,82 @@ impl Broken {
                 d[0] = 0x40;
                 d[1..4].copy_from_slice(&data[1..4]);
                 Some(Frame::std(id, &d).unwrap())
+            }
+            // Block upload initiate: the device is asked for blocks of 127 segments.
+            // A valid size only: sizes 0 and 128 are still refused.
+            Some(Fault::BlockUploadBlockSizeIgnored)
+                if byte0 >> 5 == 5 && byte0 & 0x03 == 0 && (1..=126).contains(&data[4]) =>
+            {
+                let mut d: [u8; 8] = data.try_into().unwrap();
+                d[4] = 127;
+                Some(Frame::std(id, &d).unwrap())
+            }
+            // Block download initiate (ccs 6, cs 0) with s = 0.
+            Some(Fault::BlockDownloadWithoutSizeRefused)
+                if byte0 >> 5 == 6 && byte0 & 0x01 == 0 && byte0 & 0x02 == 0 =>
+            {
+                self.transfer = Transfer::Idle;
+                self.answer(out, data, Some(0x0607_0010));
+                None
+            }
+            // Upload initiate of the write-only entry: answered with four zero bytes.
+            Some(Fault::WriteOnlyEntryRead)
+                if byte0 == 0x40 && expedited(data).0 == WRITE_ONLY_INDEX =>
+            {
+                let mut d = [0u8; 8];
+                d[0] = 0x43;
+                d[1..4].copy_from_slice(&data[1..4]);
+                out.push(Frame::std(self.sdo_tx(), &d).unwrap());
+                None
+            }
+            Some(Fault::LowLimitNotChecked)
+                if is_expedited_download(byte0)
+                    && expedited(data).0 == OFFSET_INDEX
+                    && i16::from_le_bytes([data[4], data[5]]) < OFFSET_LOW =>
+            {
+                self.answer(out, data, None);
+                None
+            }
+            Some(
+                fault @ (Fault::MappingEntryWrittenWhileEnabled
+                | Fault::MappingLengthNotChecked
+                | Fault::NotMappableObjectMapped
+                | Fault::AbsentObjectMapped),
+            ) if is_expedited_download(byte0) => self.mapping_fault(fault, frame, out),
+            Some(Fault::ErrorHistoryNotCounted)
+                if byte0 == 0x40 && (expedited(data).0, expedited(data).1) == (0x1003, 0) =>
+            {
+                // Expedited, one byte (n = 3): 0.
+                let mut d = [0u8; 8];
+                d[0] = 0x4F;
+                d[1..4].copy_from_slice(&data[1..4]);
+                out.push(Frame::std(self.sdo_tx(), &d).unwrap());
+                None
+            }
+            Some(fault @ (Fault::TimeProducerBitIgnored | Fault::TimeConsumerBitIgnored))
+                if is_expedited_download(byte0)
+                    && (expedited(data).0, expedited(data).1) == (0x1012, 0) =>
+            {
+                let bit = if fault == Fault::TimeProducerBitIgnored {
+                    0x4000_0000
+                } else {
+                    0x8000_0000
+                };
+                let now = self.device.od().get_unsigned(0x1012, 0).unwrap_or(0) as u32;
+                let new = u32::from_le_bytes(expedited(data).2);
+                if new & bit != 0 && now & bit == 0 {
+                    self.answer(out, data, None);
+                    return None;
+                }
+                Some(*frame)
+            }
+            Some(Fault::RestoreCommunicationIgnored)
+                if is_expedited_download(byte0)
+                    && (expedited(data).0, expedited(data).1) == (0x1011, 2)
+                    && expedited(data).2 == *b"load" =>
+            {
+                self.answer(out, data, None);
+                None
             }
             Some(Fault::SdoInStopped) if self.device.state() == State::Stopped => {
                 // 0x08000022: data cannot be transferred because of the present device state.
@@ -572,6 +734,59 @@ impl Broken {
         }
     }
 
+    /// The mapping faults of an invalid PDO: `None` when the fault answered the request.
+    fn mapping_fault(&mut self, fault: Fault, frame: &Frame, out: &mut Outbox) -> Option<Frame> {
+        let data = frame.data_bytes();
+        let (index, sub, value) = expedited(data);
+        let mapping = (0x1600..=0x17FF).contains(&index) || (0x1A00..=0x1BFF).contains(&index);
+        let comm = index.wrapping_sub(0x200);
+        let od = self.device.od();
+        let cob = od.get_unsigned(comm, 1).unwrap_or(0) as u32;
+        if !mapping || cob & 0x8000_0000 == 0 {
+            return Some(*frame);
+        }
+        let count = od.get_unsigned(index, 0).unwrap_or(0) as u8;
+        let entry = u32::from_le_bytes(value);
+        let target = (entry >> 16) as u16;
+        let target_sub = (entry >> 8) as u8;
+        let exists = od.description().locate(target, target_sub).is_ok();
+        let mappable = exists
+            && od
+                .description()
+                .locate(target, target_sub)
+                .is_ok_and(|id| od.description().sub_object(id).pdo_mappable);
+        let answered = match fault {
+            Fault::MappingEntryWrittenWhileEnabled if sub != 0 && count != 0 => {
+                let d = &mut self.device;
+                let r = d
+                    .write(index, 0, &[0])
+                    .and_then(|()| d.write(index, sub, &value))
+                    .and_then(|()| d.write(index, 0, &[count]));
+                Some(r.err().map(|a| a.to_u32()))
+            }
+            Fault::MappingLengthNotChecked if sub == 0 => {
+                let bits: Option<u32> = (1..=value[0])
+                    .map(|s| od.get_unsigned(index, s).map(|e| (e & 0xFF) as u32))
+                    .sum();
+                bits.is_some_and(|b| b > 64).then_some(None)
+            }
+            Fault::NotMappableObjectMapped if sub != 0 && count == 0 => {
+                (exists && !mappable).then_some(None)
+            }
+            Fault::AbsentObjectMapped if sub != 0 && count == 0 => {
+                (entry != 0 && target >= 0x20 && !exists).then_some(None)
+            }
+            _ => None,
+        };
+        match answered {
+            Some(abort) => {
+                self.answer(out, data, abort);
+                None
+            }
+            None => Some(*frame),
+        }
+    }
+
     /// The mapping change the standard forbids on a valid PDO, done the allowed way behind
     /// the client's back: PDO invalid, mapping disabled, entry written, mapping and PDO
     /// restored.
@@ -692,6 +907,14 @@ impl Broken {
             }
             return Some(frame);
         }
+        if self.fault == Some(Fault::OldMappingSent)
+            && !frame.is_remote()
+            && data.len() != 4
+            && let Some(old) = self.tpdo1_frame()
+            && old.id() == frame.id()
+        {
+            return Some(old);
+        }
         if self.fault == Some(Fault::AcyclicTpdoNeverSent) && !frame.is_remote() {
             let od = self.device.od();
             let acyclic = (0..4u16).any(|k| {
@@ -708,6 +931,15 @@ impl Broken {
             return Some(frame);
         }
         let byte0 = data[0];
+        if self.fault == Some(Fault::BlockDownloadBlockSizeZero)
+            && self.transfer == Transfer::BlockDownload
+            && byte0 & 0xE3 == 0xA0
+        {
+            // The initiate answer (scs 5, ss 0): block size 0.
+            let mut d: [u8; 8] = data.try_into().unwrap();
+            d[4] = 0;
+            return Some(Frame::std(id, &d).unwrap());
+        }
         match self.transfer {
             Transfer::BlockDownload if byte0 == 0xA1 || byte0 == 0x80 => {
                 self.transfer = Transfer::Idle;
