@@ -1265,7 +1265,7 @@ impl<H: OdHooks> Core<H> {
         }
         let invalid = AbortCode::INVALID_VALUE;
         let refused = match (index, sub) {
-            // §7.5.2.21: bits 24..=31 are reserved (0); one entry per monitored node.
+            // §7.5.2.19: bits 24..=31 are reserved (0); one entry per monitored node.
             (0x1016, 1..) if v & 0xFF00_0000 != 0 => Some(invalid),
             (0x1016, 1..) => self
                 .consumer

@@ -164,7 +164,7 @@ impl Consumer {
     }
 
     /// Whether `raw` for entry `sub` would monitor a node another entry already monitors
-    /// (CiA 301 §7.5.2.21: answered with 0x06040043).
+    /// (CiA 301 §7.5.2.19: answered with 0x06040043).
     pub fn conflicts(&self, sub: u8, raw: u32) -> bool {
         let (node, _) = split(raw);
         active(raw)

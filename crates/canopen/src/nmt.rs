@@ -3,7 +3,7 @@
 //! After power-on a device initialises, sends its boot-up message and enters
 //! pre-operational by itself (§7.3.2.2.1). NMT commands then move it between
 //! pre-operational, operational and stopped; reset node and reset communication take it back
-//! through initialising. Which services run in which state is table 81 (§7.3.2.2.3),
+//! through initialising. Which services run in which state is table 81 (§7.3.2.2.5),
 //! encoded in [`State::allows`].
 
 use crate::wire::{NmtCs, NmtState};
@@ -21,7 +21,7 @@ pub enum State {
     Stopped,
 }
 
-/// A communication service, for the permission table of §7.3.2.2.3.
+/// A communication service, for the permission table of §7.3.2.2.5.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Service {
     /// NMT module control.
@@ -52,7 +52,7 @@ impl State {
         }
     }
 
-    /// Whether `service` is available in this state (CiA 301 §7.3.2.2.3, table 81).
+    /// Whether `service` is available in this state (CiA 301 §7.3.2.2.5, table 81).
     pub const fn allows(self, service: Service) -> bool {
         match self {
             State::Initialising => false,
@@ -103,7 +103,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cia301_7_3_2_2_3_services_per_state() {
+    fn cia301_7_3_2_2_5_services_per_state() {
         use Service::*;
         let all = [Nmt, ErrorControl, Sdo, Pdo, Sync, Time, Emcy];
         let allowed = |s: State| {

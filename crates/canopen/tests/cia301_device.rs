@@ -82,7 +82,7 @@ fn cia301_7_3_2_1_commands_for_other_nodes_are_ignored_broadcast_applies() {
 }
 
 #[test]
-fn cia301_7_3_2_2_3_stopped_allows_only_nmt_and_error_control() {
+fn cia301_7_3_2_2_5_stopped_allows_only_nmt_and_error_control() {
     let mut h = Harness::booted();
     // SYNC producer every 10 ms.
     h.write(ms(0), 0x1006, 0, &u32le(10_000)).unwrap();
@@ -111,7 +111,7 @@ fn cia301_7_3_2_2_3_stopped_allows_only_nmt_and_error_control() {
 }
 
 #[test]
-fn cia301_7_3_2_2_3_pre_operational_has_no_pdos() {
+fn cia301_7_3_2_2_5_pre_operational_has_no_pdos() {
     let mut h = Harness::booted();
     h.write(ms(0), 0x1006, 0, &u32le(10_000)).unwrap();
     h.write(ms(0), 0x1005, 0, &u32le(0x4000_0080)).unwrap();

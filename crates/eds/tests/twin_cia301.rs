@@ -210,7 +210,7 @@ fn cia301_7_2_4_sdo_against_every_object_with_the_files_types_and_access() {
                 let bytes = held
                     .clone()
                     .unwrap_or_else(|_| rig.dev.od().get(index, sub).unwrap().to_le_bytes());
-                // CiA 301 §7.5.2.3: the error history holds no entry yet; a sub-index past
+                // CiA 301 §7.5.2.4: the error history holds no entry yet; a sub-index past
                 // the number of errors has no data (0x08000024).
                 if index == 0x1003 && sub > 0 {
                     let r = rig.upload(index, sub, Mode::Expedited);

@@ -600,7 +600,7 @@ impl Master {
 
     /// Produces SYNC on 0x080 every `period`, the first one `period` after `now`. With
     /// `overflow` in 2..=240 each SYNC carries a counter running 1..=overflow
-    /// (§7.5.2.37); 0 or 1 sends SYNC without data. `None` stops.
+    /// (0x1019, §7.5.2.22); 0 or 1 sends SYNC without data. `None` stops.
     pub fn set_sync(
         &mut self,
         producer: Option<(Duration, u8)>,

@@ -375,7 +375,7 @@ impl DeviceKind for Cia301 {
         }
         let tpdo_type: u8 = s.get_or("tpdo_transmission_type", 1)?;
         let rpdo_type: u8 = s.get_or("rpdo_transmission_type", 255)?;
-        // CiA 301 §7.5.2.35/36: 241..=251 are reserved; RPDOs know no 252/253 (RTR-only).
+        // CiA 301 §7.5.2.35, §7.5.2.37: 241..=251 are reserved; RPDOs know no 252/253 (RTR-only).
         for (key, t, rx) in [
             ("tpdo_transmission_type", tpdo_type, false),
             ("rpdo_transmission_type", rpdo_type, true),
@@ -383,7 +383,7 @@ impl DeviceKind for Cia301 {
             if (241..=251).contains(&t) || (rx && (252..=253).contains(&t)) {
                 return Err(s.error(
                     key,
-                    format!("transmission type {t} is reserved (CiA 301 §7.5.2.35/36)"),
+                    format!("transmission type {t} is reserved (CiA 301 §7.5.2.35, §7.5.2.37)"),
                 ));
             }
         }
