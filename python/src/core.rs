@@ -60,6 +60,9 @@ pub(crate) struct Core {
     /// Every thread that ever acted and still runs (at most [`ACTORS`]): the threads a frame
     /// handed to Python may wake (`crate::turns::note_woken`).
     pub actors: Vec<u64>,
+    /// Those of [`Core::actors`] last seen blocked in a `Condition.wait`: one seen running
+    /// after that has been woken since (`crate::turns::note_woken`).
+    pub blocked: Vec<u64>,
 }
 
 /// How many acting threads [`Core::actors`] remembers; the oldest is forgotten first.
@@ -97,7 +100,8 @@ impl Core {
     pub fn acted(&mut self, thread: u64, returned: bool) {
         if !self.actors.contains(&thread) {
             if self.actors.len() == ACTORS {
-                self.actors.remove(0);
+                let gone = self.actors.remove(0);
+                self.blocked.retain(|&t| t != gone);
             }
             self.actors.push(thread);
         }
@@ -107,6 +111,14 @@ impl Core {
             since: std::time::Instant::now(),
             returned,
         });
+    }
+
+    /// Note whether `thread` was just seen blocked in a `Condition.wait`.
+    pub fn seen_blocked(&mut self, thread: u64, blocked: bool) {
+        self.blocked.retain(|&t| t != thread);
+        if blocked && self.actors.contains(&thread) {
+            self.blocked.push(thread);
+        }
     }
 
     /// Note that `thread`, which acted inside a call that released the GIL, holds it again:

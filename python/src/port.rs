@@ -285,6 +285,13 @@ impl Port {
         }
     }
 
+    /// Note the threads the frame handed to Python before woke (`crate::turns::note_woken`);
+    /// called without the core's lock and without the GIL. A look that Python cannot answer
+    /// (an interpreter shutting down) notes nobody.
+    fn note_woken(&self, thread: u64) {
+        let _ = Python::attach(|py| crate::turns::note_woken(py, &self.shared, thread));
+    }
+
     /// The next buffered frame, if any.
     fn take(&self) -> PyResult<Option<Received>> {
         self.rx.try_recv().map_err(|RxClosed| closed())
@@ -304,6 +311,10 @@ impl Port {
         let mut bus_deadline: Option<Option<Instant>> = None;
         // A frame the pacing thread delivered while a thread that acted had not waited yet.
         let mut held: Option<Received> = None;
+        // Whether the threads that the frame handed over before may have woken were looked
+        // at (`crate::turns::note_woken`): once a call, and only where it matters, since a
+        // look takes the GIL from the thread it looks at.
+        let mut looked = !wait_for_answers;
         loop {
             // The turn rule (`crate::turns`): neither run the simulation nor hand over a frame
             // while a thread that acted has not reached its wait. Checked under the same lock
@@ -317,6 +328,14 @@ impl Port {
                 if all_wait {
                     continue;
                 }
+            }
+            // Paced, the next frame may be in the buffer already: look before handing it over.
+            if !looked && matches!(core.mode, Mode::Paced(_)) {
+                looked = true;
+                drop(core);
+                self.note_woken(thread);
+                core = self.shared.lock();
+                continue;
             }
             if let Some(r) = held.take() {
                 return Ok(Some(r));
@@ -372,6 +391,15 @@ impl Port {
                         .wait_timeout(core, wait)
                         .unwrap_or_else(PoisonError::into_inner)
                         .0;
+                    continue;
+                }
+                // Within the gap the simulation runs on to the next frame without waiting
+                // for an answer: not past a thread the last frame woke.
+                if !looked {
+                    looked = true;
+                    drop(core);
+                    self.note_woken(thread);
+                    core = self.shared.lock();
                     continue;
                 }
             }
@@ -454,9 +482,6 @@ impl Port {
     ) -> PyResult<Option<PyFrame>> {
         let timeout = timeout.map(secs).transpose()?;
         let thread = crate::turns::thread_ident(py)?;
-        if wait_for_answers {
-            crate::turns::note_woken(py, &self.shared, thread)?;
-        }
         py.detach(|| self.receive(timeout, wait_for_answers, thread))
             .map(|r| r.map(to_py))
     }

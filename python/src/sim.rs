@@ -47,6 +47,7 @@ fn build(
         reaction_time,
         acting: Vec::new(),
         actors: Vec::new(),
+        blocked: Vec::new(),
     };
     Ok(Simulation {
         shared: Arc::new(Shared {

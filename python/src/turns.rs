@@ -80,12 +80,16 @@ impl Shared {
     }
 }
 
-/// Note every thread that acted once and is now woken in its wait (a frame the calling
+/// Note every thread that acted once and has been woken from its wait (a frame the calling
 /// receiver handed to Python notified it): bus time waits for it until it waits again
-/// (module documentation). `caller`, the receiver, is not looked at.
+/// (module documentation). Woken is a thread found notified in its `Condition.wait`, or
+/// found running where the look before found it blocked in one (it may have got the GIL
+/// before this look). `caller`, the receiver, is not looked at.
 ///
-/// Called by a receiver as it comes back for the next frame, when the callbacks of the
-/// frame before have run. A thread that has ended is forgotten.
+/// Called by a receiver back for the next frame (the callbacks of the one before have run)
+/// before it runs the simulation on within the reaction gap (`crate::port`) or, paced, hands
+/// over a frame: where another frame can reach Python before the woken thread waits. A
+/// thread that has ended is forgotten.
 pub(crate) fn note_woken(py: Python<'_>, shared: &Shared, caller: u64) -> PyResult<()> {
     let actors: Vec<u64> = {
         let core = shared.lock();
@@ -99,25 +103,31 @@ pub(crate) fn note_woken(py: Python<'_>, shared: &Shared, caller: u64) -> PyResu
         return Ok(());
     }
     let frames = current_frames(py)?;
-    let mut woken = Vec::new();
-    let mut ended = Vec::new();
+    let mut seen = Vec::new();
     for thread in actors {
-        match frames.get_item(thread)? {
-            None => ended.push(thread),
-            Some(frame) => {
-                if condition_wait(&frame)? == Some(Wait::Notified) {
-                    woken.push(thread);
-                }
-            }
-        }
-    }
-    if woken.is_empty() && ended.is_empty() {
-        return Ok(());
+        let wait = match frames.get_item(thread)? {
+            None => None,
+            Some(frame) => Some(condition_wait(&frame)?),
+        };
+        seen.push((thread, wait));
     }
     let mut core = shared.lock();
-    core.actors.retain(|t| !ended.contains(t));
-    for thread in woken {
-        core.acted(thread, true);
+    for (thread, wait) in seen {
+        match wait {
+            // Ended.
+            None => {
+                core.actors.retain(|&t| t != thread);
+                core.blocked.retain(|&t| t != thread);
+            }
+            Some(Some(Wait::Blocked)) => core.seen_blocked(thread, true),
+            Some(Some(Wait::Notified)) => core.acted(thread, true),
+            Some(None) => {
+                if core.blocked.contains(&thread) {
+                    core.acted(thread, true);
+                }
+                core.seen_blocked(thread, false);
+            }
+        }
     }
     Ok(())
 }
@@ -210,13 +220,16 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
         let threads: Vec<u64> = acting.iter().filter(|a| a.1).map(|a| a.0).collect();
         // If Python cannot be asked (an interpreter shutting down), nobody is waited for:
         // a receiver must never hang on it.
-        let waiting = if threads.is_empty() {
-            Vec::new()
+        let (waiting, blocked) = if threads.is_empty() {
+            (Vec::new(), Vec::new())
         } else {
             Python::attach(|py| waiting_threads(py, &threads, &mut spots))
-                .unwrap_or_else(|_| threads.clone())
+                .unwrap_or_else(|_| (threads.clone(), Vec::new()))
         };
         let mut core = shared.lock();
+        for &thread in &threads {
+            core.seen_blocked(thread, blocked.contains(&thread));
+        }
         let limit = core.reaction_time;
         core.acting.retain(|a| {
             if a.returned {
@@ -245,10 +258,16 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
     }
 }
 
-/// Which of `threads` wait now (module documentation); a thread that ended waits.
-fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> PyResult<Vec<u64>> {
+/// Which of `threads` wait now (module documentation; a thread that ended waits), and which
+/// of those are blocked in a `Condition.wait`.
+fn waiting_threads(
+    py: Python<'_>,
+    threads: &[u64],
+    spots: &mut Vec<Spot>,
+) -> PyResult<(Vec<u64>, Vec<u64>)> {
     let frames = current_frames(py)?;
     let mut waiting = Vec::new();
+    let mut blocked = Vec::new();
     for &thread in threads {
         let Some(frame) = frames.get_item(thread)? else {
             waiting.push(thread);
@@ -258,9 +277,15 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
         let name: String = code.getattr("co_name")?.extract()?;
         if in_threading(&code)? && THREADING_WAITS.contains(&name.as_str()) {
             // A woken thread is on its way out of the wait, not in it.
-            if condition_wait(&frame)? != Some(Wait::Notified) {
-                waiting.push(thread);
-                continue;
+            match condition_wait(&frame)? {
+                Some(Wait::Notified) => {}
+                wait => {
+                    if wait == Some(Wait::Blocked) {
+                        blocked.push(thread);
+                    }
+                    waiting.push(thread);
+                    continue;
+                }
             }
         }
         let lasti: i64 = frame.getattr("f_lasti")?.extract()?;
@@ -286,5 +311,5 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
             }),
         }
     }
-    Ok(waiting)
+    Ok((waiting, blocked))
 }

@@ -47,12 +47,15 @@ class Way:
 
 
 def heartbeat_reports(way, state, before=None):
-    """`wait_for_heartbeat()` right after the command reports `state`. Through a paced bus or
-    a socket, a heartbeat the twin sent before the command reached it may still be on its way
-    (CiA 301 §7.2.8.3.2.1: the producer reports the state it is in); it reports `before`, and
-    the next one must report `state`. In virtual time the first one must."""
+    """`wait_for_heartbeat()` right after the command reports `state`. A heartbeat the twin
+    produced before the command reached it may still be on its way (CiA 301 §7.2.8.3.2.1:
+    the producer reports the state it is in when it produces): through a paced bus or a
+    socket, and in virtual time too when the command was sent in the instant between the
+    heartbeat's production and its transmission (the NMT command's identifier 0 wins the
+    arbitration against it). That one reports `before`, and the next one must report
+    `state`."""
     got = way.node.nmt.wait_for_heartbeat(timeout=2)
-    if got != state and way.name != "virtual" and got == before:
+    if got != state and got == before:
         got = way.node.nmt.wait_for_heartbeat(timeout=2)
     return got == state
 
