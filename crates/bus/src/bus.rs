@@ -37,9 +37,6 @@
 //! and at the bus's bit rate (external ports count: they are nodes). A lone node sees ACK
 //! errors and keeps retransmitting, error-passive with TEC = 128.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use cantwin_can::{
     BitRate, ControllerEvent, Duration, ErrorCounters, ErrorState, Frame, Instant, Outbox,
 };
@@ -56,6 +53,7 @@ use crate::rng::SplitMix64;
 use crate::stats::{BusStats, IdIndex, PortStats};
 use crate::tap::{AnyTap, BusEvent, BusInfo, ErrorKind, ErrorRecord, FrameRecord};
 use crate::time_map::TimeMap;
+use crate::timers::Timers;
 
 /// How a bus is set up.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -105,32 +103,36 @@ enum Source {
     Babble,
 }
 
+/// The fields every receiver touches on every frame come first, in the order the bus reads
+/// them, so that a delivery touches the first two cache lines of the port only.
+#[repr(C)]
 struct Port {
     node: Option<Box<dyn AnyNode>>,
-    /// How to reach the node as a twin, when it is one.
-    twin: Option<TwinAccess>,
-    config: PortConfig,
-    queue: TxQueue,
     counters: ErrorCounters,
     powered: bool,
     connected: bool,
-    mismatch: Option<BitRate>,
-    babble: Option<(Frame, u32)>,
-    deadline: Option<Instant>,
-    last_tick: Option<Instant>,
-    suspend_until: Option<Instant>,
-    recover_at: Option<Instant>,
-    /// Disconnected with frames to send: when the next ACK error on its own stub of cable
-    /// is detected.
-    stub_at: Option<Instant>,
-    source: Option<Source>,
-    last_bits: Option<(Frame, u32)>,
     /// The node's [`Node::acceptance_version`] when the acceptance cache last learnt that
     /// its verdicts may have changed.
     accept_version: Option<u64>,
     /// The epoch in which its acceptance verdicts last may have changed.
     accept_changed: u64,
+    deadline: Option<Instant>,
+    last_tick: Option<Instant>,
     stats: PortStats,
+    // What the port sends.
+    source: Option<Source>,
+    queue: TxQueue,
+    last_bits: Option<(Frame, u32)>,
+    config: PortConfig,
+    suspend_until: Option<Instant>,
+    mismatch: Option<BitRate>,
+    babble: Option<(Frame, u32)>,
+    recover_at: Option<Instant>,
+    /// Disconnected with frames to send: when the next ACK error on its own stub of cable
+    /// is detected.
+    stub_at: Option<Instant>,
+    /// How to reach the node as a twin, when it is one.
+    twin: Option<TwinAccess>,
 }
 
 impl Port {
@@ -159,14 +161,6 @@ impl Port {
             }
         }
     }
-}
-
-/// Cached acceptance verdicts for one identifier: bit `i` of `accept` is port `i`'s answer,
-/// valid for ports whose verdicts cannot have changed since `epoch`.
-#[derive(Debug, Default)]
-struct AcceptEntry {
-    epoch: u64,
-    accept: Vec<u64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -202,12 +196,13 @@ pub struct Bus {
     bit_ns: u64,
     now: Instant,
     ports: Vec<Port>,
-    /// Per port: `arbitration_key << 32 | port`, or `u64::MAX` when it offers nothing.
-    arb_keys: Vec<u64>,
-    /// The least of `arb_keys`.
+    /// Per port: `arbitration_key << 32 | port`, or `u64::MAX` when it offers nothing; and
+    /// the least of them.
     arbiter: Arbiter,
     offering: usize,
     listeners: usize,
+    /// Bit `i`: port `i` takes part in the bus as a receiver ([`Port::on_the_bus`]).
+    receiving: Vec<u64>,
     /// Ports with a bit-rate mismatch.
     mismatched: usize,
     /// Completions so far; stamps the acceptance cache.
@@ -215,14 +210,20 @@ pub struct Bus {
     /// The latest epoch in which some port's acceptance verdicts may have changed: cached
     /// verdicts taken after it are all still valid.
     accept_changed: u64,
-    /// Numbers the identifiers of `accept_cache`.
+    /// Numbers the identifiers of the acceptance cache.
     accept_index: IdIndex,
-    /// Per identifier number: the cached verdicts.
-    accept_cache: Vec<AcceptEntry>,
+    /// The acceptance cache, per identifier number `k`: `accept_bits[k * accept_words..]`
+    /// holds its cached verdicts (bit `i`: port `i`'s answer), valid for ports whose verdicts
+    /// cannot have changed since `accept_epochs[k]`. One flat table rather than a vector per
+    /// identifier, so a delivery reads the verdicts without chasing another allocation.
+    accept_epochs: Vec<u64>,
+    accept_bits: Vec<u64>,
+    /// 64-bit words per identifier in `accept_bits`: enough for every port.
+    accept_words: usize,
     /// Some receiver needs its counters touched on every frame (REC above 0, or a
     /// bit-rate mismatch): deliver the slow way.
     rx_slow: bool,
-    deadlines: BinaryHeap<Reverse<(Instant, u32)>>,
+    deadlines: Timers,
     dirty: Vec<u32>,
     in_flight: Option<InFlight>,
     idle_at: Instant,
@@ -268,17 +269,19 @@ impl Bus {
             bit_ns: config.bit_rate.bit_time().as_nanos(),
             now,
             ports: Vec::new(),
-            arb_keys: Vec::new(),
             arbiter: Arbiter::new(),
             offering: 0,
             listeners: 0,
+            receiving: Vec::new(),
             mismatched: 0,
             epoch: 1,
             accept_changed: 0,
             accept_index: IdIndex::default(),
-            accept_cache: Vec::new(),
+            accept_epochs: Vec::new(),
+            accept_bits: Vec::new(),
+            accept_words: 0,
             rx_slow: false,
-            deadlines: BinaryHeap::new(),
+            deadlines: Timers::default(),
             dirty: Vec::new(),
             in_flight: None,
             idle_at: now,
@@ -418,7 +421,6 @@ impl Bus {
             accept_changed: 0,
             stats: PortStats::default(),
         });
-        self.arb_keys.push(u64::MAX);
         self.arbiter.set(index, u64::MAX);
         self.mark_called(index);
         if config.powered {
@@ -744,10 +746,16 @@ impl Bus {
             .downcast_mut::<T>()
     }
 
+    /// Show `event` to the taps. Inlined, so that without taps the event is not even built.
+    #[inline]
     fn emit(&mut self, event: BusEvent) {
-        if self.taps.is_empty() {
-            return;
+        if !self.taps.is_empty() {
+            self.emit_to_taps(&event);
         }
+    }
+
+    #[inline(never)]
+    fn emit_to_taps(&mut self, event: &BusEvent) {
         let info = BusInfo {
             id: self.id,
             name: &self.name,
@@ -755,7 +763,7 @@ impl Bus {
             time_map: self.time_map,
         };
         for tap in &mut self.taps {
-            tap.on_event(&info, &event);
+            tap.on_event(&info, event);
         }
     }
 
@@ -769,9 +777,34 @@ impl Bus {
                 break;
             }
             self.step(next);
+            self.start_at_idle(t);
         }
         if t > self.now {
             self.now = t;
+        }
+    }
+
+    /// Right after a frame completed, when the bus's next event is the end of its
+    /// intermission (at or before `t`) and nothing else is due until then, do what the step
+    /// there would do, which is only to start the next transmission, without going round
+    /// the event loop: on a loaded bus that is every other step.
+    #[inline]
+    fn start_at_idle(&mut self, t: Instant) {
+        let idle_at = self.idle_at;
+        let quiet = self.in_flight.is_none()
+            && self.offering > 0
+            && idle_at > self.now
+            && idle_at <= t
+            && self.dirty.is_empty()
+            && self.suspended.is_empty()
+            && self.recovering.is_empty()
+            && self.stubs.is_empty()
+            // A timer due at `idle_at` runs before the arbitration there (a stale entry
+            // only makes this give up).
+            && self.deadlines.peek().is_none_or(|(d, _)| d > idle_at);
+        if quiet {
+            self.now = idle_at;
+            self.start_transmission(idle_at);
         }
     }
 
@@ -784,18 +817,18 @@ impl Bus {
     pub fn next_event_time(&mut self) -> Option<Instant> {
         self.flush_dirty();
         // Drop stale timer entries from the top of the heap.
-        while let Some(&Reverse((t, i))) = self.deadlines.peek() {
-            let p = &self.ports[i as usize];
+        while let Some((t, i)) = self.deadlines.peek() {
+            let p = &self.ports[i];
             if p.deadline == Some(t) && p.powered && p.attached() {
                 break;
             }
             self.deadlines.pop();
         }
-        let mut next = self.deadlines.peek().map(|Reverse((t, _))| *t);
+        let mut next = self.deadlines.peek().map(|(t, _)| t);
         let mut consider = |t: Instant| {
             next = Some(next.map_or(t, |n| n.min(t)));
         };
-        match self.in_flight {
+        match &self.in_flight {
             Some(f) => consider(f.end),
             None if self.offering > 0 => consider(self.idle_at.max(self.now)),
             None => {}
@@ -831,11 +864,10 @@ impl Bus {
             self.now = t;
         }
         let t = self.now;
-        if let Some(f) = self.in_flight
-            && f.end <= t
+        if self.in_flight.as_ref().is_some_and(|f| f.end <= t)
+            && let Some(f) = self.in_flight.take()
         {
-            self.in_flight = None;
-            self.complete(f);
+            self.complete(&f);
         }
         if !self.recovering.is_empty() {
             let mut k = 0;
@@ -881,12 +913,11 @@ impl Bus {
             }
         }
         self.flush_dirty();
-        while let Some(&Reverse((d, i))) = self.deadlines.peek() {
+        while let Some((d, i)) = self.deadlines.peek() {
             if d > t {
                 break;
             }
             self.deadlines.pop();
-            let i = i as usize;
             let p = &mut self.ports[i];
             if p.deadline != Some(d) || !p.powered {
                 continue;
@@ -903,7 +934,16 @@ impl Bus {
         }
     }
 
+    /// Ask the nodes reached from outside since the last event for their deadlines.
+    #[inline]
     fn flush_dirty(&mut self) {
+        if !self.dirty.is_empty() {
+            self.flush_dirty_ports();
+        }
+    }
+
+    #[inline(never)]
+    fn flush_dirty_ports(&mut self) {
         while let Some(i) = self.dirty.pop() {
             self.update_deadline(i as usize);
         }
@@ -932,7 +972,7 @@ impl Bus {
     fn absorb(&mut self, i: usize) -> u32 {
         let p = &mut self.ports[i];
         let mut dropped = 0;
-        for frame in self.outbox.drain() {
+        for &frame in self.outbox.frames() {
             let bits = match p.last_bits {
                 Some((f, bits)) if f == frame => bits,
                 _ => {
@@ -945,27 +985,35 @@ impl Bus {
                 dropped += 1;
             }
         }
+        self.outbox.clear();
         dropped
     }
 
     /// After a node was called: queue its frames, report overflow, refresh its arbitration
     /// entry and its deadline.
+    #[inline(always)]
     fn after_call(&mut self, i: usize) {
         self.note_acceptance(i);
         if !self.outbox.is_empty() {
-            let dropped = self.absorb(i);
-            if dropped > 0 {
-                self.tx_dropped(i, dropped);
-                // Frames queued in reaction to TxDropped that do not fit either are counted
-                // but not reported again, so a node cannot loop on its own overflow.
-                let again = self.absorb(i);
-                self.ports[i].stats.tx_dropped += u64::from(again);
-            }
-            // Only new frames change what the port offers; every other change of state
-            // refreshes its entry where it happens.
-            self.refresh(i);
+            self.queue_outbox(i);
         }
         self.update_deadline(i);
+    }
+
+    /// The queueing part of [`Bus::after_call`], when the node queued something.
+    #[inline(never)]
+    fn queue_outbox(&mut self, i: usize) {
+        let dropped = self.absorb(i);
+        if dropped > 0 {
+            self.tx_dropped(i, dropped);
+            // Frames queued in reaction to TxDropped that do not fit either are counted
+            // but not reported again, so a node cannot loop on its own overflow.
+            let again = self.absorb(i);
+            self.ports[i].stats.tx_dropped += u64::from(again);
+        }
+        // Only new frames change what the port offers; every other change of state
+        // refreshes its entry where it happens.
+        self.refresh(i);
     }
 
     /// Count and report `n` frames dropped from port `i`'s queue.
@@ -986,6 +1034,7 @@ impl Bus {
 
     /// After port `i`'s node was called: its acceptance verdicts are asked again unless it
     /// says they cannot have changed (an unchanged [`Node::acceptance_version`]).
+    #[inline(always)]
     fn note_acceptance(&mut self, i: usize) {
         let p = &mut self.ports[i];
         let version = p.node.as_ref().and_then(|n| n.acceptance_version());
@@ -1001,23 +1050,30 @@ impl Bus {
         self.accept_changed = self.epoch;
     }
 
+    #[inline(always)]
     fn update_deadline(&mut self, i: usize) {
+        let now = self.now;
         let p = &mut self.ports[i];
         let d = match (&p.node, p.powered) {
             (Some(node), true) => node.next_deadline(),
             _ => None,
         };
-        // A node that asks again for an instant it was already ticked at is ticked 1 ns
-        // later: time must move on even if a node misbehaves.
-        let d = match (d, p.last_tick) {
-            (Some(d), Some(last)) if d <= last => Some(last + Duration::from_nanos(1)),
-            (Some(d), _) => Some(d.max(self.now)),
-            (None, _) => None,
+        let d = match d {
+            // The usual answer of a node that was called without being due (a receiver):
+            // still nothing to do.
+            None if p.deadline.is_none() => return,
+            None => None,
+            // A node that asks again for an instant it was already ticked at is ticked 1 ns
+            // later: time must move on even if a node misbehaves.
+            Some(d) => Some(match p.last_tick {
+                Some(last) if d <= last => last + Duration::from_nanos(1),
+                _ => d.max(now),
+            }),
         };
         if d != p.deadline {
             p.deadline = d;
             if let Some(d) = d {
-                self.deadlines.push(Reverse((d, i as u32)));
+                self.deadlines.push(d, i);
             }
         }
     }
@@ -1048,11 +1104,7 @@ impl Bus {
                 key = (u64::from(k) << 32) | i as u64;
             }
         }
-        let old = self.arb_keys[i];
-        self.arb_keys[i] = key;
-        if key != old {
-            self.arbiter.set(i, key);
-        }
+        let old = self.arbiter.set(i, key);
         match (old == u64::MAX, key == u64::MAX) {
             (true, false) => self.offering += 1,
             (false, true) => self.offering -= 1,
@@ -1116,12 +1168,21 @@ impl Bus {
         }
     }
 
+    /// Recount the nodes that acknowledge, and note which ports receive: called wherever
+    /// a port's power, connection, controller state or node changes.
     fn count_listeners(&mut self) {
         self.listeners = self
             .ports
             .iter()
             .filter(|p| p.on_the_bus() && p.mismatch.is_none())
             .count();
+        self.receiving.clear();
+        self.receiving.resize(self.ports.len().div_ceil(64), 0);
+        for (i, p) in self.ports.iter().enumerate() {
+            if p.on_the_bus() {
+                self.receiving[i / 64] |= 1 << (i % 64);
+            }
+        }
     }
 
     fn update_counters(
@@ -1196,8 +1257,11 @@ impl Bus {
         let mismatch = p.mismatch.is_some();
         let attempt = self.attempts;
         self.attempts += 1;
-        let port_id = self.port_id(i);
-        let action = self.fault_for(attempt, port_id, &frame);
+        let action = if self.rules.is_empty() {
+            None
+        } else {
+            self.fault_for(attempt, self.port_id(i), &frame)
+        };
         // An error-active node at the wrong bit rate flags every frame it hears.
         let disturbed = self.mismatched > 0
             && self.ports.iter().enumerate().any(|(j, q)| {
@@ -1299,7 +1363,7 @@ impl Bus {
         self.in_flight = Some(f);
     }
 
-    fn complete(&mut self, f: InFlight) {
+    fn complete(&mut self, f: &InFlight) {
         self.epoch += 1;
         let now = self.now;
         let sender_id = self.port_id(f.port);
@@ -1308,28 +1372,33 @@ impl Bus {
                 let babble = f.source == Source::Babble;
                 self.stats
                     .frame(f.frame.id(), f.bits, f.start, f.idle_at, dropped);
-                self.emit(BusEvent::Frame(FrameRecord {
-                    frame: f.frame,
-                    sender: sender_id,
-                    start: f.start,
-                    end: f.end,
-                    idle_at: f.idle_at,
-                    bits: f.bits,
-                    dropped,
-                    babble,
-                }));
+                if !self.taps.is_empty() {
+                    self.emit(BusEvent::Frame(FrameRecord {
+                        frame: f.frame,
+                        sender: sender_id,
+                        start: f.start,
+                        end: f.end,
+                        idle_at: f.idle_at,
+                        bits: f.bits,
+                        dropped,
+                        babble,
+                    }));
+                }
                 if let Source::Queue { seq } = f.source {
                     self.ports[f.port].queue.remove(seq);
                     self.ports[f.port].stats.tx_frames += 1;
                 }
                 self.refresh(f.port);
-                self.update_counters(f.port, ErrorCounters::on_transmit_success);
+                // A success moves only a TEC above 0 (§12.1.4.2 rule g): at 0 nothing changes.
+                if self.ports[f.port].counters.tec() > 0 {
+                    self.update_counters(f.port, ErrorCounters::on_transmit_success);
+                }
                 self.suspend_if_passive(f.port, f.idle_at);
                 if self.rx_slow {
-                    self.receive_slow(&f, dropped);
+                    self.receive_slow(f, dropped);
                     self.update_rx_slow();
                 } else if !dropped {
-                    self.receive_fast(&f);
+                    self.receive_fast(f);
                 }
                 if babble {
                     return;
@@ -1399,15 +1468,15 @@ impl Bus {
         let id = f.frame.id();
         let n = self.ports.len();
         let words = n.div_ceil(64);
+        if words != self.accept_words {
+            self.restride_acceptance(words);
+        }
         let k = self.accept_index.number(id);
-        if k == self.accept_cache.len() {
-            self.accept_cache.push(AcceptEntry::default());
+        if k == self.accept_epochs.len() {
+            self.accept_epochs.push(0);
+            self.accept_bits.resize((k + 1) * words, 0);
         }
-        let entry = &mut self.accept_cache[k];
-        if entry.accept.len() != words {
-            entry.accept.resize(words, 0);
-        }
-        let since = entry.epoch;
+        let since = self.accept_epochs[k];
         // Verdicts taken after the last possible change are all valid: nothing to ask (the
         // usual case on a bus whose nodes keep their acceptance versions).
         let valid = since > self.accept_changed;
@@ -1430,26 +1499,31 @@ impl Bus {
                     .node
                     .as_ref()
                     .is_some_and(|node| node.accepts(id));
+                let word = &mut self.accept_bits[k * words + w];
                 if yes {
-                    entry.accept[w] |= 1 << j;
+                    *word |= 1 << j;
                 } else {
-                    entry.accept[w] &= !(1 << j);
+                    *word &= !(1 << j);
                 }
             }
         }
-        entry.epoch = self.epoch;
+        self.accept_epochs[k] = self.epoch;
         let now = self.now;
-        // Nothing below changes the cached verdicts: a word read at its turn is the word as
-        // taken above.
+        // Nothing below changes the cached verdicts, nor which ports receive (a node's
+        // callbacks change no port's power, connection or counters): a word read at its turn
+        // is the word as taken above.
         for w in 0..words {
-            let mut bits = self.accept_cache[k].accept[w];
+            let sender = if f.port / 64 == w {
+                1 << (f.port % 64)
+            } else {
+                0
+            };
+            let receiving = self.receiving.get(w).copied().unwrap_or(0);
+            let mut bits = self.accept_bits[k * words + w] & receiving & !sender;
             while bits != 0 {
                 let i = w * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
                 let p = &mut self.ports[i];
-                if i == f.port || !p.on_the_bus() {
-                    continue;
-                }
                 if let Some(node) = p.node.as_mut() {
                     p.stats.rx_frames += 1;
                     node.on_frame(&f.frame, now, &mut self.outbox);
@@ -1457,6 +1531,21 @@ impl Bus {
                 }
             }
         }
+    }
+
+    /// Give every identifier of the acceptance cache `words` words of verdicts, keeping the
+    /// ones it has (more ports attached: the new ports' verdicts start unknown, and they
+    /// are asked since they were called when attached).
+    #[cold]
+    fn restride_acceptance(&mut self, words: usize) {
+        let old = self.accept_words;
+        let mut bits = vec![0u64; self.accept_epochs.len() * words];
+        for (k, row) in bits.chunks_exact_mut(words).enumerate() {
+            let keep = old.min(words);
+            row[..keep].copy_from_slice(&self.accept_bits[k * old..k * old + keep]);
+        }
+        self.accept_bits = bits;
+        self.accept_words = words;
     }
 
     /// Hand a good frame to its receivers, moving every receiver's REC.
@@ -1495,9 +1584,9 @@ impl Bus {
     /// §10.4.6.4: an error-passive node that was the transmitter waits 8 bits after
     /// intermission before it starts again.
     fn suspend_if_passive(&mut self, i: usize, idle_at: Instant) {
-        let until = idle_at + self.bits(8);
-        let p = &mut self.ports[i];
-        if p.counters.state() == ErrorState::Passive {
+        if self.ports[i].counters.state() == ErrorState::Passive {
+            let until = idle_at + self.bits(8);
+            let p = &mut self.ports[i];
             p.suspend_until = Some(until);
             self.suspended.push(i as u32);
             self.refresh(i);

@@ -67,6 +67,7 @@ mod sim;
 mod stats;
 mod tap;
 mod time_map;
+mod timers;
 
 pub use bus::{Bus, BusConfig, TapId};
 pub use error::BusError;

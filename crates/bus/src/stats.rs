@@ -76,9 +76,15 @@ impl IdIndex {
     /// The number of `id`, numbering it now if it had none.
     #[inline]
     pub fn number(&mut self, id: Id) -> usize {
-        if let Some(n) = self.get(id) {
-            return n;
+        match self.get(id) {
+            Some(n) => n,
+            None => self.add(id),
         }
+    }
+
+    /// Number `id`, which has no number yet.
+    #[cold]
+    fn add(&mut self, id: Id) -> usize {
         let n = self.ids.len();
         self.ids.push(id);
         match id {
@@ -126,7 +132,11 @@ pub struct BusStats {
     /// Per identifier number.
     per_id: Vec<IdStats>,
     window: Duration,
+    /// Busy intervals before the latest, oldest first, as far back as the window reaches.
     recent: VecDeque<(Instant, Instant)>,
+    /// The latest busy interval, which back-to-back frames extend: kept apart so that a
+    /// loaded bus extends it without touching the allocation behind `recent`.
+    open: Option<(Instant, Instant)>,
 }
 
 impl BusStats {
@@ -142,6 +152,7 @@ impl BusStats {
             per_id: Vec::new(),
             window,
             recent: VecDeque::new(),
+            open: None,
         }
     }
 
@@ -150,13 +161,18 @@ impl BusStats {
         *self = BusStats::new(now, self.window);
     }
 
+    #[inline]
     fn busy_interval(&mut self, start: Instant, end: Instant) {
         self.busy += end - start;
         // Back-to-back transmissions (a loaded bus) extend one interval: the window's sums
         // are the same, and the window holds a few intervals rather than one per frame.
-        match self.recent.back_mut() {
+        match &mut self.open {
             Some(last) if last.1 == start => last.1 = end,
-            _ => self.recent.push_back((start, end)),
+            open => {
+                if let Some(before) = open.replace((start, end)) {
+                    self.recent.push_back(before);
+                }
+            }
         }
         let horizon = end - self.window;
         while let Some(&(_, e)) = self.recent.front() {
@@ -166,8 +182,13 @@ impl BusStats {
                 break;
             }
         }
+        // The latest interval ends at `end`: only a window of zero leaves it behind.
+        if self.recent.is_empty() && self.open.is_some_and(|(_, e)| e <= horizon) {
+            self.open = None;
+        }
     }
 
+    #[inline]
     pub(crate) fn frame(
         &mut self,
         id: Id,
@@ -258,6 +279,7 @@ impl BusStats {
         let busy: u64 = self
             .recent
             .iter()
+            .chain(self.open.iter())
             .map(|&(s, e)| (e.min(now) - s.max(from)).as_nanos())
             .sum();
         100.0 * busy as f64 / span.as_nanos() as f64
@@ -337,7 +359,7 @@ mod tests {
             s.frame(id, 100, t(100 * k), t(100 * (k + 1)), false);
         }
         s.frame(id, 100, t(1500), t(1600), false);
-        assert_eq!(s.recent.len(), 2);
+        assert_eq!(s.recent.len() + usize::from(s.open.is_some()), 2);
         // Window (600, 1600]: 400 µs of the run of ten frames and the last frame.
         assert_eq!(s.window_load_percent(t(1600)), 50.0);
         // Window (50, 1050]: 950 µs of the run.
