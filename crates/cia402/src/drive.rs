@@ -1,10 +1,12 @@
 //! A servo drive over its object dictionary: the power drive state machine, every operating
 //! mode, the cascaded controller and the plant, stepped in virtual time. Sans-IO: the
 //! owner (a twin) calls [`Drive::evaluate`] after every write of the dictionary's CiA 402
-//! objects, [`Drive::advance`] to bring the drive to a bus time, and [`Drive::sync`] at
-//! every SYNC; the drive reads its inputs and parameters from the dictionary and writes its
-//! actual values and statusword back. It keeps no copy of what the dictionary holds beyond
-//! one evaluation: the parameters are read again after any write of them.
+//! objects ([`Drive::evaluate_written`] when it knows which inputs were written),
+//! [`Drive::advance`] to bring the drive to a bus time, and [`Drive::sync`] at every SYNC;
+//! the drive reads its inputs and parameters from the dictionary and writes its actual
+//! values and statusword back. It keeps no copy of what the dictionary holds beyond a
+//! write: the parameters are read again after any write of them, an input after a write
+//! of it (after any write, for an owner that does not say which).
 //!
 //! The control loop runs every [`DriveConfig::loop_period`] on a fixed grid from power-up;
 //! the values in the dictionary are those of the last loop cycle.
@@ -35,7 +37,8 @@
 //!   gone (the following error always), then transition 15 follows.
 
 use cantwin_can::Duration;
-use cantwin_canopen::od::{EntryId, ObjectDictionary};
+use cantwin_canopen::device::Device;
+use cantwin_canopen::od::{EntryId, ObjectDictionary, OdHooks};
 
 use crate::control::{Controller, Demand, Gains};
 use crate::cyclic::{self, Interpolator};
@@ -53,7 +56,7 @@ use crate::pt::ProfileTorque;
 use crate::pv::{ProfileVelocity, WindowTimer, Windows};
 use crate::state::{Facts, Motion, PowerStateMachine, State, StopReason};
 use crate::statusword::{StatusFlags, Statusword};
-use crate::units::{Units, to_i16, to_i32};
+use crate::units::{Units, to_i16, to_i32, to_u32};
 use crate::vl::{VelocityMode, VlParams};
 
 /// CiA 402 error code of a following error (0x603F, EMCY).
@@ -117,6 +120,8 @@ struct Params {
     max_profile_velocity: f64,
     max_motor_speed: f64,
     max_torque: f64,
+    /// 0x6072 max torque in N·m, the limit of every loop cycle.
+    torque_limit: f64,
     torque_slope: f64,
     following_error_window: Option<f64>,
     following_error_time_out_us: u64,
@@ -144,6 +149,78 @@ struct Inputs {
     position_offset: f64,
     velocity_offset: f64,
     torque_offset: f64,
+}
+
+/// A set of the drive's input objects (the controlword, 0x6060, the set-points and the
+/// offsets): those written since the drive last read them. An owner that learns of each
+/// write (the device's hooks) passes them to [`Drive::evaluate_written`], and the drive
+/// reads only those; the others hold what it read before.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct InputSet(u16);
+
+impl InputSet {
+    /// No input.
+    pub const NONE: InputSet = InputSet(0);
+    /// How many inputs there are.
+    pub const COUNT: usize = 10;
+    /// Every input.
+    pub const ALL: InputSet = InputSet((1 << InputSet::COUNT) - 1);
+
+    /// The input object `index` (any sub-index of it), or `None` when the object is not
+    /// one of the drive's inputs (a parameter, an actual value).
+    pub const fn of(index: u16) -> Option<InputSet> {
+        match InputSet::number(index) {
+            Some(n) => Some(InputSet::single(n)),
+            None => None,
+        }
+    }
+
+    /// The set of input number `n` (of [`InputSet::number`]); empty beyond
+    /// [`InputSet::COUNT`].
+    pub const fn single(n: usize) -> InputSet {
+        if n < InputSet::COUNT {
+            InputSet(1 << n)
+        } else {
+            InputSet::NONE
+        }
+    }
+
+    /// The number, below [`InputSet::COUNT`], of input object `index`, or `None` when the
+    /// object is not one of the drive's inputs.
+    pub const fn number(index: u16) -> Option<usize> {
+        let bit = match index {
+            CONTROLWORD => 0,
+            MODES_OF_OPERATION => 1,
+            TARGET_POSITION => 2,
+            TARGET_VELOCITY => 3,
+            TARGET_TORQUE => 4,
+            INTERPOLATION_DATA_RECORD => 5,
+            VL_TARGET_VELOCITY => 6,
+            POSITION_OFFSET => 7,
+            VELOCITY_OFFSET => 8,
+            TORQUE_OFFSET => 9,
+            _ => return None,
+        };
+        Some(bit)
+    }
+
+    /// Both sets.
+    pub const fn union(self, other: InputSet) -> InputSet {
+        InputSet(self.0 | other.0)
+    }
+
+    /// Whether the set is empty.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// Whether input object `index` is in the set.
+    pub const fn contains(self, index: u16) -> bool {
+        match InputSet::of(index) {
+            Some(input) => self.0 & input.0 != 0,
+            None => false,
+        }
+    }
 }
 
 fn int(od: &ObjectDictionary, index: u16, sub: u8) -> Option<i64> {
@@ -209,6 +286,18 @@ impl InputIds {
 fn raw_int(od: &ObjectDictionary, input: Input) -> i64 {
     let Some((id, signed)) = input else { return 0 };
     let bytes = od.raw(id);
+    // The sizes of the profile's own types, read whole rather than through a buffer: the
+    // drive reads inputs at every evaluation, two a communication cycle under a cyclic
+    // master.
+    match (bytes, signed) {
+        (&[b], true) => return i64::from(b as i8),
+        (&[b], false) => return i64::from(b),
+        (&[a, b], true) => return i64::from(i16::from_le_bytes([a, b])),
+        (&[a, b], false) => return i64::from(u16::from_le_bytes([a, b])),
+        (&[a, b, c, d], true) => return i64::from(i32::from_le_bytes([a, b, c, d])),
+        (&[a, b, c, d], false) => return i64::from(u32::from_le_bytes([a, b, c, d])),
+        _ => {}
+    }
     let n = bytes.len().min(8);
     let mut b = [0u8; 8];
     b[..n].copy_from_slice(&bytes[..n]);
@@ -218,6 +307,49 @@ fn raw_int(od: &ObjectDictionary, input: Input) -> i64 {
         (v << shift) >> shift
     } else {
         v
+    }
+}
+
+/// Where a drive finds its objects: a dictionary, or the CiA 301 device holding one. The
+/// drive reads through [`DriveOd::od`] and asks for [`DriveOd::od_mut`] only to store a
+/// value that changed: a device takes write access to its dictionary as a sign that its
+/// timers may have changed and works out its next deadline again, and at a steady
+/// statusword an evaluation changes nothing.
+pub trait DriveOd {
+    /// The dictionary, to read.
+    fn od(&self) -> &ObjectDictionary;
+    /// The dictionary, to write.
+    fn od_mut(&mut self) -> &mut ObjectDictionary;
+}
+
+impl DriveOd for ObjectDictionary {
+    fn od(&self) -> &ObjectDictionary {
+        self
+    }
+
+    fn od_mut(&mut self) -> &mut ObjectDictionary {
+        self
+    }
+}
+
+impl<H: OdHooks> DriveOd for Device<H> {
+    fn od(&self) -> &ObjectDictionary {
+        Device::od(self)
+    }
+
+    fn od_mut(&mut self) -> &mut ObjectDictionary {
+        Device::od_mut(self)
+    }
+}
+
+/// Writes `bytes` to `id` unless it holds them already: most actual values stand still
+/// most of the time, and a write is dearer than the comparison.
+#[inline]
+fn put<D: DriveOd + ?Sized, const N: usize>(od: &mut D, id: Option<EntryId>, bytes: [u8; N]) {
+    if let Some(id) = id
+        && od.od().raw(id) != bytes
+    {
+        let _ = od.od_mut().set_raw(id, &bytes);
     }
 }
 
@@ -321,6 +453,8 @@ pub struct Drive {
     pending: bool,
     /// The statusword last written.
     last_statusword: u16,
+    /// The loop period in seconds, the motor's time step.
+    loop_seconds: f64,
 }
 
 impl Drive {
@@ -354,6 +488,7 @@ impl Drive {
                 max_profile_velocity: f64::MAX,
                 max_motor_speed: f64::MAX,
                 max_torque: 1000.0,
+                torque_limit: units.torque_to_nm(1000.0),
                 torque_slope: 1000.0,
                 following_error_window: None,
                 following_error_time_out_us: 0,
@@ -401,8 +536,9 @@ impl Drive {
             cycles: 0,
             pending: false,
             last_statusword: 0,
+            loop_seconds: config.loop_period.as_secs_f64(),
         };
-        drive.read(od);
+        drive.read(od, InputSet::ALL);
         drive.mode = Mode::from_code(drive.inputs.mode).filter(|m| config.modes.contains(*m));
         drive.publish(od);
         drive
@@ -495,6 +631,12 @@ impl Drive {
         std::mem::take(&mut self.events)
     }
 
+    /// [`Drive::take_events`], keeping the drive's buffer (for an owner that asks after
+    /// every frame).
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, DriveEvent> {
+        self.events.drain(..)
+    }
+
     /// The parameters must be read again (a parameter object was written).
     pub fn parameters_changed(&mut self) {
         self.params_stale = true;
@@ -549,6 +691,7 @@ impl Drive {
             (Some(n), Some(i)) => cyclic::period_us(n as u8, i as i8).unwrap_or(1000),
             _ => fallback.interpolation_us,
         };
+        let max_torque = get(MAX_TORQUE, 0, 1000.0);
         self.params = Params {
             units: u,
             options: OptionCodes::from_od(od, fallback.options),
@@ -560,7 +703,8 @@ impl Drive {
             quick_stop_deceleration: get(QUICK_STOP_DECELERATION, 0, 1.0),
             max_profile_velocity: get(MAX_PROFILE_VELOCITY, 0, f64::MAX),
             max_motor_speed,
-            max_torque: get(MAX_TORQUE, 0, 1000.0),
+            max_torque,
+            torque_limit: u.torque_to_nm(max_torque),
             torque_slope: get(TORQUE_SLOPE, 0, 1000.0),
             following_error_window: window(FOLLOWING_ERROR_WINDOW),
             following_error_time_out_us: ms(FOLLOWING_ERROR_TIME_OUT, 0),
@@ -582,24 +726,44 @@ impl Drive {
         self.params_stale = false;
     }
 
-    fn read(&mut self, od: &ObjectDictionary) {
+    /// Reads the parameters if they are stale and the inputs in `which`.
+    fn read(&mut self, od: &ObjectDictionary, which: InputSet) {
         if self.params_stale {
             self.read_params(od);
         }
         let ids = &self.input_ids;
+        let i = &mut self.inputs;
         let get = |input: Input| raw_int(od, input);
-        self.inputs = Inputs {
-            controlword: get(ids.controlword) as u16,
-            mode: get(ids.mode) as i8,
-            target_position: get(ids.target_position) as f64,
-            target_velocity: get(ids.target_velocity) as f64,
-            target_torque: get(ids.target_torque) as f64,
-            ip_data: get(ids.ip_data) as f64,
-            vl_target: get(ids.vl_target) as i16,
-            position_offset: get(ids.position_offset) as f64,
-            velocity_offset: get(ids.velocity_offset) as f64,
-            torque_offset: get(ids.torque_offset) as f64,
-        };
+        if which.contains(CONTROLWORD) {
+            i.controlword = get(ids.controlword) as u16;
+        }
+        if which.contains(MODES_OF_OPERATION) {
+            i.mode = get(ids.mode) as i8;
+        }
+        if which.contains(TARGET_POSITION) {
+            i.target_position = get(ids.target_position) as f64;
+        }
+        if which.contains(TARGET_VELOCITY) {
+            i.target_velocity = get(ids.target_velocity) as f64;
+        }
+        if which.contains(TARGET_TORQUE) {
+            i.target_torque = get(ids.target_torque) as f64;
+        }
+        if which.contains(INTERPOLATION_DATA_RECORD) {
+            i.ip_data = get(ids.ip_data) as f64;
+        }
+        if which.contains(VL_TARGET_VELOCITY) {
+            i.vl_target = get(ids.vl_target) as i16;
+        }
+        if which.contains(POSITION_OFFSET) {
+            i.position_offset = get(ids.position_offset) as f64;
+        }
+        if which.contains(VELOCITY_OFFSET) {
+            i.velocity_offset = get(ids.velocity_offset) as f64;
+        }
+        if which.contains(TORQUE_OFFSET) {
+            i.torque_offset = get(ids.torque_offset) as f64;
+        }
     }
 
     fn facts(&self) -> Facts {
@@ -640,8 +804,15 @@ impl Drive {
 
     /// Evaluates the controlword, the mode of operation and the set-points the dictionary
     /// holds now (after a write of them), and writes the statusword back.
-    pub fn evaluate(&mut self, od: &mut ObjectDictionary) {
-        self.read(od);
+    pub fn evaluate<D: DriveOd + ?Sized>(&mut self, od: &mut D) {
+        self.evaluate_written(od, InputSet::ALL);
+    }
+
+    /// [`Drive::evaluate`] after writes of the inputs in `written` only (and of parameters,
+    /// if [`Drive::parameters_changed`] said so): the other inputs are taken as the drive
+    /// last read them. A cyclic master writes two or three objects a cycle.
+    pub fn evaluate_written<D: DriveOd + ?Sized>(&mut self, od: &mut D, written: InputSet) {
+        self.read(od.od(), written);
         let cw = self.inputs.controlword;
         if self.fsa.fault_reset_edge(cw) {
             self.reset_faults();
@@ -700,19 +871,12 @@ impl Drive {
     }
 
     /// Writes what an evaluation changes: the statusword, 0x6061 and 0x603F.
-    fn publish_status(&mut self, od: &mut ObjectDictionary) {
+    fn publish_status<D: DriveOd + ?Sized>(&mut self, od: &mut D) {
         self.last_statusword = self.statusword();
         let o = &self.outputs;
-        let put = |od: &mut ObjectDictionary, id: Option<EntryId>, bytes: &[u8]| {
-            if let Some(id) = id
-                && od.raw(id) != bytes
-            {
-                let _ = od.set_raw(id, bytes);
-            }
-        };
-        put(od, o.statusword, &self.last_statusword.to_le_bytes());
-        put(od, o.mode_display, &[self.mode.map_or(0, Mode::code) as u8]);
-        put(od, o.error_code, &self.error_code().to_le_bytes());
+        put(od, o.statusword, self.last_statusword.to_le_bytes());
+        put(od, o.mode_display, [self.mode.map_or(0, Mode::code) as u8]);
+        put(od, o.error_code, self.error_code().to_le_bytes());
     }
 
     fn wired_inputs(&self) -> u32 {
@@ -732,9 +896,9 @@ impl Drive {
 
     /// A SYNC: the cyclic modes take the set-points of the last evaluation (the owner
     /// evaluates the writes a SYNC applied, those of synchronous RPDOs, before it).
-    pub fn sync(&mut self, od: &mut ObjectDictionary) {
+    pub fn sync<D: DriveOd + ?Sized>(&mut self, od: &mut D) {
         if self.params_stale {
-            self.read(od);
+            self.read(od.od(), InputSet::ALL);
         }
         let i = self.inputs;
         let period = self.params.interpolation_us;
@@ -780,9 +944,9 @@ impl Drive {
 
     /// Runs the loop cycles due by `elapsed` (the time since power-up) and writes the
     /// actual values and statusword of the last one.
-    pub fn advance(&mut self, od: &mut ObjectDictionary, elapsed: Duration) {
+    pub fn advance<D: DriveOd + ?Sized>(&mut self, od: &mut D, elapsed: Duration) {
         if self.params_stale {
-            self.read(od);
+            self.read(od.od(), InputSet::ALL);
         }
         let mut ran = false;
         while self.next_cycle() <= elapsed {
@@ -908,7 +1072,7 @@ impl Drive {
         // Limit switches and software position limits (not in homing, which looks for the
         // switches itself).
         let demand = demand.map(|d| self.limit(d, &mut status, actual, dt));
-        let torque_limit = self.params.units.torque_to_nm(self.params.max_torque);
+        let torque_limit = self.params.torque_limit;
         let torque = demand.map(|d| {
             let u = &self.params.units;
             let d = match d {
@@ -947,10 +1111,10 @@ impl Drive {
         }
         self.demand = demand.unwrap_or(Demand::Torque(0.0));
         self.motor
-            .step(torque, torque_limit, self.config.loop_period);
-        let now_actual = self.position();
+            .step_seconds(torque, torque_limit, self.loop_seconds);
         // Homing events.
         if self.mode == Some(Mode::Homing) && bridge && stage.motion == Motion::Operate {
+            let now_actual = self.position();
             let index = self
                 .encoder
                 .index_between(angle_before, self.motor.state.angle)
@@ -1335,63 +1499,118 @@ impl Drive {
     }
 
     /// Writes the statusword, 0x6061 and the actual values into `od`.
-    fn publish(&mut self, od: &mut ObjectDictionary) {
+    fn publish<D: DriveOd + ?Sized>(&mut self, od: &mut D) {
         self.publish_status(od);
         let o = &self.outputs;
         let u = &self.params.units;
-        // Only what changed is written: most actual values stand still most of the time.
-        let put = |od: &mut ObjectDictionary, id: Option<EntryId>, bytes: &[u8]| {
-            if let Some(id) = id
-                && od.raw(id) != bytes
-            {
-                let _ = od.set_raw(id, bytes);
-            }
-        };
         let demand = match self.demand {
             Demand::Position { position, .. } => position,
             _ => self.position(),
         };
-        put(od, o.position_demand, &to_i32(demand).to_le_bytes());
+        put(od, o.position_demand, to_i32(demand).to_le_bytes());
         let count = self.encoder.count(self.motor.state.angle);
         let count = count.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32;
-        put(od, o.position_internal, &count.to_le_bytes());
-        put(
-            od,
-            o.position_actual,
-            &to_i32(self.position()).to_le_bytes(),
-        );
+        put(od, o.position_internal, count.to_le_bytes());
+        put(od, o.position_actual, to_i32(self.position()).to_le_bytes());
         let inc_per_s =
             self.motor.state.speed / core::f64::consts::TAU * f64::from(self.encoder.increments);
-        put(od, o.velocity_sensor, &to_i32(inc_per_s).to_le_bytes());
+        put(od, o.velocity_sensor, to_i32(inc_per_s).to_le_bytes());
         let vdemand = u.rad_to_velocity(self.controller.velocity_demand);
-        put(od, o.velocity_demand, &to_i32(vdemand).to_le_bytes());
-        put(
-            od,
-            o.velocity_actual,
-            &to_i32(self.velocity()).to_le_bytes(),
-        );
+        put(od, o.velocity_demand, to_i32(vdemand).to_le_bytes());
+        put(od, o.velocity_actual, to_i32(self.velocity()).to_le_bytes());
         let tdemand = u.nm_to_torque(self.motor.state.torque);
-        put(od, o.torque_demand, &to_i16(tdemand).to_le_bytes());
-        put(od, o.torque_actual, &to_i16(self.torque()).to_le_bytes());
+        put(od, o.torque_demand, to_i16(tdemand).to_le_bytes());
+        put(od, o.torque_actual, to_i16(self.torque()).to_le_bytes());
         let current = u.a_to_current(self.motor.state.current);
-        put(od, o.current_actual, &to_i16(current).to_le_bytes());
-        let mv = (self.inverter.dc_link * 1000.0)
-            .round()
-            .clamp(0.0, f64::from(u32::MAX)) as u32;
-        put(od, o.dc_link, &mv.to_le_bytes());
+        put(od, o.current_actual, to_i16(current).to_le_bytes());
+        let mv = to_u32(self.inverter.dc_link * 1000.0);
+        put(od, o.dc_link, mv.to_le_bytes());
         put(
             od,
             o.following_error,
-            &to_i32(self.following_error).to_le_bytes(),
+            to_i32(self.following_error).to_le_bytes(),
         );
-        put(od, o.digital_inputs, &self.digital_inputs().to_le_bytes());
+        put(od, o.digital_inputs, self.digital_inputs().to_le_bytes());
         let rpm = self.motor.state.speed * 60.0 / core::f64::consts::TAU;
-        put(od, o.vl_demand, &self.vl.demand().to_le_bytes());
-        put(od, o.vl_actual, &to_i16(rpm).to_le_bytes());
+        put(od, o.vl_demand, self.vl.demand().to_le_bytes());
+        put(od, o.vl_actual, to_i16(rpm).to_le_bytes());
     }
 
     /// The statusword the dictionary holds (as last published).
     pub fn published_statusword(&self) -> u16 {
         self.last_statusword
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dictionary::{MotionDefaults, ServoObjects, servo_objects};
+    use cantwin_canopen::od::{OdBuilder, Value};
+    use std::sync::Arc;
+
+    fn dictionary() -> ObjectDictionary {
+        let spec = ServoObjects::all_modes(MotionDefaults::default());
+        let desc = crate::objects::add(OdBuilder::new(), servo_objects(&spec))
+            .build()
+            .expect("the profile's dictionary");
+        ObjectDictionary::new(Arc::new(desc), 1)
+    }
+
+    #[test]
+    fn input_sets_name_the_commands_and_set_points_only() {
+        let inputs = [
+            CONTROLWORD,
+            MODES_OF_OPERATION,
+            TARGET_POSITION,
+            TARGET_VELOCITY,
+            TARGET_TORQUE,
+            INTERPOLATION_DATA_RECORD,
+            VL_TARGET_VELOCITY,
+            POSITION_OFFSET,
+            VELOCITY_OFFSET,
+            TORQUE_OFFSET,
+        ];
+        let mut all = InputSet::NONE;
+        for (k, index) in inputs.into_iter().enumerate() {
+            assert_eq!(InputSet::number(index), Some(k));
+            let one = InputSet::of(index).expect("an input");
+            assert!(one.contains(index) && !one.is_empty());
+            assert!(!InputSet::NONE.contains(index));
+            all = all.union(one);
+        }
+        assert_eq!(all, InputSet::ALL);
+        assert_eq!(InputSet::single(InputSet::COUNT), InputSet::NONE);
+        for index in [STATUSWORD, PROFILE_VELOCITY, POSITION_ACTUAL_VALUE, 0x1017] {
+            assert_eq!(InputSet::of(index), None);
+            assert!(!InputSet::ALL.contains(index));
+        }
+    }
+
+    #[test]
+    fn cia402_6040h_an_evaluation_reads_again_the_inputs_written_only() {
+        let mut od = dictionary();
+        let mut drive = Drive::new(DriveConfig::default(), &mut od);
+        let cw = InputSet::of(CONTROLWORD).expect("an input");
+        // Shutdown (transition 2).
+        od.set(CONTROLWORD, 0, &Value::Unsigned16(0x06)).unwrap();
+        drive.evaluate_written(&mut od, cw);
+        assert_eq!(drive.state(), State::ReadyToSwitchOn);
+        // A mode stored but not said to be written is not taken; said, it is.
+        od.set(MODES_OF_OPERATION, 0, &Value::Integer8(8)).unwrap();
+        drive.evaluate_written(&mut od, cw);
+        assert_eq!(drive.mode(), None);
+        let mode = InputSet::of(MODES_OF_OPERATION).expect("an input");
+        drive.evaluate_written(&mut od, mode);
+        assert_eq!(drive.mode(), Some(Mode::CyclicSyncPosition));
+        // Switch on + enable operation (transitions 3 and 4), the controlword read again by
+        // an evaluation of every input.
+        od.set(CONTROLWORD, 0, &Value::Unsigned16(0x0F)).unwrap();
+        drive.evaluate(&mut od);
+        assert_eq!(drive.state(), State::OperationEnabled);
+        assert_eq!(
+            od.get(STATUSWORD, 0).unwrap(),
+            Value::Unsigned16(drive.published_statusword())
+        );
     }
 }

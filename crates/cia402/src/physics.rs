@@ -141,7 +141,12 @@ pub struct Encoder {
 impl Encoder {
     /// The increment count of `angle` (rad), truncated toward −∞ as a counter counts.
     pub fn count(&self, angle: f64) -> i64 {
-        (angle / core::f64::consts::TAU * f64::from(self.increments)).floor() as i64
+        let x = angle / core::f64::consts::TAU * f64::from(self.increments);
+        // `x.floor() as i64` without calling `floor`, a library function where the target
+        // has no rounding instruction: truncate, then take one off a negative value that is
+        // not an integer (the truncated value is exact: a double's integer part is one).
+        let t = x as i64;
+        t.saturating_sub(i64::from((t as f64) > x))
     }
 
     /// The angle of the index pulse crossed moving from `from` to `to` (rad), if any: the
@@ -263,8 +268,12 @@ impl Motor {
     /// Advances by `dt` with the bridge making `torque` (N·m, `None`: the bridge is off and
     /// the motor coasts), limited to `limit` (N·m) and to the motor's peak torque.
     pub fn step(&mut self, torque: Option<f64>, limit: f64, dt: Duration) {
+        self.step_seconds(torque, limit, dt.as_secs_f64());
+    }
+
+    /// [`Motor::step`] by `dt` seconds (a loop period converted once, not every cycle).
+    pub fn step_seconds(&mut self, torque: Option<f64>, limit: f64, dt: f64) {
         let m = &self.mechanics;
-        let dt = dt.as_secs_f64();
         let limit = limit.min(m.peak_torque).max(0.0);
         let t = torque.map_or(0.0, |t| t.clamp(-limit, limit));
         self.state.torque = t;
@@ -346,6 +355,16 @@ mod tests {
         let tau = core::f64::consts::TAU;
         assert_eq!(e.count(tau), 4096);
         assert_eq!(e.count(-0.0001), -1);
+        assert_eq!(e.count(-tau), -4096);
+        assert_eq!(e.count(-0.0), 0);
+        assert_eq!(e.count(f64::NAN), 0);
+        assert_eq!(e.count(f64::INFINITY), i64::MAX);
+        assert_eq!(e.count(f64::NEG_INFINITY), i64::MIN);
+        for k in -40_000..40_000 {
+            let angle = f64::from(k) * 1.0e-3;
+            let floor = (angle / tau * 4096.0).floor() as i64;
+            assert_eq!(e.count(angle), floor, "{angle}");
+        }
         assert_eq!(e.index_between(0.5, 7.0), Some(tau));
         assert_eq!(e.index_between(7.0, 0.5), Some(tau));
         assert_eq!(e.index_between(0.5, 0.6), None);

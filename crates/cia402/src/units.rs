@@ -15,21 +15,25 @@ use cantwin_canopen::od::ObjectDictionary;
 
 use crate::index::*;
 
-/// The conversions in force.
+/// The conversions in force. Built whole ([`Units::increments`], [`Units::from_od`]) and
+/// read through its methods, so the scale every conversion uses is worked out once: the
+/// drive converts positions and velocities several times a loop cycle.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Units {
     /// Encoder increments per motor revolution.
-    pub increments_per_revolution: f64,
+    increments_per_revolution: f64,
     /// Encoder increments per position unit.
-    pub increments_per_unit: f64,
+    increments_per_unit: f64,
     /// Rated torque, N·m.
-    pub rated_torque: f64,
+    rated_torque: f64,
     /// Rated current, A.
-    pub rated_current: f64,
+    rated_current: f64,
     /// −1 when 0x607E bit 7 is set.
-    pub position_sign: f64,
+    position_sign: f64,
     /// −1 when 0x607E bit 6 is set.
-    pub velocity_sign: f64,
+    velocity_sign: f64,
+    /// rad per position unit, of the two ratios above.
+    rad_per_unit: f64,
 }
 
 fn ratio(od: &ObjectDictionary, index: u16, fallback: f64) -> f64 {
@@ -43,14 +47,63 @@ impl Units {
     /// One position unit per increment of an encoder of `increments` per revolution, and
     /// the rated torque and current given.
     pub fn increments(increments: u32, rated_torque: f64, rated_current: f64) -> Units {
-        Units {
-            increments_per_revolution: f64::from(increments.max(1)),
-            increments_per_unit: 1.0,
+        Units::new(
+            f64::from(increments.max(1)),
+            1.0,
             rated_torque,
             rated_current,
-            position_sign: 1.0,
-            velocity_sign: 1.0,
+            0,
+        )
+    }
+
+    /// The units of an encoder of `increments_per_revolution`, `increments_per_unit`, the
+    /// rated torque and current given, and 0x607E polarity `polarity`.
+    fn new(
+        increments_per_revolution: f64,
+        increments_per_unit: f64,
+        rated_torque: f64,
+        rated_current: f64,
+        polarity: u64,
+    ) -> Units {
+        Units {
+            increments_per_revolution,
+            increments_per_unit,
+            rated_torque,
+            rated_current,
+            position_sign: if polarity & 0x80 != 0 { -1.0 } else { 1.0 },
+            velocity_sign: if polarity & 0x40 != 0 { -1.0 } else { 1.0 },
+            rad_per_unit: increments_per_unit / increments_per_revolution * core::f64::consts::TAU,
         }
+    }
+
+    /// Encoder increments per motor revolution.
+    pub fn increments_per_revolution(&self) -> f64 {
+        self.increments_per_revolution
+    }
+
+    /// Encoder increments per position unit.
+    pub fn increments_per_unit(&self) -> f64 {
+        self.increments_per_unit
+    }
+
+    /// Rated torque, N·m (0x6076).
+    pub fn rated_torque(&self) -> f64 {
+        self.rated_torque
+    }
+
+    /// Rated current, A (0x6075).
+    pub fn rated_current(&self) -> f64 {
+        self.rated_current
+    }
+
+    /// −1 when 0x607E bit 7 (position polarity) is set, else 1.
+    pub fn position_sign(&self) -> f64 {
+        self.position_sign
+    }
+
+    /// −1 when 0x607E bit 6 (velocity polarity) is set, else 1.
+    pub fn velocity_sign(&self) -> f64 {
+        self.velocity_sign
     }
 
     /// The units `od`'s factor group, rated values and polarity say; what the dictionary
@@ -73,19 +126,18 @@ impl Units {
                 .map_or(fallback, |v| v as f64 / 1000.0)
         };
         let polarity = od.get_unsigned(POLARITY, 0).unwrap_or(0);
-        Units {
-            increments_per_revolution: encoder,
-            increments_per_unit: encoder * gear / feed,
-            rated_torque: rated(MOTOR_RATED_TORQUE, fallback.rated_torque),
-            rated_current: rated(MOTOR_RATED_CURRENT, fallback.rated_current),
-            position_sign: if polarity & 0x80 != 0 { -1.0 } else { 1.0 },
-            velocity_sign: if polarity & 0x40 != 0 { -1.0 } else { 1.0 },
-        }
+        Units::new(
+            encoder,
+            encoder * gear / feed,
+            rated(MOTOR_RATED_TORQUE, fallback.rated_torque),
+            rated(MOTOR_RATED_CURRENT, fallback.rated_current),
+            polarity,
+        )
     }
 
     /// rad per position unit (without polarity).
     pub fn rad_per_unit(&self) -> f64 {
-        self.increments_per_unit / self.increments_per_revolution * core::f64::consts::TAU
+        self.rad_per_unit
     }
 
     /// A position in position units as a motor angle, rad.
@@ -129,14 +181,33 @@ impl Units {
     }
 }
 
+/// The largest double below one half, 0.5 − 2⁻⁵⁴.
+const BELOW_HALF: f64 = f64::from_bits(0x3FDF_FFFF_FFFF_FFFF);
+
+/// `v` moved so that truncating it (`as`, which saturates and takes NaN to 0) rounds it
+/// to the nearest integer, halves away from zero, exactly as [`f64::round`] does: a
+/// fraction of one half reaches the next integer only through the rounding of the sum
+/// (ties to even lands on it), a smaller one never does, and from 2⁵² on, where every
+/// double is an integer, the sum rounds back to `v`. Done this way because the drive
+/// rounds a dozen actual values at every publication and `f64::round` is a library call
+/// where the target has no rounding instruction.
+fn nearest(v: f64) -> f64 {
+    v + BELOW_HALF.copysign(v)
+}
+
 /// Rounds to the nearest integer and saturates to `i32` (an actual value object).
 pub fn to_i32(v: f64) -> i32 {
-    v.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+    nearest(v) as i32
 }
 
 /// Rounds to the nearest integer and saturates to `i16`.
 pub fn to_i16(v: f64) -> i16 {
-    v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+    nearest(v) as i16
+}
+
+/// Rounds to the nearest integer and saturates to `u32` (negative: 0).
+pub fn to_u32(v: f64) -> u32 {
+    nearest(v) as u32
 }
 
 #[cfg(test)]
@@ -155,7 +226,7 @@ mod tests {
         let mut od = ObjectDictionary::new(Arc::new(desc), 1);
         let base = Units::increments(4096, 1.27, 3.0);
         let u = Units::from_od(&od, &base);
-        assert_eq!(u.increments_per_unit, 1.0);
+        assert_eq!(u.increments_per_unit(), 1.0);
         assert!((u.position_to_rad(4096.0) - core::f64::consts::TAU).abs() < 1e-12);
         // Gear 10:1 and a feed of 5 mm per shaft revolution, in µm: one unit is 1 µm, and
         // 5000 units are one shaft revolution, ten motor revolutions.
@@ -169,5 +240,89 @@ mod tests {
         assert!(u.rad_to_velocity(1.0) < 0.0);
         assert!((u.torque_to_nm(1000.0) - 1.27).abs() < 1e-12);
         assert_eq!(to_i16(1e9), i16::MAX);
+    }
+
+    #[test]
+    fn actual_values_round_as_f64_round_and_saturate() {
+        let cases = [
+            0.0,
+            -0.0,
+            0.49999999999999994,
+            0.5,
+            -0.5,
+            1.5,
+            -1.5,
+            2.5,
+            -2.4999,
+            1e15 + 0.5,
+            4_503_599_627_370_497.0,
+            -9.3e18,
+            9.3e18,
+            1e300,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+        ];
+        for v in cases {
+            let want = v.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32;
+            assert_eq!(to_i32(v), want, "{v}");
+            let want = v.round().clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16;
+            assert_eq!(to_i16(v), want, "{v}");
+            let want = v.round().clamp(0.0, f64::from(u32::MAX)) as u32;
+            assert_eq!(to_u32(v), want, "{v}");
+        }
+        assert_eq!(to_i32(f64::NAN), 0);
+        assert_eq!(to_i16(f64::NAN), 0);
+        assert_eq!(to_u32(f64::NAN), 0);
+        // Every quarter from -3 to 3 and the edges of i32.
+        for k in -12..=12 {
+            let v = f64::from(k) * 0.25;
+            assert_eq!(to_i32(v), v.round() as i32, "{v}");
+        }
+        assert_eq!(to_i32(2_147_483_647.5), i32::MAX);
+        assert_eq!(to_i32(-2_147_483_648.5), i32::MIN);
+        assert_eq!(to_i32(-2_147_483_647.5), i32::MIN);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn actual_values_round_as_f64_round_for_any_double(bits in proptest::num::u64::ANY) {
+            let v = f64::from_bits(bits);
+            let r = v.round();
+            proptest::prop_assert_eq!(
+                to_i32(v),
+                r.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+            );
+            proptest::prop_assert_eq!(
+                to_i16(v),
+                r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+            );
+            proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+        }
+
+        #[test]
+        fn actual_values_round_as_f64_round_near_halves(
+            n in -(1i64 << 53)..(1i64 << 53),
+            shift in 0i32..24,
+            step in -2i64..=2,
+        ) {
+            // Halves, quarters … of every magnitude, and their neighbouring doubles.
+            let exact = n as f64 * 2f64.powi(-shift);
+            let v = f64::from_bits(exact.to_bits().wrapping_add_signed(step));
+            let r = v.round();
+            proptest::prop_assert_eq!(
+                to_i32(v),
+                r.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+            );
+            proptest::prop_assert_eq!(
+                to_i16(v),
+                r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+            );
+            proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+            let small = (n % 100_000) as f64 * 2f64.powi(-shift);
+            let v = f64::from_bits(small.to_bits().wrapping_add_signed(step));
+            proptest::prop_assert_eq!(to_i32(v), v.round() as i32);
+        }
     }
 }

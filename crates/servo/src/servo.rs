@@ -26,7 +26,7 @@ use cantwin_can::{ControllerEvent, Duration, Frame, Id, Instant, Node, Outbox};
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::device::{Device, DeviceConfig, DeviceError, Event};
 use cantwin_canopen::od::{ObjectDictionary, OdDescription, OdHooks};
-use cantwin_cia402::drive::{Drive, DriveConfig, DriveEvent};
+use cantwin_cia402::drive::{Drive, DriveConfig, DriveEvent, InputSet};
 use cantwin_cia402::index::*;
 use cantwin_cia402::{Mode, SupportedModes, hm};
 
@@ -58,31 +58,42 @@ impl ServoConfig {
     }
 }
 
-/// The objects whose writes the drive evaluates at once (commands and set-points); a write
-/// of any other CiA 402 object is a parameter change.
-fn is_input(index: u16) -> bool {
-    matches!(
-        index,
-        CONTROLWORD
-            | MODES_OF_OPERATION
-            | TARGET_POSITION
-            | TARGET_VELOCITY
-            | TARGET_TORQUE
-            | INTERPOLATION_DATA_RECORD
-            | VL_TARGET_VELOCITY
-            | POSITION_OFFSET
-            | VELOCITY_OFFSET
-            | TORQUE_OFFSET
-    )
-}
-
 /// The servo's hooks into its CiA 301 device: they check 0x6060 and 0x6098 and note
-/// which kind of CiA 402 object was written.
+/// which CiA 402 objects were written: the drive's inputs (commands and set-points,
+/// [`InputSet::of`]), which it evaluates at once and reads again one by one, or any
+/// other object, a parameter change.
+///
+/// The notes are numbers of writes, which the servo compares with the last one it took:
+/// it reads them through the device's shared access to its hooks, since asking for
+/// mutable access tells the device that its timers may have changed.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ServoHooks {
     modes: SupportedModes,
-    inputs: bool,
-    params: bool,
+    /// The number of the last write noted: counting from 1 and wrapping past 0, which
+    /// stands for none.
+    writes: u32,
+    /// The number of the last write of each input ([`InputSet::number`]).
+    input_writes: [u32; InputSet::COUNT],
+    /// The number of the last write of a parameter.
+    param_writes: u32,
+}
+
+impl ServoHooks {
+    /// The inputs written and whether a parameter was, after write number `seen`.
+    fn notes_since(&self, seen: u32) -> (InputSet, bool) {
+        let news = self.writes.wrapping_sub(seen);
+        if news == 0 {
+            return (InputSet::NONE, false);
+        }
+        let after = |n: u32| n != 0 && n.wrapping_sub(seen).wrapping_sub(1) < news;
+        let mut inputs = InputSet::NONE;
+        for (k, n) in self.input_writes.iter().enumerate() {
+            if after(*n) {
+                inputs = inputs.union(InputSet::single(k));
+            }
+        }
+        (inputs, after(self.param_writes))
+    }
 }
 
 impl OdHooks for ServoHooks {
@@ -110,10 +121,10 @@ impl OdHooks for ServoHooks {
     }
 
     fn written(&mut self, _od: &mut ObjectDictionary, index: u16, _sub: u8) {
-        if is_input(index) {
-            self.inputs = true;
-        } else {
-            self.params = true;
+        self.writes = self.writes.wrapping_add(1).max(1);
+        match InputSet::number(index).and_then(|n| self.input_writes.get_mut(n)) {
+            Some(n) => *n = self.writes,
+            None => self.param_writes = self.writes,
         }
     }
 }
@@ -142,6 +153,8 @@ pub struct Servo {
     last: Instant,
     statusword: u16,
     mode_display: i64,
+    /// The number of the last write the drive has taken of the hooks' notes.
+    notes_seen: u32,
 }
 
 impl core::fmt::Debug for Servo {
@@ -232,6 +245,7 @@ impl Servo {
             last: Instant::ZERO,
             statusword: 0,
             mode_display: 0,
+            notes_seen: 0,
         })
     }
 
@@ -270,7 +284,7 @@ impl Servo {
         self.last = t;
         let elapsed = t.saturating_duration_since(self.powered_at);
         if self.drive.next_cycle() <= elapsed {
-            self.drive.advance(self.device.od_mut(), elapsed);
+            self.drive.advance(&mut self.device, elapsed);
             self.publish();
         }
     }
@@ -279,7 +293,7 @@ impl Servo {
     pub fn changed(&mut self, now: Instant) {
         self.settle(now);
         if self.powered {
-            self.drive.evaluate(self.device.od_mut());
+            self.drive.evaluate(&mut self.device);
             self.publish();
         }
     }
@@ -287,7 +301,7 @@ impl Servo {
     /// Passes the drive's news to the bus: EMCYs for its faults, event-driven TPDOs for
     /// a changed statusword or mode.
     fn publish(&mut self) {
-        for e in self.drive.take_events() {
+        for e in self.drive.drain_events() {
             match e {
                 DriveEvent::Fault(code) => {
                     self.device.emcy().raise(code, [0; 5]);
@@ -321,18 +335,17 @@ impl Servo {
                 _ => {}
             }
         }
-        let hooks = *self.device.hooks();
-        if hooks.params {
+        let hooks = self.device.hooks();
+        let (inputs, params) = hooks.notes_since(self.notes_seen);
+        self.notes_seen = hooks.writes;
+        if params {
             self.drive.parameters_changed();
         }
-        if hooks.inputs || hooks.params {
-            let h = self.device.hooks_mut();
-            h.inputs = false;
-            h.params = false;
-            self.drive.evaluate(self.device.od_mut());
+        if !inputs.is_empty() || params {
+            self.drive.evaluate_written(&mut self.device, inputs);
         }
         if sync {
-            self.drive.sync(self.device.od_mut());
+            self.drive.sync(&mut self.device);
         }
         self.publish();
     }
@@ -353,9 +366,7 @@ impl Node for Servo {
         self.powered = true;
         self.powered_at = now;
         self.last = now;
-        let h = self.device.hooks_mut();
-        h.inputs = false;
-        h.params = false;
+        self.notes_seen = self.device.hooks().writes;
         self.device.on_power_up(now, out);
         self.drive = Drive::new(self.config.drive, self.device.od_mut());
         while self.device.poll_event().is_some() {}
@@ -381,10 +392,11 @@ impl Node for Servo {
     }
 
     fn next_deadline(&self) -> Option<Instant> {
-        [self.device.next_deadline(), self.drive_deadline()]
-            .into_iter()
-            .flatten()
-            .min()
+        // Asked after every frame and timer: no iterator over the two.
+        match (self.device.next_deadline(), self.drive_deadline()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
@@ -403,5 +415,44 @@ impl Node for Servo {
 
     fn acceptance_version(&self) -> Option<u64> {
         self.device.acceptance_version()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noted(hooks: &mut ServoHooks, od: &mut ObjectDictionary, index: u16) {
+        hooks.written(od, index, 0);
+    }
+
+    #[test]
+    fn the_hooks_notes_name_the_writes_after_the_last_taken_across_a_wrap() {
+        let desc = Arc::new(
+            crate::od::description(
+                &cantwin_cia402::dictionary::ServoObjects::all_modes(Default::default()),
+                0,
+            )
+            .expect("the built-in dictionary"),
+        );
+        let mut od = ObjectDictionary::new(desc, 1);
+        let cw = InputSet::of(CONTROLWORD).expect("an input");
+        let target = InputSet::of(TARGET_POSITION).expect("an input");
+        let mut hooks = ServoHooks {
+            writes: u32::MAX - 1,
+            ..ServoHooks::default()
+        };
+        let seen = hooks.writes;
+        assert_eq!(hooks.notes_since(seen), (InputSet::NONE, false));
+        noted(&mut hooks, &mut od, CONTROLWORD);
+        noted(&mut hooks, &mut od, TARGET_POSITION);
+        noted(&mut hooks, &mut od, PROFILE_VELOCITY);
+        assert_eq!(hooks.writes, 2);
+        assert_eq!(hooks.notes_since(seen), (cw.union(target), true));
+        // Taken up to the controlword: the target and the parameter remain.
+        assert_eq!(hooks.notes_since(u32::MAX), (target, true));
+        assert_eq!(hooks.notes_since(hooks.writes), (InputSet::NONE, false));
+        noted(&mut hooks, &mut od, CONTROLWORD);
+        assert_eq!(hooks.notes_since(2), (cw, false));
     }
 }
