@@ -339,9 +339,11 @@ impl<H: OdHooks> Device<H> {
             .description()
             .object(0x1016)
             .map_or(0, |o| o.sub_number().saturating_sub(1) as u8);
-        let pdo = PdoEngine::new(&od)
-            .ok()
-            .filter(|p| p.rpdo_slots() + p.tpdo_slots() > 0);
+        // A PDO whose stored configuration cannot run (a mapping of an object the
+        // dictionary lacks) stays off and the others run, as a device that boots with a bad
+        // stored mapping does (CiA 301 §7.5.2.36: the mapping is refused, not the device).
+        let (pdo, _) = PdoEngine::load(&od);
+        let pdo = Some(pdo).filter(|p| p.rpdo_slots() + p.tpdo_slots() > 0);
         let mut core = Core {
             config,
             od,

@@ -51,7 +51,8 @@ impl fmt::Display for Issue {
 /// The findings of [`Eds::check`].
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Report {
-    /// Every finding, in the order of the file's canonical layout.
+    /// Every finding: in the order of the file's canonical layout from [`Eds::check`], in
+    /// line order from [`crate::load`].
     pub issues: Vec<Issue>,
 }
 
@@ -76,6 +77,12 @@ impl Report {
     /// Whether there is no error.
     pub fn is_ok(&self) -> bool {
         self.errors().next().is_none()
+    }
+
+    /// Orders the findings by line, those without a line last (a stable sort: findings on
+    /// one line keep their order).
+    pub(crate) fn sort_by_line(&mut self) {
+        self.issues.sort_by_key(|i| (i.line.is_none(), i.line));
     }
 
     pub(crate) fn push_parse(&mut self, severity: Severity, e: &crate::ParseError) {
@@ -115,8 +122,9 @@ impl Eds {
     /// Checks the file: `EDSVersion`, mandatory objects present, object lists agree with the
     /// objects, `SubNumber` agrees with the sub-objects, sub-index 0 of ARRAY and RECORD,
     /// object codes, data types and access types valid, values within their type's range and
-    /// within the limits, limits in order. The findings carry no lines; [`crate::load`] adds
-    /// them.
+    /// within the limits, limits in order, and the PDO mappings the device would run
+    /// ([`crate::pdo_issues`]: a DCF's with its `ParameterValue`s). The findings carry no
+    /// lines; [`crate::load`] adds them.
     pub fn check(&self) -> Report {
         let mut r = Report::default();
         match self.file_info.eds_version.as_deref() {
@@ -333,6 +341,16 @@ impl Eds {
                 }
             }
         }
+        // The PDOs the device built from the file runs, with a DCF's values as it is
+        // configured with them.
+        let configured;
+        let source = if self.is_dcf() {
+            configured = crate::configured(self);
+            &configured
+        } else {
+            self
+        };
+        r.issues.extend(crate::pdo::pdo_issues(source));
         r
     }
 }
@@ -341,12 +359,15 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
     for (severity, key, message) in judge(e, needs_type).findings {
         r.push(severity, sec, Some(key), message);
     }
-    if e.parameter_name.contains(';') {
+    // A `;` after white space starts an inline comment for python-canopen's reader (and for
+    // `crate::load`): what follows it would be lost on reading the file back.
+    let cut = |t: &str| crate::ini::inline_comment(t).is_some();
+    if cut(&e.parameter_name) {
         r.push(
             Severity::Warning,
             sec,
             Some("ParameterName"),
-            "contains `;`, which some INI readers take for an inline comment".to_owned(),
+            "contains ` ;`, which INI readers take for the start of an inline comment".to_owned(),
         );
     }
     for (key, v) in [
@@ -354,13 +375,14 @@ fn check_entry(r: &mut Report, sec: &str, e: &Entry, needs_type: bool) {
         ("ParameterValue", &e.parameter_value),
     ] {
         if let Some(EdsValue::Text(s)) = v
-            && s.contains(';')
+            && cut(s)
         {
             r.push(
                 Severity::Warning,
                 sec,
                 Some(key),
-                "contains `;`, which some INI readers take for an inline comment".to_owned(),
+                "contains ` ;`, which INI readers take for the start of an inline comment"
+                    .to_owned(),
             );
         }
     }

@@ -54,6 +54,14 @@ pub enum ParseErrorKind {
     /// A line starting with `#` (CiA 306 comments start with `;`); read as a comment.
     #[error("a line starting with `#` (CiA 306 comments start with `;`); read as a comment")]
     HashComment,
+    /// A `;` after white space in a value: read as the start of a comment.
+    #[error(
+        "`;` after white space read as the start of an inline comment (CiA 306 has comments only on lines of their own)"
+    )]
+    InlineComment,
+    /// A file that is not UTF-8, read as Windows-1252.
+    #[error("not UTF-8 from here: the file is read as Windows-1252")]
+    Windows1252,
     /// A value read with a guess at what the file means.
     #[error("{0}")]
     Interpreted(String),

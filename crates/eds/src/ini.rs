@@ -37,7 +37,10 @@ pub(crate) type Found = Vec<(Severity, ParseError)>;
 ///
 /// * A line whose first non-blank character is `;` or `#` is a comment (CiA 306 basic
 ///   structure names `;`; `#` lines are common in the field and are read the same way, with
-///   a note); a `;` later in a line is part of the value.
+///   a note). A `;` preceded by white space later in a line starts an inline comment, as
+///   python-canopen reads EDS files (`inline_comment_prefixes=(';',)`); CiA 306 has comments
+///   only on lines of their own, so each is a note. A `;` right after other characters
+///   (`a;b`) is part of the value.
 /// * Leading and trailing white space (tabs too) of names, keys and values is not
 ///   significant; CR LF and LF line ends are both read.
 /// * A line before the first section (warning), a line without `=` or with an empty key
@@ -135,6 +138,18 @@ pub(crate) fn tokenize(text: &str) -> (Vec<RawSection>, Found) {
             ));
             continue;
         }
+        let value = match inline_comment(value) {
+            Some(at) => {
+                found.push((
+                    Severity::Note,
+                    ParseError::at(line, ParseErrorKind::InlineComment)
+                        .in_section(&section.name)
+                        .with_key(key),
+                ));
+                &value[..at]
+            }
+            None => value,
+        };
         section.entries.push(RawEntry {
             key: key.to_owned(),
             value: value.trim().to_owned(),
@@ -142,6 +157,18 @@ pub(crate) fn tokenize(text: &str) -> (Vec<RawSection>, Found) {
         });
     }
     (sections, found)
+}
+
+/// Where an inline comment starts in a value: at the first `;` that follows white space.
+pub(crate) fn inline_comment(value: &str) -> Option<usize> {
+    let mut prev_blank = false;
+    for (i, c) in value.char_indices() {
+        if c == ';' && prev_blank {
+            return Some(i);
+        }
+        prev_blank = c.is_whitespace();
+    }
+    None
 }
 
 #[cfg(test)]
@@ -165,8 +192,22 @@ mod tests {
 
     #[test]
     fn semicolon_inside_a_value_is_data() {
-        let (s, _) = tokenize("[A]\nK=a;b\n");
+        let (s, found) = tokenize("[A]\nK=a;b\n");
         assert_eq!(s[0].entries[0].value, "a;b");
+        assert!(found.is_empty());
+    }
+
+    #[test]
+    fn semicolon_after_white_space_starts_an_inline_comment() {
+        let (s, found) = tokenize("[A]\nK=0 ; comment\nL=x\t;y\nM= ;all comment\n");
+        let values: Vec<&str> = s[0].entries.iter().map(|e| e.value.as_str()).collect();
+        assert_eq!(values, ["0", "x", ""]);
+        assert_eq!(found.len(), 3);
+        assert_eq!(found[0].0, Severity::Note);
+        assert_eq!(
+            (found[0].1.line, found[0].1.kind.clone()),
+            (2, ParseErrorKind::InlineComment)
+        );
     }
 
     fn first(text: &str) -> (Severity, ParseError) {

@@ -21,12 +21,16 @@ pub(crate) struct Judged {
     pub access: Access,
     /// The default: a value, or an offset added to the node-ID.
     pub default: Option<Default>,
-    /// `LowLimit`, kept only when it bounds a number type and does not contradict `HighLimit`.
+    /// `LowLimit`, kept only when it bounds a number type (the lower of the two limits when
+    /// the file has them upside down).
     pub low: Option<Value>,
-    /// `HighLimit`, kept likewise.
+    /// `HighLimit`, kept likewise (the higher of the two).
     pub high: Option<Value>,
     /// What the file says that CiA 306 does not allow, or that was read with a guess.
     pub findings: Vec<Finding>,
+    /// Where the default lies outside the limits (`below LowLimit 1`): the device starts
+    /// there, as the file says.
+    pub default_outside: Option<String>,
 }
 
 /// A usable default value.
@@ -117,6 +121,21 @@ fn order(a: &Value, b: &Value) -> Option<Ordering> {
         (Some(x), Some(y)) => Some(x.cmp(&y)),
         _ => real(a)?.partial_cmp(&real(b)?),
     }
+}
+
+/// Where `x` lies outside `low..=high`, said in words (`below LowLimit 1`); `None` inside.
+pub(crate) fn outside(x: &Value, low: Option<&Value>, high: Option<&Value>) -> Option<String> {
+    if let Some(l) = low
+        && order(x, l) == Some(Ordering::Less)
+    {
+        return Some(format!("below LowLimit {l}"));
+    }
+    if let Some(h) = high
+        && order(x, h) == Some(Ordering::Greater)
+    {
+        return Some(format!("above HighLimit {h}"));
+    }
+    None
 }
 
 /// Judges a value for every node-ID (1..=127) a `$NODEID` may be resolved with.
@@ -220,6 +239,7 @@ pub(crate) fn judge(e: &Entry, needs_type: bool) -> Judged {
             low: None,
             high: None,
             findings,
+            default_outside: None,
         };
     };
     let typed = e.data_type.and_then(DataType::from_index).is_some();
@@ -243,16 +263,17 @@ pub(crate) fn judge(e: &Entry, needs_type: bool) -> Judged {
     };
     let mut low = limit("LowLimit", &e.low_limit, &mut findings);
     let mut high = limit("HighLimit", &e.high_limit, &mut findings);
+    // LowLimit above HighLimit: the two were written in each other's place (the evident
+    // intent of a range); they are taken swapped, the same in check and dictionary.
     if let (Some(l), Some(h)) = (&low, &high)
         && order(l, h) == Some(Ordering::Greater)
     {
         findings.push((
-            Severity::Error,
+            Severity::Warning,
             "LowLimit",
-            "above HighLimit; the limits are ignored".to_owned(),
+            format!("{l} is above HighLimit {h}; the limits are taken swapped ({h}..={l})"),
         ));
-        low = None;
-        high = None;
+        core::mem::swap(&mut low, &mut high);
     }
     // An object without a DefaultValue would start at 0 (CiA 306 §4.6.3 leaves the value
     // open); where 0 lies outside the file's own limits the device could not even take its
@@ -294,16 +315,23 @@ pub(crate) fn judge(e: &Entry, needs_type: bool) -> Judged {
         Some(Default::Value(v)) => Some(v.clone()),
         _ => None,
     };
-    for (key, v) in [("DefaultValue", dv), ("ParameterValue", pv)] {
-        let Some(x) = v else {
-            continue;
-        };
-        if low.as_ref().and_then(|l| order(&x, l)) == Some(Ordering::Less) {
-            findings.push((Severity::Error, key, "below LowLimit".to_owned()));
-        }
-        if high.as_ref().and_then(|h| order(&x, h)) == Some(Ordering::Greater) {
-            findings.push((Severity::Error, key, "above HighLimit".to_owned()));
-        }
+    // A DefaultValue outside the limits is what the file says the device starts with: the
+    // device starts there (and refuses a download of the same value, CiA 301 §7.2.4.3.17),
+    // which is worth a warning. A ParameterValue outside them is a configuration the device
+    // would refuse.
+    let default_outside = dv.and_then(|x| {
+        let m = outside(&x, low.as_ref(), high.as_ref())?;
+        Some(format!(
+            "{x} is {m}; the device starts at {x}, as the file says"
+        ))
+    });
+    if let Some(m) = &default_outside {
+        findings.push((Severity::Warning, "DefaultValue", m.clone()));
+    }
+    if let Some(x) = pv
+        && let Some(m) = outside(&x, low.as_ref(), high.as_ref())
+    {
+        findings.push((Severity::Error, "ParameterValue", format!("{x} is {m}")));
     }
     Judged {
         ty: Some(ty),
@@ -312,6 +340,7 @@ pub(crate) fn judge(e: &Entry, needs_type: bool) -> Judged {
         low,
         high,
         findings,
+        default_outside,
     }
 }
 

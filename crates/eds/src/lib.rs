@@ -19,17 +19,18 @@
 //!   values as a DCF and [`apply_parameter_values`] loads a DCF's values into a device.
 //!
 //! Parsing decisions (CiA 306 leaves them open): section and key names are matched without
-//! regard to case; a `;` (or, with a note, `#`) starts a comment only at the start of a
-//! line; a duplicate section, or a duplicate key in a section, is an error naming both
-//! lines, and the first is kept. Files that are not UTF-8
-//! are read as ISO 8859-1 ([`parse_bytes`]).
+//! regard to case; a `;` (or, with a note, `#`) starts a comment at the start of a line,
+//! and a `;` after white space starts an inline comment (with a note: python-canopen reads
+//! them so, CiA 306 has none); a duplicate section, or a duplicate key in a section, is an
+//! error naming both lines, and the first is kept. Files that are not UTF-8 are read as
+//! Windows-1252 ([`parse_bytes`]), with a note from [`load_bytes`].
 //!
 //! What is written is what python-canopen's importer reads: keys in CiA 306 spelling (its
 //! reader is case-sensitive), `[DeviceComissioning]` with CiA 306's spelling, integers as
 //! `0x` hex or decimal (never a leading-zero octal, which Python's `int(x, 0)` refuses),
 //! `$NODEID+0x..`, OCTET_STRING and DOMAIN values as bare hex digits, and a `[xxxxName]`
 //! section naming every sub-object of a compact array. [`Eds::check`] warns about what that
-//! reader would trip on (a `;` in a value, an incomplete `[DummyUsage]`).
+//! reader would trip on (a `;` after white space in a value, an incomplete `[DummyUsage]`).
 //!
 //! ```
 //! use cantwin_eds::{EdsValue, parse, write};
@@ -84,6 +85,7 @@ mod judge;
 mod model;
 mod od;
 mod parse;
+mod pdo;
 mod value;
 mod write;
 
@@ -94,10 +96,11 @@ pub use model::{
     DeviceCommissioning, DeviceInfo, Eds, Entry, FileInfo, Object, ObjectList, Section,
 };
 pub use od::{
-    ConvertError, apply_parameter_values, commission, configured, from_od, power_on_defaults,
-    to_dcf, to_od,
+    ConvertError, apply_parameter_values, commission, configured, device_warnings, from_od,
+    power_on_defaults, to_dcf, to_od,
 };
 pub use parse::{Loaded, decode, load, load_bytes, parse};
+pub use pdo::pdo_issues;
 pub use value::{EdsValue, parse_integer, parse_node_id_expr};
 pub use write::write;
 
@@ -110,7 +113,7 @@ pub const ARRAY: u8 = 0x8;
 /// Object code RECORD.
 pub const RECORD: u8 = 0x9;
 
-/// Parses bytes: UTF-8 when valid, ISO 8859-1 otherwise (see [`decode`]).
+/// Parses bytes: UTF-8 when valid, Windows-1252 otherwise (see [`decode`]).
 pub fn parse_bytes(bytes: &[u8]) -> Result<Eds, ParseError> {
     parse(&decode(bytes))
 }

@@ -3,7 +3,7 @@
 //! from an EDS ([`to_od`]) and configured from a DCF ([`apply_parameter_values`]).
 
 use crate::check::{Issue, Severity};
-use crate::judge::{Default, judge, value_of};
+use crate::judge::{Default, judge, outside, value_of};
 use crate::model::{DeviceInfo, Eds, Entry, FileInfo, Object};
 use crate::parse::expand_compact;
 use crate::value::EdsValue;
@@ -49,6 +49,11 @@ fn from_value(v: &Value) -> EdsValue {
         Value::VisibleString(s) => EdsValue::Text(s.clone()),
         Value::UnicodeString(u) => EdsValue::Text(String::from_utf16_lossy(u)),
         Value::OctetString(b) | Value::Domain(b) => EdsValue::Bytes(b.clone()),
+        // `days ms`, the form tools write and the loader reads back (CiA 306 gives these
+        // types no text form of its own).
+        Value::TimeOfDay(t) | Value::TimeDifference(t) => {
+            EdsValue::Raw(format!("{} {}", t.days, t.ms))
+        }
         other => match other.as_i128() {
             Some(x) => EdsValue::Integer(x),
             None => EdsValue::Raw(other.to_string()),
@@ -112,8 +117,9 @@ fn type_bits(index: u16) -> u32 {
 /// VAR with sub-objects is held as a RECORD), `ObjFlags` and `CompactSubObj` carry over.
 /// DEFTYPE objects of the basic types (the dummy entries 0x0001..=0x0007 among them) are
 /// held as read-only UNSIGNED32 values with the type's length in bits (CiA 301 §7.4.7.1) and
-/// keep their object code. Values that do not fit their type, and limits that contradict
-/// each other, are left out; an undefined data type is held as DOMAIN; a missing or
+/// keep their object code. Values that do not fit their type are left out, a `LowLimit`
+/// above `HighLimit` is taken swapped, and a default outside the limits is kept (the
+/// object starts there, as the file says); an undefined data type is held as DOMAIN; a missing or
 /// unreadable access type as read-only. Only an entry without any data type makes a
 /// dictionary impossible. NULL and DEFSTRUCT objects, and objects with an unknown object
 /// code, are left out. `ParameterValue`s are not part of a description; see
@@ -420,16 +426,42 @@ pub fn to_dcf(eds: &Eds, od: &ObjectDictionary, commissioning: crate::DeviceComm
 /// The DCF of node `node_id` made from an EDS or a DCF, without a device: each entry's
 /// `ParameterValue` is its value on that node — the file's own `ParameterValue` where it has
 /// one (a DCF given as input keeps its configuration), else its `DefaultValue` — with
-/// `$NODEID` resolved, as [`crate::Eds::check`] judges it. An entry with neither, or whose
-/// value the judgement leaves out, gets no `ParameterValue` and a note: a value is never
-/// invented (a zero could lie outside the entry's limits). Text is kept as written.
+/// `$NODEID` resolved, as [`crate::Eds::check`] judges it. What is left unset, or changed,
+/// is said in the returned findings:
+///
+/// * an entry with neither value, an empty `DefaultValue`, or a value the judgement leaves
+///   out gets no `ParameterValue` (a note): a value is never invented;
+/// * a `DefaultValue` outside the entry's limits gets none either (a warning naming the
+///   value and the limits): the node cannot take it back (CiA 301 §7.2.4.3.17), so the
+///   integrator gives the value;
+/// * a DCF made for another node (`[DeviceComissioning] NodeID`, or else the node most of
+///   its node-relative values are evidently for) whose `ParameterValue` is that node's
+///   `$NODEID`-based default (a COB-ID `0x187` of node 7) is written for the new node (a
+///   note); one the integrator changed (not the old node's default) is kept, with a warning
+///   that it is node-specific.
+///
+/// Text is kept as written.
 pub fn commission(
     eds: &Eds,
     node_id: u8,
     commissioning: crate::DeviceCommissioning,
 ) -> (Eds, Vec<Issue>) {
+    let mut found = Vec::new();
+    let stated = eds.commissioning.as_ref().and_then(|c| c.node_id);
+    let old_node = stated.or_else(|| written_for(eds));
+    if let (None, Some(n)) = (stated, old_node) {
+        found.push(Issue {
+            severity: Severity::Note,
+            line: None,
+            section: "DeviceComissioning".to_owned(),
+            key: Some("NodeID".to_owned()),
+            message: format!(
+                "the file names no node; its node-relative ParameterValues are evidently \
+                 for node {n}"
+            ),
+        });
+    }
     let mut dcf = eds.clone();
-    let mut notes = Vec::new();
     for (&index, o) in dcf.objects.iter_mut() {
         let code = o.object_code();
         if !matches!(
@@ -450,36 +482,192 @@ pub fn commission(
             } else {
                 format!("{index:04X}sub{sub:X}")
             };
-            let source = e
-                .parameter_value
-                .clone()
-                .or_else(|| e.default_value.clone());
-            let value = source.as_ref().and_then(|v| {
-                let resolved = judged_value(e, v, node_id)?;
-                Some(match v {
-                    EdsValue::NodeId(_) => from_value(&resolved),
-                    other => other.clone(),
-                })
-            });
-            if value.is_none() {
-                let why = if source.is_some() {
-                    "the value does not fit the entry; left unset"
-                } else {
-                    "no DefaultValue and no ParameterValue; left unset"
-                };
-                notes.push(Issue {
-                    severity: Severity::Note,
+            let mut say = |severity, message: String| {
+                found.push(Issue {
+                    severity,
                     line: None,
-                    section,
+                    section: section.clone(),
                     key: Some("ParameterValue".to_owned()),
-                    message: why.to_owned(),
+                    message,
                 });
-            }
-            e.parameter_value = value;
+            };
+            e.parameter_value = match e.parameter_value.clone() {
+                Some(pv) => kept_value(e, &pv, old_node, node_id, &mut say),
+                None => default_as_value(e, index, sub, node_id, &mut say),
+            };
         }
     }
     dcf.commissioning = Some(commissioning);
-    (dcf, notes)
+    (dcf, found)
+}
+
+/// The node a file's `ParameterValue`s were written for when it does not say
+/// (`[DeviceComissioning] NodeID`): the node-ID most of its node-relative entries
+/// (`DefaultValue=$NODEID+n`) evidently hold (`ParameterValue` minus `n` in 1..=127), when
+/// one node-ID is the most common; `None` if none or a tie.
+fn written_for(eds: &Eds) -> Option<u8> {
+    let mut count = [0usize; 128];
+    for o in eds.objects.values() {
+        for e in std::iter::once(&o.entry).chain(o.subs.values()) {
+            if let (Some(EdsValue::NodeId(off)), Some(EdsValue::Integer(pv))) =
+                (&e.default_value, &e.parameter_value)
+                && let Ok(n) = u8::try_from(pv - off)
+                && (1..=127).contains(&n)
+            {
+                count[usize::from(n)] += 1;
+            }
+        }
+    }
+    let best = *count.iter().max()?;
+    let mut at = (1..=127u8).filter(|&n| count[usize::from(n)] == best);
+    match (best, at.next(), at.next()) {
+        (1.., Some(n), None) => Some(n),
+        _ => None,
+    }
+}
+
+/// The `ParameterValue` `pv` of a file made for node `old_node`, for node `node_id`.
+fn kept_value(
+    e: &Entry,
+    pv: &EdsValue,
+    old_node: Option<u8>,
+    node_id: u8,
+    say: &mut impl FnMut(Severity, String),
+) -> Option<EdsValue> {
+    let Some(now) = judged_value(e, pv, node_id) else {
+        say(
+            Severity::Note,
+            "the ParameterValue does not fit the entry; left unset".to_owned(),
+        );
+        return None;
+    };
+    if let EdsValue::NodeId(_) = pv {
+        return Some(from_value(&now));
+    }
+    // A value of a node-relative entry (COB-IDs, CiA 301 §7.5.2.35/37) was written for the
+    // node the file was made for.
+    let Some(off @ EdsValue::NodeId(o)) = &e.default_value else {
+        return Some(pv.clone());
+    };
+    if old_node == Some(node_id) || judged_value(e, off, node_id).as_ref() == Some(&now) {
+        return Some(pv.clone());
+    }
+    let old_default = old_node.and_then(|n| judged_value(e, off, n));
+    match (old_node, old_default) {
+        (Some(old), Some(d)) if d == now => {
+            let new = judged_value(e, off, node_id)?;
+            say(
+                Severity::Note,
+                format!(
+                    "{} is the DefaultValue $NODEID+{o:#X} of node {old}; written for node \
+                     {node_id} ({})",
+                    pv.to_text(e.data_type),
+                    from_value(&new).to_text(e.data_type)
+                ),
+            );
+            Some(from_value(&new))
+        }
+        (old, _) => {
+            let made_for = old.map_or("another node".to_owned(), |n| format!("node {n}"));
+            say(
+                Severity::Warning,
+                format!(
+                    "{} is kept, but it is node-specific: the DefaultValue is $NODEID+{o:#X} \
+                     and the file was made for {made_for}; check it for node {node_id}",
+                    pv.to_text(e.data_type)
+                ),
+            );
+            Some(pv.clone())
+        }
+    }
+}
+
+/// The `DefaultValue` of `e` as its `ParameterValue` on node `node_id`, if it can be one.
+fn default_as_value(
+    e: &Entry,
+    index: u16,
+    sub: u8,
+    node_id: u8,
+    say: &mut impl FnMut(Severity, String),
+) -> Option<EdsValue> {
+    let dv = match &e.default_value {
+        None => {
+            say(
+                Severity::Note,
+                "no DefaultValue and no ParameterValue; left unset".to_owned(),
+            );
+            return None;
+        }
+        Some(EdsValue::Raw(t)) if t.trim().is_empty() => {
+            say(
+                Severity::Note,
+                "the DefaultValue is empty and there is no ParameterValue; left unset".to_owned(),
+            );
+            return None;
+        }
+        Some(dv) => dv,
+    };
+    let Some(x) = judged_value(e, dv, node_id) else {
+        say(
+            Severity::Note,
+            "the DefaultValue does not fit the entry; left unset".to_owned(),
+        );
+        return None;
+    };
+    let j = judge(e, true);
+    if let Some(m) = outside(&x, j.low.as_ref(), j.high.as_ref()) {
+        let bound = |v: &Option<Value>| v.as_ref().map_or(String::new(), |v| v.to_string());
+        say(
+            Severity::Warning,
+            format!(
+                "the DefaultValue {x} is {m} (limits {}..={}), which the node cannot take; \
+                 left unset: give the node's value with --set {index:#06X}:{sub}=VALUE",
+                bound(&j.low),
+                bound(&j.high)
+            ),
+        );
+        return None;
+    }
+    Some(match dv {
+        EdsValue::NodeId(_) => from_value(&x),
+        other => other.clone(),
+    })
+}
+
+/// What a device built from the file does that a user of the file should be told, with no
+/// lines (see [`crate::load`] for them): a PDO whose mapping cannot run stays off
+/// ([`crate::pdo_issues`]), and an object whose `DefaultValue` lies outside its limits
+/// starts there, as the file says. `eds` is the file the device is built from.
+pub fn device_warnings(eds: &Eds) -> Vec<Issue> {
+    let mut out = Vec::new();
+    for (&index, o) in &eds.objects {
+        let code = o.object_code();
+        let var_like = code == crate::VAR || code == crate::DOMAIN;
+        let composite = code == crate::ARRAY || code == crate::RECORD;
+        let entries: Vec<(String, &Entry)> = if o.subs.is_empty() && var_like {
+            vec![(format!("{index:04X}"), &o.entry)]
+        } else if composite || var_like {
+            o.subs
+                .iter()
+                .map(|(s, e)| (format!("{index:04X}sub{s:X}"), e))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        for (section, e) in entries {
+            if let Some(m) = judge(e, true).default_outside {
+                out.push(Issue {
+                    severity: Severity::Warning,
+                    line: None,
+                    section,
+                    key: Some("DefaultValue".to_owned()),
+                    message: m,
+                });
+            }
+        }
+    }
+    out.extend(crate::pdo::pdo_issues(eds));
+    out
 }
 
 /// The file with each DCF `ParameterValue` as the entry's `DefaultValue`, where the

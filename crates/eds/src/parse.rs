@@ -383,12 +383,43 @@ fn by_sub<'a>(f: &mut Found, sec: &'a RawSection) -> BTreeMap<u8, &'a RawEntry> 
     out
 }
 
-/// Decodes bytes: UTF-8 if valid, else ISO 8859-1 (each byte one character), the encoding
-/// of most EDS files in the field.
+/// The characters Windows-1252 puts at 0x80..=0x9F (the code page's published table); the
+/// five bytes it leaves undefined (0x81, 0x8D, 0x8F, 0x90, 0x9D) stand for the control
+/// characters of the same number, as ISO 8859-1 has them.
+const CP1252_80_9F: [char; 32] = [
+    '\u{20AC}', '\u{0081}', '\u{201A}', '\u{0192}', '\u{201E}', '\u{2026}', '\u{2020}', '\u{2021}',
+    '\u{02C6}', '\u{2030}', '\u{0160}', '\u{2039}', '\u{0152}', '\u{008D}', '\u{017D}', '\u{008F}',
+    '\u{0090}', '\u{2018}', '\u{2019}', '\u{201C}', '\u{201D}', '\u{2022}', '\u{2013}', '\u{2014}',
+    '\u{02DC}', '\u{2122}', '\u{0161}', '\u{203A}', '\u{0153}', '\u{009D}', '\u{017E}', '\u{0178}',
+];
+
+/// One Windows-1252 byte as its character: ISO 8859-1 apart from 0x80..=0x9F.
+fn cp1252(b: u8) -> char {
+    match b {
+        0x80..=0x9F => CP1252_80_9F[usize::from(b - 0x80)],
+        _ => char::from(b),
+    }
+}
+
+/// Decodes bytes: UTF-8 if valid, else Windows-1252 (each byte one character), the encoding
+/// most EDS files in the field are written in by Windows tools; its printable characters
+/// are a superset of ISO 8859-1's (`€` and `‰` among the additions).
 pub fn decode(bytes: &[u8]) -> String {
+    decode_with_line(bytes).0
+}
+
+/// [`decode`], with the line of the first byte that is not UTF-8 when the file is read as
+/// Windows-1252.
+fn decode_with_line(bytes: &[u8]) -> (String, Option<usize>) {
     match core::str::from_utf8(bytes) {
-        Ok(s) => s.to_owned(),
-        Err(_) => bytes.iter().map(|&b| char::from(b)).collect(),
+        Ok(s) => (s.to_owned(), None),
+        Err(e) => {
+            let line = 1 + bytes[..e.valid_up_to()]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count();
+            (bytes.iter().map(|&b| cp1252(b)).collect(), Some(line))
+        }
     }
 }
 
@@ -418,12 +449,21 @@ pub fn load(text: &str) -> Loaded {
         issue.line = lines.find(&issue.section, issue.key.as_deref());
         report.issues.push(issue);
     }
+    report.sort_by_line();
     Loaded { eds, report }
 }
 
-/// [`load`] of bytes: UTF-8 when valid, ISO 8859-1 otherwise (see [`decode`]).
+/// [`load`] of bytes: UTF-8 when valid, Windows-1252 otherwise (see [`decode`]), with a
+/// note at the line of the first byte that is not UTF-8.
 pub fn load_bytes(bytes: &[u8]) -> Loaded {
-    load(&decode(bytes))
+    let (text, line) = decode_with_line(bytes);
+    let mut loaded = load(&text);
+    if let Some(line) = line {
+        let e = ParseError::at(line, ParseErrorKind::Windows1252);
+        loaded.report.push_parse(Severity::Note, &e);
+        loaded.report.sort_by_line();
+    }
+    loaded
 }
 
 /// Parses an EDS or DCF file, refusing it at the first error the parser reads past (a

@@ -225,18 +225,29 @@ fn i10_twos_complement_limits_and_limits_upside_down() {
     let s = d.get(0x2001, 0).unwrap();
     assert_eq!(s.low_limit, Some(Value::Integer16(-10)));
     assert_eq!(s.high_limit, Some(Value::Integer16(10)));
+    // LowLimit=100 and HighLimit=1: the range evidently meant is 1..=100, the limits taken
+    // swapped (a warning), the same in the check and the dictionary; the default 5 is in it.
     let s = d.get(0x2002, 0).unwrap();
-    assert_eq!((s.low_limit.clone(), s.high_limit.clone()), (None, None));
+    assert_eq!(
+        (s.low_limit.clone(), s.high_limit.clone()),
+        (Some(Value::Unsigned16(1)), Some(Value::Unsigned16(100)))
+    );
     assert_eq!(s.default, Some(Value::Unsigned16(5)));
     diag(
         &l,
-        Severity::Error,
+        Severity::Warning,
         80,
         "2002",
         Some("LowLimit"),
-        "above HighLimit; the limits are ignored",
+        "100 is above HighLimit 1; the limits are taken swapped (1..=100)",
     );
-    assert_eq!(l.report.errors().count(), 1, "{}", l.report);
+    assert!(l.report.is_ok(), "{}", l.report);
+    let mut o = ObjectDictionary::new(Arc::new(d), 1);
+    assert_eq!(
+        o.download(0x2002, 0, &[0, 0]),
+        Err(cantwin_canopen::AbortCode::VALUE_TOO_LOW)
+    );
+    assert_eq!(o.download(0x2002, 0, &[100, 0]), Ok(()));
 }
 
 #[test]
@@ -486,4 +497,108 @@ fn servo_like_eds_loads_with_its_version_count_and_dummy_objects() {
     assert_eq!(default(&d, 0x0003, 0), Some(Value::Unsigned32(16)));
     assert_eq!(d.get(0x6040, 0).unwrap().access, Access::Rww);
     assert!(!d.get(0x6502, 0).unwrap().pdo_mappable);
+}
+
+/// A `;` after white space starts an inline comment, as python-canopen reads EDS files
+/// (`inline_comment_prefixes=(';',)`), in every key; each is a note, since CiA 306 has
+/// comments only on lines of their own. A `;` right after text is part of the value.
+#[test]
+fn i17_inline_comments_after_white_space() {
+    let l = file("i17_inline_comments.eds");
+    assert!(l.report.is_ok(), "{}", l.report);
+    let e = l.eds.entry(0x2000, 0).unwrap();
+    assert_eq!(e.parameter_name, "Set point");
+    assert_eq!(e.access_type, Some(Access::Rw));
+    assert_eq!(e.default_value, Some(EdsValue::Integer(0)));
+    assert_eq!(
+        l.eds.entry(0x2001, 0).unwrap().default_value,
+        Some(EdsValue::NodeId(0x180))
+    );
+    assert_eq!(
+        l.eds.entry(0x2002, 0).unwrap().default_value,
+        Some(EdsValue::Text("a;b".into()))
+    );
+    assert_eq!(
+        l.eds.file_info.description.as_deref(),
+        Some("Inline comments")
+    );
+    for (line, section, key) in [
+        (6, "FileInfo", "Description"),
+        (60, "2000", "ParameterName"),
+        (63, "2000", "AccessType"),
+        (64, "2000", "DefaultValue"),
+        (72, "2001", "DefaultValue"),
+    ] {
+        diag(
+            &l,
+            Severity::Note,
+            line,
+            section,
+            Some(key),
+            "read as the start of an inline comment",
+        );
+    }
+    assert!(
+        !l.report.issues.iter().any(|i| i.line == Some(80)),
+        "{}",
+        l.report
+    );
+    let d = od(&l);
+    assert_eq!(default(&d, 0x2000, 0), Some(Value::Unsigned16(0)));
+}
+
+/// A file that is not UTF-8 is Windows-1252 text: 0x80 is `€` and 0x89 `‰` (not the C1
+/// control characters ISO 8859-1 has there), with a note at the first such line.
+#[test]
+fn i16_windows_1252_text() {
+    let bytes = std::fs::read(path("i16_cp1252.eds")).unwrap();
+    assert!(std::str::from_utf8(&bytes).is_err());
+    let l = load_bytes(&bytes);
+    assert!(l.report.is_ok(), "{}", l.report);
+    let e = l.eds.entry(0x2000, 0).unwrap();
+    assert_eq!(e.parameter_name, "Preis in €");
+    assert_eq!(e.default_value, Some(EdsValue::Text("5 €, 3 ‰, ä".into())));
+    diag(&l, Severity::Note, 60, "", None, "read as Windows-1252");
+    // The bytes Windows-1252 leaves undefined stand for the control characters of their
+    // number; the others of 0x80..=0x9F are its characters.
+    assert_eq!(
+        cantwin_eds::decode(&[0x80, 0x81, 0x8A, 0x9F, 0xFF]),
+        "\u{20AC}\u{81}\u{160}\u{178}\u{FF}"
+    );
+}
+
+/// A default mapping that names an object the file lacks (python-canopen's `sample.eds`
+/// maps 0x6040/0x6041 without defining them): a warning naming the PDO, at the entry's
+/// line; the other PDOs are not mentioned.
+#[test]
+fn a_pdo_mapping_an_object_the_file_lacks_is_a_warning() {
+    let l = shaped("pdo_missing_object.eds");
+    assert!(l.report.is_ok(), "{}", l.report);
+    diag(
+        &l,
+        Severity::Warning,
+        289,
+        "1A01sub1",
+        Some("DefaultValue"),
+        "TPDO 2 maps 0x6041, which the file does not define: the PDO is off",
+    );
+    let pdo: Vec<_> = l
+        .report
+        .issues
+        .iter()
+        .filter(|i| i.message.contains("PDO"))
+        .collect();
+    assert_eq!(pdo.len(), 1, "{}", l.report);
+    assert_eq!(cantwin_eds::pdo_issues(&l.eds).len(), 1);
+}
+
+/// `cantwin eds check` prints the diagnostics in the order of their lines.
+#[test]
+fn diagnostics_come_in_line_order() {
+    let l = shaped("sample_like.dcf");
+    let lines: Vec<usize> = l.report.issues.iter().filter_map(|i| i.line).collect();
+    assert!(lines.len() > 3, "{}", l.report);
+    assert!(lines.windows(2).all(|w| w[0] <= w[1]), "{}", l.report);
+    let after = l.report.issues.iter().skip_while(|i| i.line.is_some());
+    assert!(after.clone().all(|i| i.line.is_none()), "{}", l.report);
 }

@@ -261,7 +261,8 @@ fn cia301_device() -> OdDescription {
         ..Cia301Options::default()
     };
     let b = cia301_defaults(OdBuilder::new(), &options);
-    let b = PdoObjects::new(2, 2).tpdo(0, 255, &[0x6000_0108]).add_to(b);
+    // TPDO1 maps the VAR 0x6000 (sub-index 0), 8 bits.
+    let b = PdoObjects::new(2, 2).tpdo(0, 255, &[0x6000_0008]).add_to(b);
     b.var(
         0x6000,
         SubObject::new("Inputs", DataType::Unsigned8, Access::Ro).mappable(),
@@ -358,4 +359,70 @@ fn cia306_5_device_values_round_trip_through_a_dcf() {
             );
         }
     }
+}
+
+/// TIME_OF_DAY and TIME_DIFFERENCE defaults are written as `days ms` (the form tools write,
+/// CiA 306 gives these types none of its own) and load back as the same value.
+#[test]
+fn time_of_day_is_exported_as_days_and_ms_and_loads_back() {
+    use cantwin_canopen::od::TimeOfDay;
+    let t = TimeOfDay {
+        days: 365,
+        ms: 43_200_000,
+    };
+    let desc = OdBuilder::new()
+        .var(0x1000, u32_ro("Device type", 0))
+        .var(
+            0x2000,
+            SubObject::new("Time", DataType::TimeOfDay, Access::Rw).default(Value::TimeOfDay(t)),
+        )
+        .var(
+            0x2001,
+            SubObject::new("Span", DataType::TimeDifference, Access::Rw)
+                .default(Value::TimeDifference(TimeOfDay { days: 2, ms: 5 })),
+        )
+        .build()
+        .unwrap();
+    let text = write(&from_od(&desc, info(), FileInfo::new("t.eds")));
+    assert!(text.contains("DefaultValue=365 43200000\n"), "{text}");
+    assert!(text.contains("DefaultValue=2 5\n"), "{text}");
+    let back = cantwin_eds::load(&text);
+    assert!(back.report.is_ok(), "{}", back.report);
+    let d = to_od(&back.eds).unwrap();
+    assert_eq!(d.get(0x2000, 0).unwrap().default, Some(Value::TimeOfDay(t)));
+    assert_eq!(
+        d.get(0x2001, 0).unwrap().default,
+        Some(Value::TimeDifference(TimeOfDay { days: 2, ms: 5 }))
+    );
+}
+
+/// A file whose node-relative `ParameterValue`s were written for a node it does not name
+/// (no `[DeviceComissioning] NodeID`): made for another node, the values that are that
+/// node's `$NODEID` defaults move to the new node, the others stay, with a warning.
+#[test]
+fn commission_moves_values_written_for_an_unnamed_node() {
+    let text = "[1014]\nParameterName=COB-ID EMCY\nDataType=0x0007\nAccessType=rw\n\
+                DefaultValue=$NODEID+0x80\nParameterValue=0xA0\n\n\
+                [1200]\nParameterName=SDO server\nObjectType=0x9\nSubNumber=3\n\n\
+                [1200sub0]\nParameterName=n\nDataType=0x0005\nAccessType=ro\nDefaultValue=2\n\n\
+                [1200sub1]\nParameterName=rx\nDataType=0x0007\nAccessType=ro\n\
+                DefaultValue=$NODEID+0x600\nParameterValue=0x620\n\n\
+                [1200sub2]\nParameterName=tx\nDataType=0x0007\nAccessType=ro\n\
+                DefaultValue=$NODEID+0x580\nParameterValue=0x5A5\n";
+    let eds = cantwin_eds::load(text).eds;
+    let (dcf, found) = cantwin_eds::commission(&eds, 3, Default::default());
+    let pv = |i, s| dcf.entry(i, s).unwrap().parameter_value.clone();
+    assert_eq!(pv(0x1014, 0), Some(EdsValue::Integer(0x83)));
+    assert_eq!(pv(0x1200, 1), Some(EdsValue::Integer(0x603)));
+    assert_eq!(pv(0x1200, 2), Some(EdsValue::Integer(0x5A5)));
+    let said: Vec<String> = found.iter().map(ToString::to_string).collect();
+    assert!(
+        said.iter().any(|s| s.contains("evidently for node 32")),
+        "{said:?}"
+    );
+    assert!(
+        said.iter()
+            .any(|s| s.starts_with("warning: [1200sub2]") && s.contains("node-specific")),
+        "{said:?}"
+    );
 }

@@ -318,3 +318,121 @@ fn cia306_dummy_usage_that_supports_no_dummy_refuses_dummy_mapping() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn corpus(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../eds/tests/corpus")
+        .join(name)
+}
+
+/// An SDO expedited download (CiA 301 §7.2.4.3.3) of `value` (`len` bytes) to node 5 and
+/// its answer.
+fn download(rig: &mut Rig, index: u16, sub: u8, value: u32, len: u8) -> Vec<u8> {
+    let cmd = 0x23 | ((4 - len) << 2);
+    let [lo, hi] = index.to_le_bytes();
+    let v = value.to_le_bytes();
+    rig.send(0x605, &[cmd, lo, hi, sub, v[0], v[1], v[2], v[3]]);
+    rig.sdo_response(5)
+}
+
+fn abort(index: u16, sub: u8, code: u32) -> Vec<u8> {
+    let [lo, hi] = index.to_le_bytes();
+    let c = code.to_le_bytes();
+    vec![0x80, lo, hi, sub, c[0], c[1], c[2], c[3]]
+}
+
+/// A file shaped like python-canopen's `test/sample.eds`, whose TPDO 2 maps 0x6041, which
+/// it does not define: that PDO stays off, said at build, and its COB-ID, still valid,
+/// cannot be changed (CiA 301 §7.5.2.37); a transmission type of 245 is refused on any PDO
+/// (0x06090030); TPDO 1 and RPDO 1 run.
+#[test]
+fn cia301_a_pdo_mapping_an_object_the_file_lacks_stays_off_and_the_others_run() {
+    let dir = temp_dir("pdo-missing");
+    let path = scenario_in(
+        &dir,
+        &format!(
+            "file = \"{}\"\nnode_id = 5",
+            corpus("pdo_missing_object.eds").display()
+        ),
+    );
+    let built = Scenario::load(&path)
+        .unwrap()
+        .build(&Registry::builtin(), &BuildEnv::default())
+        .unwrap();
+    let w = built.warnings.join("\n");
+    assert!(
+        w.contains(
+            "warning: line 289 [1A01sub1] DefaultValue: TPDO 2 maps 0x6041, which the file does not define: the PDO is off"
+        ),
+        "{w}"
+    );
+    assert_eq!(built.warnings.len(), 1, "{w}");
+    let mut rig = Rig::load(&path, "dev");
+    rig.built.sim.run_for(Duration::from_millis(10));
+    assert_eq!(
+        download(&mut rig, 0x1800, 2, 245, 1),
+        abort(0x1800, 2, 0x0609_0030)
+    );
+    assert_eq!(
+        download(&mut rig, 0x1801, 1, 0x305, 4),
+        abort(0x1801, 1, 0x0609_0030)
+    );
+    // The mapping of a PDO whose COB-ID is valid cannot be changed (§7.5.2.38), and, once
+    // invalid, the PDO cannot be made valid again with the mapping it has.
+    assert_eq!(
+        download(&mut rig, 0x1A01, 0, 0, 1),
+        abort(0x1A01, 0, 0x0601_0000)
+    );
+    assert_eq!(download(&mut rig, 0x1801, 1, 0x8000_0285, 4)[0], 0x60);
+    assert_eq!(
+        download(&mut rig, 0x1801, 1, 0x285, 4),
+        abort(0x1801, 1, 0x0604_0043)
+    );
+    // OPERATIONAL: TPDO 1 sends 0x2000 (event-driven, once on entering), TPDO 2 nothing;
+    // RPDO 1 writes 0x2001.
+    rig.send(0x000, &[0x01, 5]);
+    rig.send(0x205, &[0x77]);
+    let frames = rig.device_frames();
+    assert!(
+        frames.iter().any(|(id, d, _)| *id == 0x185 && d == &[0x5A]),
+        "{frames:?}"
+    );
+    assert!(!frames.iter().any(|(id, _, _)| *id == 0x285), "{frames:?}");
+    assert_eq!(rig.read_object("dev", 0x2001, 0), Some(vec![0x77]));
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A DefaultValue outside the file's limits is where the object starts, as the file says,
+/// with a build warning; a download of that value is refused (CiA 301 §7.2.4.3.17).
+#[test]
+fn cia306_a_default_outside_the_limits_is_kept_and_said() {
+    let dir = temp_dir("default-outside");
+    let text = std::fs::read_to_string(corpus("pdo_missing_object.eds"))
+        .unwrap()
+        .replace(
+            "ParameterName=Outputs\nObjectType=7\nDataType=5\nAccessType=rw\nPDOMapping=1\nDefaultValue=0\n",
+            "ParameterName=Outputs\nObjectType=7\nDataType=5\nAccessType=rw\nPDOMapping=1\nDefaultValue=0\nLowLimit=1\nHighLimit=9\n",
+        );
+    assert!(text.contains("LowLimit=1\nHighLimit=9\n"));
+    std::fs::write(dir.join("d.eds"), text).unwrap();
+    let path = scenario_in(&dir, "file = \"d.eds\"\nnode_id = 5");
+    let built = Scenario::load(&path)
+        .unwrap()
+        .build(&Registry::builtin(), &BuildEnv::default())
+        .unwrap();
+    let w = built.warnings.join("\n");
+    assert!(
+        w.contains(
+            "[2001] DefaultValue: 0 is below LowLimit 1; the device starts at 0, as the file says"
+        ),
+        "{w}"
+    );
+    let mut rig = Rig::load(&path, "dev");
+    assert_eq!(rig.read_object("dev", 0x2001, 0), Some(vec![0]));
+    assert_eq!(
+        download(&mut rig, 0x2001, 0, 0, 1),
+        abort(0x2001, 0, 0x0609_0032)
+    );
+    assert_eq!(download(&mut rig, 0x2001, 0, 9, 1)[0], 0x60);
+    let _ = std::fs::remove_dir_all(dir);
+}

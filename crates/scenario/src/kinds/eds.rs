@@ -29,7 +29,9 @@
 //! * without 0x1200 it still answers SDO on the default connection (0x600/0x580 + node-ID),
 //!   which CiA 301 §7.2.4.1 requires of every device;
 //! * PDOs are the 0x1400–0x15FF/0x1800–0x19FF communication objects with their mapping
-//!   objects 0x1600–0x17FF/0x1A00–0x1BFF; a file without them has no PDOs;
+//!   objects 0x1600–0x17FF/0x1A00–0x1BFF; a file without them has no PDOs; a PDO whose
+//!   mapping cannot run (an object the file lacks) stays off, with a build warning, and the
+//!   others run;
 //! * without 0x1014 the EMCY producer uses 0x80 + node-ID; without 0x1010/0x1011 nothing is
 //!   stored.
 //!
@@ -38,7 +40,7 @@
 use std::path::{Path, PathBuf};
 
 use cantwin_bus::{BoxedNode, PortConfig};
-use cantwin_eds::{ConvertError, EdsValue, configured, load_bytes, to_od};
+use cantwin_eds::{ConvertError, EdsValue, configured, device_warnings, load_bytes, to_od};
 
 use super::common::{canopen_device, check_node_id, sdo_timeout};
 use crate::error::ScenarioError;
@@ -70,7 +72,7 @@ impl DeviceKind for EdsKind {
     }
 
     fn summary(&self) -> &'static str {
-        "CiA 301 device from an EDS/DCF file: file, node_id, heartbeat_ms, sdo_timeout_ms"
+        "CiA 301 device from an EDS/DCF file: file, node_id, heartbeat_ms, sdo_timeout_ms, lss"
     }
 
     fn build(
@@ -172,6 +174,17 @@ impl DeviceKind for EdsKind {
                 ),
             )
         })?;
+        // What the device does that the file's user should hear of: a PDO whose mapping
+        // names an object the file lacks stays off (CiA 301 §7.5.2.36), a default outside
+        // its limits is where the object starts. Said with the line `eds check` gives.
+        for w in device_warnings(&eds) {
+            let at = loaded
+                .report
+                .issues
+                .iter()
+                .find(|i| i.section == w.section && i.key == w.key && i.message == w.message);
+            s.warn(format!("{}: {}", path.display(), at.unwrap_or(&w)));
+        }
         let port = PortConfig {
             queue_depth: TX_QUEUE_DEPTH,
             ..PortConfig::default()
@@ -211,6 +224,13 @@ impl DeviceKind for EdsKind {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn summary_names_every_key() {
+        for key in ["file", "node_id", "heartbeat_ms", "sdo_timeout_ms", "lss"] {
+            assert!(EdsKind.summary().contains(key), "{key}");
+        }
+    }
 
     #[test]
     fn file_is_relative_to_the_scenario_directory() {
