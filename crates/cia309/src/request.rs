@@ -8,8 +8,15 @@ use cantwin_canopen::wire::NmtCs;
 use crate::error::GwError;
 use crate::value::{Ty, encode, show, ty};
 
-/// The only network the gateway serves.
-pub const NET: u32 = 1;
+/// The highest network number a request may give (CiA 309-3: a 16-bit net). The gateway
+/// serves one network and, as CANopenNode's gateway built for one network
+/// (`CO_CONFIG_GTW_MULTI_NET` off), accepts any net up to this and does not use it.
+pub const NET_MAX: u32 = 0xFFFF;
+
+/// What ends every answer, on stdin/stdout and TCP alike: CANopenNode's gateway writes each
+/// response with CR LF (and `cocomm` waits for it); the lines inside a multi-line answer
+/// (`help`, `lss_allnodes`) end with LF only.
+pub const EOL: &str = "\r\n";
 
 /// What a request asks of the bus.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,6 +96,8 @@ pub const FASTSCAN_TIMEOUT_MS: u16 = 100;
 /// One client's settings, which `set` requests change.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Session {
+    /// The default net (`set network`): remembered, not used (one network).
+    pub net: Option<u16>,
     /// The default node (`set node`), for requests without a node.
     pub node: Option<u8>,
     /// The SDO timeout in milliseconds (`set sdo_timeout`).
@@ -104,6 +113,7 @@ impl Session {
     /// A client with no default node, the given SDO timeout and no block transfer.
     pub fn new(sdo_timeout_ms: u32) -> Session {
         Session {
+            net: None,
             node: None,
             sdo_timeout_ms,
             block: false,
@@ -115,7 +125,8 @@ impl Session {
 /// What a request line needs: an answer now, or a bus operation first.
 #[derive(Debug)]
 pub enum Step {
-    /// The answer, ready to send (one or more lines, the sequence number on the last).
+    /// The answer, ready to send followed by [`EOL`] (one or more lines separated by LF, the
+    /// sequence number on the last; `help`'s text has none).
     Answer(String),
     /// A bus operation to run; its result gives the answer.
     Bus(Pending),
@@ -231,12 +242,18 @@ fn lss_outcome(kind: LssShow, o: Outcome) -> Result<String, GwError> {
 /// What a parsed request needs: a bus operation (answered by `show`), or an answer now.
 #[derive(Debug)]
 enum Action {
-    Bus { op: BusOp, show: Show },
+    Bus {
+        op: BusOp,
+        show: Show,
+    },
+    /// An answer after the sequence number.
     Answer(String),
+    /// An answer without the sequence number (`help`).
+    Text(String),
 }
 
-/// The answer text with its sequence number: a multi-line answer (help) carries it on its
-/// last line.
+/// The answer text with its sequence number: a multi-line answer (`lss_allnodes`) carries it
+/// on its last line.
 /// The sequence number is shown as a signed 32-bit number, as CANopenNode prints it
 /// (`PRId32`): `[4294967295]` is answered `[-1]`.
 fn sequenced(seq: u32, result: Result<String, GwError>) -> String {
@@ -279,6 +296,7 @@ pub fn request(line: &str, s: &mut Session) -> Step {
     s.sequence = seq;
     match parse(rest, s) {
         Ok(Action::Answer(a)) => Step::Answer(sequenced(seq, Ok(a))),
+        Ok(Action::Text(t)) => Step::Answer(t),
         Ok(Action::Bus { op, show }) => Step::Bus(Pending { seq, op, show }),
         Err(e) => Step::Answer(sequenced(seq, Err(e))),
     }
@@ -446,10 +464,6 @@ fn mux(index: &str, sub: &str) -> Option<Mux> {
     Some(Mux::new(i, s))
 }
 
-fn net_or_node(text: &str, max: u32) -> Option<u32> {
-    number(text).filter(|n| *n <= max)
-}
-
 /// Parses a request (without its `[seq]`) for a client with settings `s`.
 fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
     let w = words(line);
@@ -467,23 +481,21 @@ fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
         2 => (Some(w[0].0), Some(w[1].0), 2),
         _ => return Err(GwError::SYNTAX),
     };
+    // CANopenNode's gateway: a net above 16 bits is 106, a node above 127 is 107; any other
+    // net is taken and not used (one network).
     if let Some(n) = net {
-        let n = net_or_node(n, u32::from(u16::MAX)).ok_or(GwError::SYNTAX)?;
-        if n != NET {
+        let n = number(n).ok_or(GwError::SYNTAX)?;
+        if n > NET_MAX {
             return Err(GwError::NET);
         }
     }
     let node = match node {
-        Some(n) => Some(
-            net_or_node(n, u32::from(u8::MAX))
-                .ok_or(GwError::SYNTAX)
-                .and_then(|n| {
-                    u8::try_from(n)
-                        .ok()
-                        .filter(|n| *n <= 127)
-                        .ok_or(GwError::NODE)
-                })?,
-        ),
+        Some(n) => Some(number(n).ok_or(GwError::SYNTAX).and_then(|n| {
+            u8::try_from(n)
+                .ok()
+                .filter(|n| *n <= 127)
+                .ok_or(GwError::NODE)
+        })?),
         None => None,
     };
     let Some(&(cmd, _)) = w.get(at) else {
@@ -552,46 +564,33 @@ fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
             "comm" | "communication" => nmt(NmtCs::ResetCommunication),
             _ => Err(GwError::SYNTAX),
         },
-        ("set", [(what, _), (value, _)]) if node.is_none() => {
+        // `[<net>] set …`: CANopenNode's gateway takes the numbers before `set` and does not
+        // use them.
+        ("set", [(what, _), (value, _)]) => {
             match what.to_ascii_lowercase().as_str() {
                 "network" => {
-                    let n = net_or_node(value, u32::from(u16::MAX)).ok_or(GwError::SYNTAX)?;
-                    if n != NET {
-                        return Err(GwError::NET);
-                    }
+                    let n = ranged(value, 0, NET_MAX)?;
+                    s.net = u16::try_from(n).ok();
                 }
-                "node" => {
-                    let n = net_or_node(value, u32::from(u8::MAX)).ok_or(GwError::SYNTAX)?;
-                    let n = u8::try_from(n)
-                        .ok()
-                        .filter(|n| (1..=127).contains(n))
-                        .ok_or(GwError::NODE)?;
-                    s.node = Some(n);
-                }
-                "sdo_timeout" => {
-                    let ms = number(value).ok_or(GwError::SYNTAX)?;
-                    if ms == 0 {
-                        return Err(GwError::SYNTAX);
-                    }
-                    s.sdo_timeout_ms = ms;
-                }
-                "sdo_block" => match *value {
-                    "0" => s.block = false,
-                    "1" => s.block = true,
-                    _ => return Err(GwError::SYNTAX),
-                },
+                // CANopenNode's gateway: a value out of its range is a syntax error (101).
+                "node" => s.node = Some(ranged(value, 1, 127)? as u8),
+                "sdo_timeout" => s.sdo_timeout_ms = ranged(value, 1, 0xFFFF)?,
+                "sdo_block" => s.block = ranged(value, 0, 1)? == 1,
                 _ => return Err(GwError::NOT_SUPPORTED),
             }
             Ok(Action::Answer("OK".into()))
         }
         ("info", []) => Ok(Action::Answer(format!(
-            "cantwin {} CiA 309-3 ASCII gateway: net {NET}, node {}, sdo_timeout {} ms, sdo_block {}",
+            "cantwin {} CiA 309-3 ASCII gateway: net {}, node {}, sdo_timeout {} ms, sdo_block {}",
             env!("CARGO_PKG_VERSION"),
+            s.net.map_or_else(|| "none".to_string(), |n| n.to_string()),
             s.node.map_or_else(|| "none".to_string(), |n| n.to_string()),
             s.sdo_timeout_ms,
             u8::from(s.block),
         ))),
-        ("help", []) => Ok(Action::Answer(format!("{HELP}OK"))),
+        // CANopenNode's gateway answers `help` with its text alone (no sequence number, no
+        // OK), an LF before it, LF between its lines, the answer's EOL after it.
+        ("help", []) => Ok(Action::Text(help_text(HELP.lines()))),
         // CANopenNode's `help datatype` and `help lss`: the parts of the help on types and
         // on the LSS commands.
         ("help", [(what, _)]) => {
@@ -602,15 +601,11 @@ fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
             };
             // A kept line and the indented lines that continue it.
             let mut keep = false;
-            let mut text = String::new();
-            for l in HELP.lines() {
+            let lines = HELP.lines().filter(|l| {
                 keep = start(l) || (keep && l.starts_with("      "));
-                if keep {
-                    text.push_str(l);
-                    text.push('\n');
-                }
-            }
-            Ok(Action::Answer(format!("{text}OK")))
+                keep
+            });
+            Ok(Action::Text(help_text(lines)))
         }
         (
             "read" | "r" | "write" | "w" | "start" | "stop" | "preop" | "preoperational" | "reset"
@@ -621,7 +616,16 @@ fn parse(line: &str, s: &mut Session) -> Result<Action, GwError> {
     }
 }
 
-/// The text `help` answers with (before its final `OK`).
+/// `help`'s answer of `lines`: each after an LF (so the text starts on a line of its own).
+fn help_text<'a>(lines: impl Iterator<Item = &'a str>) -> String {
+    lines.fold(String::new(), |mut text, l| {
+        text.push('\n');
+        text.push_str(l);
+        text
+    })
+}
+
+/// The text `help` answers with.
 pub const HELP: &str = "\
 Request: [<seq>] [[<net>] <node>] <command>; answer: [<seq>] OK | <value> | ERROR:<code>
   read <index> <sub> [<type>]          SDO upload (r)
@@ -663,7 +667,7 @@ mod tests {
     fn bus_op(line: &str, s: &mut Session) -> BusOp {
         match parse(line, s).unwrap() {
             Action::Bus { op, .. } => op,
-            Action::Answer(a) => panic!("{line}: answered {a}"),
+            Action::Answer(a) | Action::Text(a) => panic!("{line}: answered {a}"),
         }
     }
 
@@ -708,8 +712,9 @@ mod tests {
                 cs: NmtCs::Start
             }
         );
-        assert_eq!(parse("2 5 start", &mut s).err(), Some(GwError::NET));
         assert_eq!(parse("200 start", &mut s).err(), Some(GwError::NODE));
+        assert_eq!(parse("0x10000 5 start", &mut s).err(), Some(GwError::NET));
+        assert_eq!(parse("1 128 start", &mut s).err(), Some(GwError::NODE));
         assert_eq!(parse("0 read 0x1000 0", &mut s).err(), Some(GwError::NODE));
         assert_eq!(
             parse("5 frobnicate", &mut s).err(),
@@ -720,6 +725,57 @@ mod tests {
             parse("5 read 0x1000 0 q7", &mut s).err(),
             Some(GwError::SYNTAX)
         );
+    }
+
+    /// CANopenNode's gateway built for one network takes any net of 16 bits (0 too) and
+    /// does not use it.
+    #[test]
+    fn cia309_3_any_16_bit_net_is_taken_and_not_used() {
+        let mut s = session();
+        for net in ["0", "1", "2", "0xFFFF"] {
+            assert_eq!(
+                bus_op(&format!("{net} 5 read 0x1017 0 u16"), &mut s),
+                BusOp::Upload {
+                    node: 5,
+                    mux: Mux::new(0x1017, 0)
+                },
+                "net {net}"
+            );
+            assert_eq!(
+                bus_op(&format!("{net} 0 start"), &mut s),
+                BusOp::Nmt {
+                    node: 0,
+                    cs: NmtCs::Start
+                },
+                "net {net}"
+            );
+        }
+        assert_eq!(
+            parse("65536 5 read 0x1017 0", &mut s).err(),
+            Some(GwError::NET)
+        );
+        assert_eq!(
+            parse("1 0 read 0x1017 0", &mut s).err(),
+            Some(GwError::NODE)
+        );
+        // `set network` remembers any 16-bit net; more is a syntax error.
+        assert_eq!(answer("[1] set network 0", &mut s), "[1] OK");
+        assert_eq!(s.net, Some(0));
+        assert_eq!(answer("[2] set network 7", &mut s), "[2] OK");
+        assert_eq!(answer("[3] set network 65536", &mut s), "[3] ERROR:101");
+        assert_eq!(s.net, Some(7));
+        // Numbers before `set` are taken and not used.
+        assert_eq!(answer("[4] 3 set node 9", &mut s), "[4] OK");
+        assert_eq!(s.node, Some(9));
+        assert_eq!(answer("[5] 2 3 set sdo_timeout 300", &mut s), "[5] OK");
+        assert_eq!(s.sdo_timeout_ms, 300);
+        // Values out of range are syntax errors, as CANopenNode's gateway answers them.
+        assert_eq!(answer("[6] set node 0", &mut s), "[6] ERROR:101");
+        assert_eq!(answer("[7] set node 128", &mut s), "[7] ERROR:101");
+        assert_eq!(answer("[8] set sdo_timeout 65536", &mut s), "[8] ERROR:101");
+        assert_eq!(answer("[9] set sdo_block 2", &mut s), "[9] ERROR:101");
+        assert_eq!(answer("[10] set sdo_block 0x1", &mut s), "[10] OK");
+        assert!(s.block);
     }
 
     #[test]
@@ -763,10 +819,14 @@ mod tests {
         assert_eq!(answer("[x] 9 start", &mut s), "[4] ERROR:101");
         assert_eq!(answer("set node 3", &mut s), "[4] ERROR:101");
         assert_eq!(answer("[6] set sdo_timeout 0", &mut s), "[6] ERROR:101");
-        assert!(answer("[5] help", &mut s).ends_with("\n[5] OK"));
+        // help: the text alone, starting on a line of its own, no sequence number, no OK.
+        let help = answer("[5] help", &mut s);
+        assert!(help.starts_with("\nRequest: [<seq>]"), "{help}");
+        assert!(!help.contains("[5]") && !help.contains("OK\n") && !help.ends_with('\n'));
+        assert!(!help.contains('\r'), "{help}");
         let lss = answer("[5] help lss", &mut s);
         assert!(
-            lss.starts_with("  lss_switch_glob <0|1>") && lss.ends_with("\n[5] OK"),
+            lss.starts_with("\n  lss_switch_glob <0|1>") && !lss.contains("[5]"),
             "{lss}"
         );
         assert!(
@@ -775,7 +835,7 @@ mod tests {
         );
         let types = answer("[5] help datatype", &mut s);
         assert!(
-            types.starts_with("Types: b i8") && types.contains("hex (bytes"),
+            types.starts_with("\nTypes: b i8") && types.contains("hex (bytes"),
             "{types}"
         );
         assert_eq!(answer("[5] help me", &mut s), "[5] ERROR:101");

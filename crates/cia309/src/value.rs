@@ -7,6 +7,7 @@ use cantwin_canopen::od::{DataType, Value};
 use base64::Engine as _;
 
 use crate::error::GwError;
+use crate::real::printf_g;
 
 /// The CiA 309-3 data type mnemonics and the CiA 301 types they stand for.
 pub const MNEMONICS: &[(&str, DataType)] = &[
@@ -195,6 +196,8 @@ pub(crate) fn show(t: Option<Ty>, data: &[u8]) -> Result<String, GwError> {
                 Value::VisibleString(_) | Value::UnicodeString(_) => {
                     format!("\"{}\"", v.to_string().replace('"', "\"\""))
                 }
+                Value::Real32(x) => printf_g(f64::from(x)),
+                Value::Real64(x) => printf_g(x),
                 other => other.to_string(),
             })
         }
@@ -239,6 +242,14 @@ mod tests {
             "C8 3D BB 00"
         );
         assert_eq!(show(None, &[1, 0xAB]).unwrap(), "01 AB");
+        // REAL32/REAL64 as C's `%g`: 6 significant digits, the exponent form when large.
+        assert_eq!(
+            show(d("r32"), &core::f32::consts::PI.to_le_bytes()).unwrap(),
+            "3.14159"
+        );
+        assert_eq!(show(d("r64"), &1e300_f64.to_le_bytes()).unwrap(), "1e+300");
+        assert_eq!(show(d("r32"), &1e8_f32.to_le_bytes()).unwrap(), "1e+08");
+        assert_eq!(show(d("r64"), &(-0.0_f64).to_le_bytes()).unwrap(), "-0");
         assert_eq!(
             show(d("u32"), &[1, 2]).err(),
             Some(GwError::Abort(AbortCode::TYPE_MISMATCH))

@@ -2,9 +2,9 @@
 //! CANopenNode's gateway and its `cocomm` client (parsed and answered by `cantwin-cia309`),
 //! on stdin/stdout or TCP.
 //!
-//! One gateway serves one network, net 1. The bus is driven by one master and one LSS master
-//! (CiA 305) on the gateway's thread; each client has its own default node, SDO timeout and
-//! block setting.
+//! One gateway serves one network (a request's net is taken and not used). The bus is driven
+//! by one master and one LSS master (CiA 305) on the gateway's thread; each client has its
+//! own default node, SDO timeout and block setting.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpListener, TcpStream};
@@ -14,10 +14,10 @@ use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
 use std::time::Duration as WallDuration;
 
 use anyhow::{Context, Result, bail};
-use cantwin_can::{Duration, Outbox};
+use cantwin_can::{Duration, Frame, Node, Outbox};
 use cantwin_canopen::lss;
 use cantwin_canopen::master::{Master, MasterEvent, Mode, SdoEvent, TransferId};
-use cantwin_cia309::{BusOp, GwError, LSS_TIMEOUT_MS, LssOp, LssResult, Session, Step};
+use cantwin_cia309::{BusOp, EOL, GwError, LSS_TIMEOUT_MS, LssOp, LssResult, Session, Step};
 
 use crate::connect::{Link, Target};
 
@@ -88,6 +88,21 @@ fn run_job(op: BusOp, s: &Session, jobs: &Sender<Job>) -> Result<JobResult, GwEr
     rx.recv().map_err(|_| GwError::STATE)
 }
 
+/// Puts the frames `node` queued in `out` on the bus and confirms each to it once sent, then
+/// the frames that releases: the master hands the driver at most its transmit window of
+/// unconfirmed frames ([`Node::on_sent`]), so a frame sent and not confirmed would hold its
+/// place for good and, after a window's worth of requests, stop every transfer.
+fn send_confirmed<N: Node>(link: &Link, node: &mut N, out: &mut Outbox) -> Result<()> {
+    while !out.is_empty() {
+        let frames: Vec<Frame> = out.drain().collect();
+        for f in frames {
+            link.send(f)?;
+            node.on_sent(&f, link.now(), out);
+        }
+    }
+    Ok(())
+}
+
 /// Runs one LSS service to its end on the bus.
 fn lss_service(
     link: &mut Link,
@@ -101,9 +116,7 @@ fn lss_service(
     if master.start(service, link.now(), &mut out).is_err() {
         return Ok(Err(GwError::STATE));
     }
-    for f in out.drain() {
-        link.send(f)?;
-    }
+    send_confirmed(link, master, &mut out)?;
     let mut outcome = master.poll();
     if outcome.is_none() {
         // A fastscan is at most 2 + 4 × 33 steps of one timeout each.
@@ -203,9 +216,7 @@ fn execute(
     let started = match &job.op {
         BusOp::Nmt { node, cs } => {
             let r = master.nmt(*cs, *node, &mut out);
-            for f in out.drain() {
-                link.send(f)?;
-            }
+            send_confirmed(link, master, &mut out)?;
             return Ok(JobResult::Sdo(
                 r.map(|()| Vec::new()).map_err(|_| GwError::NODE),
             ));
@@ -220,9 +231,7 @@ fn execute(
         Ok(id) => id,
         Err(_) => return Ok(JobResult::Sdo(Err(GwError::STATE))),
     };
-    for f in out.drain() {
-        link.send(f)?;
-    }
+    send_confirmed(link, master, &mut out)?;
     let mut result = None;
     let limit = WallDuration::from_nanos(job.timeout.as_nanos()) * 4 + WallDuration::from_secs(600);
     link.run(
@@ -302,21 +311,23 @@ fn read_line(r: &mut impl BufRead) -> std::io::Result<Option<Result<String, ()>>
     ))
 }
 
-/// Serves one client: lines in, answers out, each answer ended by `eol`.
+/// Serves one client: lines in, answers out, each answer ended by [`EOL`] (CR LF, on
+/// stdin/stdout as on TCP, as CANopenNode's gateway ends every response whatever carries it)
+/// and written in one piece: `cocomm` takes the first read that holds a CR LF as the whole
+/// answer, so an answer and its CR LF sent apart (two TCP segments) read as two.
 fn serve_client(
     input: &mut impl BufRead,
     output: &mut impl Write,
     jobs: &Sender<Job>,
     mut session: Session,
-    eol: &str,
 ) -> std::io::Result<()> {
     while let Some(line) = read_line(input)? {
-        let text = match line {
+        let mut text = match line {
             Ok(l) => answer(&l, &mut session, jobs),
             Err(()) => format!("[{}] ERROR:{}", session.sequence as i32, GwError::SYNTAX),
         };
-        output.write_all(text.replace('\n', eol).as_bytes())?;
-        output.write_all(eol.as_bytes())?;
+        text.push_str(EOL);
+        output.write_all(text.as_bytes())?;
         output.flush()?;
     }
     Ok(())
@@ -346,7 +357,7 @@ pub fn run(args: &GatewayArgs) -> Result<()> {
                 let stdin = std::io::stdin();
                 let mut input = stdin.lock();
                 let mut output = std::io::stdout();
-                if let Err(e) = serve_client(&mut input, &mut output, &jobs, session, "\n") {
+                if let Err(e) = serve_client(&mut input, &mut output, &jobs, session) {
                     eprintln!("gateway: {e}");
                 }
             });
@@ -394,7 +405,7 @@ fn accept(listener: &TcpListener, jobs: &Sender<Job>, session: Session) {
 fn serve_tcp(stream: TcpStream, jobs: &Sender<Job>, session: Session) -> std::io::Result<()> {
     let mut output = stream.try_clone()?;
     let mut input = BufReader::new(stream);
-    serve_client(&mut input, &mut output, jobs, session, "\r\n")
+    serve_client(&mut input, &mut output, jobs, session)
 }
 
 #[cfg(test)]

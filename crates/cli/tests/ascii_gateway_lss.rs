@@ -106,7 +106,8 @@ fn cia309_3_lss_allnodes_gives_each_node_without_node_id_one() {
     );
     assert_eq!(
         String::from_utf8(out.stdout).unwrap(),
+        // The comment lines end with LF, the answer with CR LF (CANopenNode's gateway).
         "# Node-ID 10 assigned to: 0x00000CA7 0x00000000 0x00010000 0x00000030\n\
-         # Found 1 nodes, search finished.\n[1] OK\n[2] 0x00000030\n"
+         # Found 1 nodes, search finished.\n[1] OK\r\n[2] 0x00000030\r\n"
     );
 }
