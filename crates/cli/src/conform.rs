@@ -75,6 +75,11 @@ pub struct Args {
     /// How long the device has to answer an SDO request, in ms.
     #[arg(long, default_value_t = 1000)]
     sdo_timeout_ms: u64,
+    /// How long the device has to send its boot-up message after an NMT reset, in
+    /// seconds (0.01–600; a device that loads a large configuration at reset node may
+    /// need more than the default).
+    #[arg(long, value_name = "SECONDS", default_value_t = 2.0)]
+    boot_timeout: f64,
     /// Timing cases accept periods within this many percent of the nominal one.
     #[arg(long, default_value_t = 10.0)]
     tolerance_percent: f64,
@@ -88,6 +93,38 @@ fn write(path: &Path, text: &str) -> Result<()> {
     let tmp = path.with_extension("partial");
     std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
     std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Checks, before the run, that each report `args` asks for can be written: its directory
+/// exists and takes a file. An error names the path as given.
+fn check_report_paths(args: &Args) -> Result<()> {
+    for (flag, path) in [
+        ("--junit", &args.junit),
+        ("--json-report", &args.json_report),
+        ("--html", &args.html),
+    ] {
+        let Some(path) = path else { continue };
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        if !dir.is_dir() {
+            bail!(
+                "{flag} {}: the directory {} does not exist",
+                path.display(),
+                dir.display()
+            );
+        }
+        if path.is_dir() {
+            bail!("{flag} {}: is a directory", path.display());
+        }
+        // The same temporary file the report is written through, created and removed.
+        let probe = path.with_extension("partial");
+        std::fs::write(&probe, b"")
+            .and_then(|()| std::fs::remove_file(&probe))
+            .with_context(|| format!("{flag} {}: cannot write there", path.display()))?;
+    }
+    Ok(())
 }
 
 /// Writes the reports `args` asks for.
@@ -122,11 +159,18 @@ fn options(args: &Args) -> Result<Options> {
     if !(0.0..=100.0).contains(&args.tolerance_percent) {
         bail!("--tolerance-percent must be between 0 and 100");
     }
+    if !(0.01..=600.0).contains(&args.boot_timeout) {
+        bail!(
+            "--boot-timeout {}: must be between 0.01 and 600 seconds",
+            args.boot_timeout
+        );
+    }
     Ok(Options {
         only,
         skip: args.skip.clone(),
         sdo_timeout: Duration::from_millis(args.sdo_timeout_ms.max(1)),
         tolerance: args.tolerance_percent / 100.0,
+        boot_timeout: Duration::from_secs_f64(args.boot_timeout),
         ..Options::default()
     })
 }
@@ -211,9 +255,18 @@ pub fn run(args: &Args) -> Result<()> {
         bail!("--node-id and --eds are required");
     };
     let options = options(args)?;
+    check_report_paths(args)?;
     let bytes =
         std::fs::read(eds_path).with_context(|| format!("reading {}", eds_path.display()))?;
     let eds = cantwin_eds::load_bytes(&bytes).eds;
+    // A file that describes no object is not the device's EDS (an empty file, another
+    // file given by mistake): every case would fail for the file's sake.
+    if eds.objects.is_empty() {
+        bail!(
+            "--eds {}: no object dictionary in the file (CiA 306 §4.6): is it an EDS or DCF?",
+            eds_path.display()
+        );
+    }
     let mut profile = Profile::from_eds(&eds);
     if let Some(path) = &args.profile {
         let text =

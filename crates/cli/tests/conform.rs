@@ -227,8 +227,14 @@ fn eds_twins_of_real_files_conform_to_their_files() {
 #[test]
 fn eds_files_with_faults_fail_their_case() {
     let corpus = root().join("crates/eds/tests/corpus");
+    // CiA 306 §4.5.2: a file without [DeviceInfo] is no device description.
+    let io = std::fs::read_to_string(root().join("scenarios/eds/example-io.eds")).unwrap();
+    let start = io.find("[DeviceInfo]").unwrap();
+    let end = start + 1 + io[start + 1..].find("\n[").unwrap();
+    let no_device_info = tmp("no-device-info").join("no-device-info.eds");
+    std::fs::write(&no_device_info, format!("{}{}", &io[..start], &io[end..])).unwrap();
     for (file, case) in [
-        ("irregular/i10_limits.eds", "eds.file-valid"),
+        (no_device_info.to_str().unwrap(), "eds.file-valid"),
         ("datatypes_like.eds", "eds.mandatory-objects"),
     ] {
         let dir = tmp(&file.replace('/', "-"));
@@ -261,6 +267,7 @@ fn eds_files_with_faults_fail_their_case() {
         assert!(failed.contains(&case), "{file}: {failed:?}");
         let _ = std::fs::remove_dir_all(&dir);
     }
+    let _ = std::fs::remove_dir_all(no_device_info.parent().unwrap());
 }
 
 #[test]
@@ -582,4 +589,134 @@ fn socketcan_on_an_interface_that_is_not_can_is_refused() {
     ]);
     assert!(!o.status.success(), "{}", text(&o));
     assert!(text(&o).contains("cannot be used with"), "{}", text(&o));
+}
+
+#[test]
+fn boot_timeout_is_taken_and_checked() {
+    for bad in ["0", "-1", "601", "NaN"] {
+        let o = cantwin(&[
+            "conform",
+            "--scenario",
+            "scenarios/cia301-device.toml",
+            "--node-id",
+            "5",
+            "--eds",
+            "scenarios/eds/example-io.eds",
+            &format!("--boot-timeout={bad}"),
+        ]);
+        assert!(!o.status.success(), "{bad}: {}", text(&o));
+        assert!(text(&o).contains("--boot-timeout"), "{bad}: {}", text(&o));
+    }
+    let o = cantwin(&["conform", "--help"]);
+    assert!(
+        text(&o).contains("--boot-timeout <SECONDS>"),
+        "{}",
+        text(&o)
+    );
+    // With 0.5 s the boot-up (within milliseconds on the twin) still counts.
+    let dir = tmp("boot-timeout");
+    let eds = dir.join("node5.eds");
+    let o = cantwin(&[
+        "eds",
+        "export",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--device",
+        "node5",
+        "-o",
+        eds.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "5",
+        "--eds",
+        eds.to_str().unwrap(),
+        "--only",
+        "nmt",
+        "--boot-timeout",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_file_that_describes_no_object_is_refused_before_the_run() {
+    let dir = tmp("empty-eds");
+    for (name, content) in [("empty.eds", ""), ("notes.txt", "just some notes\n")] {
+        let path = dir.join(name);
+        std::fs::write(&path, content).unwrap();
+        let o = cantwin(&[
+            "conform",
+            "--scenario",
+            "scenarios/cia301-device.toml",
+            "--node-id",
+            "5",
+            "--eds",
+            path.to_str().unwrap(),
+        ]);
+        assert!(!o.status.success(), "{name}: {}", text(&o));
+        let t = text(&o);
+        assert!(t.contains("no object dictionary"), "{name}: {t}");
+        assert!(t.contains(name), "{name}: {t}");
+        assert!(
+            !t.contains("PASSED") && !t.contains("FAILED"),
+            "{name}: not run: {t}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn report_paths_are_checked_before_the_run() {
+    for flag in ["--junit", "--json-report", "--html"] {
+        let path = "no-such-dir/sub/report.out";
+        let o = cantwin(&[
+            "conform",
+            "--scenario",
+            "scenarios/cia301-device.toml",
+            "--node-id",
+            "5",
+            "--eds",
+            "scenarios/eds/example-io.eds",
+            flag,
+            path,
+        ]);
+        assert!(!o.status.success(), "{flag}: {}", text(&o));
+        let t = text(&o);
+        assert!(t.contains(&format!("{flag} {path}")), "{flag}: {t}");
+        assert!(t.contains("does not exist"), "{flag}: {t}");
+        // Refused before the run: no case ran.
+        assert!(
+            !t.contains("PASSED") && !t.contains("FAILED"),
+            "{flag}: {t}"
+        );
+    }
+}
+
+#[test]
+fn a_stopped_run_is_an_error_in_junit() {
+    let dir = tmp("stopped");
+    let junit = dir.join("j.xml");
+    let o = cantwin(&[
+        "conform",
+        "--scenario",
+        "scenarios/cia301-device.toml",
+        "--node-id",
+        "77",
+        "--eds",
+        "scenarios/eds/example-io.eds",
+        "--junit",
+        junit.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success(), "{}", text(&o));
+    let xml = std::fs::read_to_string(&junit).unwrap();
+    assert!(xml.contains("errors=\"1\""), "{xml}");
+    assert!(xml.contains("<error message=\"the run stopped: "), "{xml}");
+    assert!(xml.contains("does not answer"), "{xml}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -120,6 +120,30 @@ pub(crate) struct Ctx<'a> {
     /// Every entry of the file as first read by the EDS area (read once: a real device
     /// answers hundreds of uploads slowly).
     pub scan: Option<Scan>,
+    /// The node-IDs other nodes have shown on the bus (bit n: node-ID n), so that a case
+    /// that needs a node-ID nobody uses (a heartbeat to consume, an NMT command for another
+    /// node) does not pick one that is alive.
+    seen: u128,
+    /// The identifiers of the frames of at most one byte (a SYNC's length, CiA 301
+    /// §7.2.5.3) seen before the first case.
+    short_before_cases: std::collections::BTreeSet<u32>,
+    /// The first case has begun: `short_before_cases` is complete.
+    cases_begun: bool,
+    /// SYNC frames came from another producer before the first case: the cases whose
+    /// verdict depends on SYNC timing cannot be judged.
+    pub foreign_sync: bool,
+}
+
+/// The node-ID a frame of the pre-defined connection set shows (CiA 301 §7.3.5): EMCY
+/// (0x081..0x0FF), the default PDOs (0x181..0x57F), SDO responses (0x581..0x5FF) and
+/// error control (0x701..0x77F).
+fn node_of(id: Id) -> Option<u8> {
+    let Id::Standard(_) = id else { return None };
+    let raw = id.as_raw();
+    let n = (raw & 0x7F) as u8;
+    let base = raw & !0x7F;
+    let known = matches!(base, 0x080 | 0x580 | 0x700) || (0x180..=0x500).contains(&base);
+    (known && n != 0).then_some(n)
 }
 
 fn id16(base: u16, node: u8) -> Id {
@@ -145,6 +169,10 @@ impl<'a> Ctx<'a> {
             log: Vec::new(),
             omitted: 0,
             scan: None,
+            seen: 0,
+            short_before_cases: std::collections::BTreeSet::new(),
+            cases_begun: false,
+            foreign_sync: false,
         }
     }
 
@@ -170,6 +198,19 @@ impl<'a> Ctx<'a> {
     }
 
     fn record(&mut self, t: Instant, dir: Direction, frame: &Frame) {
+        if dir == Direction::Response
+            && let Some(n) = node_of(frame.id())
+        {
+            self.seen |= 1u128 << n;
+        }
+        if dir == Direction::Response
+            && !self.cases_begun
+            && !frame.is_remote()
+            && frame.len() <= 1
+            && let Id::Standard(_) = frame.id()
+        {
+            self.short_before_cases.insert(frame.id().as_raw());
+        }
         if self.log.len() >= MAX_LOGGED_FRAMES {
             self.omitted += 1;
         } else {
@@ -180,6 +221,40 @@ impl<'a> Ctx<'a> {
                 frame: frame.to_string(),
             });
         }
+    }
+
+    /// A node-ID in 1..=127 that is neither the device's nor seen on the bus so far, the
+    /// first after the device's (CiA 301 §7.3.4: every node on a network has its own).
+    pub fn free_node(&self) -> u8 {
+        (1..=127u8)
+            .map(|k| ((u16::from(self.node) - 1 + u16::from(k)) % 127 + 1) as u8)
+            .find(|&n| n != self.node && self.seen & (1u128 << n) == 0)
+            .unwrap_or(if self.node >= 127 { 1 } else { self.node + 1 })
+    }
+
+    /// Ends the time before the first case: whether SYNC frames came meanwhile from a
+    /// producer other than the device, on 0x080 or the device's COB-ID SYNC (0x1005,
+    /// CiA 301 §7.5.2.5). The device is the producer only with bit 30 of 0x1005 set; a
+    /// network has a single producer (§7.2.5).
+    pub fn begin_cases(&mut self) -> Result<(), Finding> {
+        let cob = if self.eds.objects.contains_key(&0x1005) {
+            match self.upload(0x1005, 0)? {
+                Ok(d) if !d.is_empty() && d.len() <= 4 => {
+                    let mut b = [0u8; 4];
+                    b[..d.len()].copy_from_slice(&d);
+                    Some(u32::from_le_bytes(b))
+                }
+                _ => None,
+            }
+        } else {
+            None
+        };
+        self.cases_begun = true;
+        let own = cob.is_some_and(|c| c & 0x4000_0000 != 0);
+        let id = cob.map_or(0x080, |c| c & 0x7FF);
+        self.foreign_sync = !own
+            && (self.short_before_cases.contains(&0x080) || self.short_before_cases.contains(&id));
+        Ok(())
     }
 
     /// Sends `frame`, logged as stimulus.

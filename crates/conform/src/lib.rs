@@ -189,6 +189,10 @@ fn verdict_of(
 /// and the EMCYs behind it come within a few milliseconds of power-up).
 const SETTLE_QUIET: cantwin_can::Duration = cantwin_can::Duration::from_millis(50);
 
+/// How long the device has to act on the NMT command that starts the run (CiA 301 leaves
+/// it to the device; the state change stops its PDOs within a few milliseconds).
+const ENTER_PRE_OPERATIONAL: cantwin_can::Duration = cantwin_can::Duration::from_millis(50);
+
 /// Whether the selection needs no bus at all (only the file checks of the EDS area).
 fn only_offline(options: &Options) -> bool {
     cases::all()
@@ -236,8 +240,14 @@ pub fn run(
         // (CiA 301 §7.3.2.2.1) now, and no case may take it for the answer to a reset.
         // The frames are before any case: they are in no case's log.
         let settled = ctx.settle(SETTLE_QUIET, options.boot_timeout);
+        // The cases start in PRE-OPERATIONAL, where a device is after its boot-up; one a
+        // master has started already is put back there (CiA 301 §7.3.2.2.1, figure 48).
+        let entered = settled.and_then(|_| {
+            ctx.nmt(cantwin_canopen::wire::NmtCs::EnterPreOperational)?;
+            ctx.idle(ENTER_PRE_OPERATIONAL)
+        });
         let _ = ctx.take_log();
-        if let Err(Finding::Transport(e)) = settled {
+        if let Err(Finding::Transport(e)) = entered {
             report.stopped = Some(e.to_string());
         }
     }
@@ -251,6 +261,11 @@ pub fn run(
             }
             Err(Finding::Transport(e)) => report.stopped = Some(e.to_string()),
             _ => {}
+        }
+        if report.stopped.is_none()
+            && let Err(Finding::Transport(e)) = ctx.begin_cases()
+        {
+            report.stopped = Some(e.to_string());
         }
     }
     for (i, case) in selected.into_iter().enumerate() {

@@ -98,13 +98,25 @@ fn frames_text(c: &CaseReport) -> String {
 pub fn junit(report: &Report) -> String {
     let mut s = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
     let failures = report.mandatory_failures().count();
+    // A run that stopped (the device did not answer, the transport failed) is an error
+    // of the run itself, not a case's: a suite "run" with one erroneous case carries it,
+    // so that a CI system does not show the cases it never ran as a clean result.
+    let errors = usize::from(report.stopped.is_some());
     let _ = writeln!(
         s,
-        "<testsuites name=\"cantwin conform {}\" tests=\"{}\" failures=\"{failures}\" time=\"{:.6}\">",
+        "<testsuites name=\"cantwin conform {}\" tests=\"{}\" failures=\"{failures}\" errors=\"{errors}\" time=\"{:.6}\">",
         xml(&report.device),
-        report.cases.len(),
+        report.cases.len() + errors,
         report.duration_us as f64 / 1e6
     );
+    if let Some(why) = &report.stopped {
+        let _ = writeln!(
+            s,
+            "  <testsuite name=\"run\" tests=\"1\" failures=\"0\" errors=\"1\" skipped=\"0\">\n    <testcase classname=\"conform.run\" name=\"run\" time=\"{:.6}\"><error message=\"the run stopped: {}\"/></testcase>\n  </testsuite>",
+            report.duration_us as f64 / 1e6,
+            xml(why)
+        );
+    }
     for area in Area::ALL {
         let cases: Vec<&CaseReport> = report.cases.iter().filter(|c| c.area == area).collect();
         if cases.is_empty() {
@@ -338,6 +350,23 @@ mod tests {
             "the failure carries its frames"
         );
         assert!(x.contains("(2 more frames not logged)"));
+    }
+
+    #[test]
+    fn junit_of_a_stopped_run_carries_an_error() {
+        let mut r = report();
+        let clean = junit(&r);
+        assert!(clean.contains("errors=\"0\""), "{clean}");
+        assert!(!clean.contains("<error "), "{clean}");
+        r.stopped = Some("node 5 does not answer <1000>".into());
+        let x = junit(&r);
+        assert!(x.contains("errors=\"1\""), "{x}");
+        assert_eq!(x.matches("<error ").count(), 1, "{x}");
+        assert!(
+            x.contains("<error message=\"the run stopped: node 5 does not answer &lt;1000&gt;\"/>"),
+            "{x}"
+        );
+        assert_eq!(x.matches("<testcase ").count(), 4);
     }
 
     #[test]

@@ -65,6 +65,12 @@ fn case_for(fault: Fault) -> (&'static str, Area) {
         Fault::ResetCommunicationResetsApplication => {
             ("restore.application-after-reset-node", Area::StoreRestore)
         }
+        Fault::RpdoIgnoredInOperational => ("pdo.rpdo-processed", Area::Pdo),
+        Fault::NmtForAnyNodeId => ("nmt.other-node", Area::Nmt),
+        Fault::InhibitedEmcyDropped => ("emcy.inhibit", Area::SyncEmcyTime),
+        Fault::ErrorRegisterReadsZero | Fault::NoErrorResetEmcy => {
+            ("emcy.error-register", Area::SyncEmcyTime)
+        }
     }
 }
 
@@ -399,6 +405,31 @@ fn cia301_7_5_2_14_restore_of_the_communication_parameters_ignored_is_caught() {
 #[test]
 fn cia301_7_3_2_2_1_application_area_reset_by_reset_communication_is_caught() {
     caught_only(Fault::ResetCommunicationResetsApplication);
+}
+
+#[test]
+fn cia301_7_3_2_2_5_rpdo_ignored_in_operational_is_caught() {
+    caught(Fault::RpdoIgnoredInOperational);
+}
+
+#[test]
+fn cia301_7_2_8_3_1_nmt_command_for_another_node_id_obeyed_is_caught() {
+    caught(Fault::NmtForAnyNodeId);
+}
+
+#[test]
+fn cia301_7_5_2_2_error_register_that_reads_0_during_an_error_is_caught() {
+    caught(Fault::ErrorRegisterReadsZero);
+}
+
+#[test]
+fn cia301_7_2_7_1_missing_error_reset_emcy_is_caught() {
+    caught(Fault::NoErrorResetEmcy);
+}
+
+#[test]
+fn cia301_7_5_2_18_emcy_dropped_under_the_inhibit_time_is_caught() {
+    caught(Fault::InhibitedEmcyDropped);
 }
 
 #[test]

@@ -222,3 +222,69 @@ fn cia301_7_2_4_3_17_write_only_and_low_limit_aborts_run_on_an_eds_twin() {
         assert!(c.detail.contains(what), "{id}: {}", c.detail);
     }
 }
+
+/// CiA 301 §7.3.4: the heartbeat consumer cases monitor a node-ID nobody on the bus uses;
+/// node 6 is alive and heartbeating, so monitoring it would never time out.
+#[test]
+fn heartbeat_consumer_cases_monitor_a_node_id_free_on_the_bus() {
+    let r = conform_with("two-nodes.toml", "node5", None, &Options::default());
+    assert!(r.passed(), "{}", show(&r));
+    let c = r.case("error-control.heartbeat-consumer").unwrap();
+    assert_eq!(c.verdict, Verdict::Pass, "{}", c.detail);
+    assert!(c.detail.contains("node 7"), "{}", c.detail);
+}
+
+/// CiA 301 §7.3.2.2.1: a device a master started before the run is put back into
+/// PRE-OPERATIONAL before the first case, where every case expects it.
+#[test]
+fn a_device_started_before_the_run_is_put_into_pre_operational_first() {
+    let r = conform_with("started-before.toml", "node5", None, &Options::default());
+    assert!(r.passed(), "{}", show(&r));
+    // The heartbeats of the first case report PRE-OPERATIONAL (0x7F), not OPERATIONAL.
+    let first = r
+        .cases
+        .iter()
+        .find(|c| c.frames.iter().any(|f| f.frame.starts_with("705#")))
+        .unwrap();
+    let beats: Vec<&str> = first
+        .frames
+        .iter()
+        .map(|f| f.frame.as_str())
+        .filter(|f| f.starts_with("705#"))
+        .collect();
+    assert!(!beats.is_empty(), "{}: {:?}", first.id, first.frames);
+    assert!(
+        beats.iter().all(|f| *f == "705#7F"),
+        "{}: {beats:?}",
+        first.id
+    );
+}
+
+/// CiA 301 §7.2.5: the scenario's own master produces SYNC every 10 ms, so the cases that
+/// count SYNCs and the TPDOs they trigger cannot be judged; they are skipped, not failed.
+#[test]
+fn cases_that_count_syncs_are_skipped_beside_another_sync_producer() {
+    let r = conform("servo-axis.toml", "axis");
+    assert!(r.passed(), "{}", show(&r));
+    for id in [
+        "pdo.transmission-sync",
+        "pdo.transmission-cyclic",
+        "sync.producer",
+        "sync.counter",
+    ] {
+        let c = r.case(id).unwrap();
+        assert_eq!(c.verdict, Verdict::Skipped, "{id}: {}", c.detail);
+        assert_eq!(
+            c.detail, "skipped: another SYNC producer on the bus",
+            "{id}"
+        );
+    }
+    // Without that producer the same cases run.
+    let alone = conform("servo-axis-alone.toml", "axis");
+    assert_eq!(
+        alone.case("sync.producer").unwrap().verdict,
+        Verdict::Pass,
+        "{}",
+        show(&alone)
+    );
+}

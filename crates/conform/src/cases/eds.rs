@@ -85,9 +85,30 @@ fn scan<'c>(ctx: &'c mut Ctx<'_>) -> Result<&'c [ScanEntry], Finding> {
     Ok(ctx.scan.as_deref().unwrap_or_default())
 }
 
+/// What CiA 306 §4 requires of every EDS and DCF that the file lacks: the sections of
+/// the file and device information (§4.5.1, §4.5.2), the object lists (§4.5.4) and at least
+/// one object. A section without a key reads as absent: each of these has mandatory keys.
+pub(crate) fn missing_parts(eds: &cantwin_eds::Eds) -> Vec<String> {
+    let mut missing = Vec::new();
+    if eds.file_info == cantwin_eds::FileInfo::default() {
+        missing.push("no [FileInfo] (CiA 306 §4.5.1)".to_string());
+    }
+    if eds.device_info == cantwin_eds::DeviceInfo::default() {
+        missing.push("no [DeviceInfo] (CiA 306 §4.5.2)".to_string());
+    }
+    if eds.mandatory_objects.is_empty() {
+        missing.push("no [MandatoryObjects] list (CiA 306 §4.5.4)".to_string());
+    }
+    if eds.objects.is_empty() {
+        missing.push("no object defined (CiA 306 §4.6)".to_string());
+    }
+    missing
+}
+
 fn file_valid(ctx: &mut Ctx<'_>) -> Outcome {
     let report = ctx.eds.check();
-    let errors: Vec<String> = report.errors().map(|i| i.to_string()).collect();
+    let mut errors = missing_parts(ctx.eds);
+    errors.extend(report.errors().map(|i| i.to_string()));
     if errors.is_empty() {
         Ok(format!(
             "{} objects, {} warnings",
@@ -248,5 +269,97 @@ fn default_values(ctx: &mut Ctx<'_>) -> Outcome {
         Ok(format!("{checked} defaults agree"))
     } else {
         Err(fail(super::listing(&bad)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use cantwin_can::{Frame, Instant};
+
+    use crate::transport::{Transport, TransportError};
+    use crate::{Area, Options, Profile, Verdict, run};
+
+    /// A bus with nobody on it: the file checks need none.
+    struct Silent(Instant);
+
+    impl Transport for Silent {
+        fn send(&mut self, _frame: Frame) -> Result<(), TransportError> {
+            Ok(())
+        }
+        fn recv(&mut self, deadline: Instant) -> Result<Option<(Instant, Frame)>, TransportError> {
+            self.0 = self.0.max(deadline);
+            Ok(None)
+        }
+        fn now(&self) -> Instant {
+            self.0
+        }
+        fn describe(&self) -> String {
+            "silence".into()
+        }
+    }
+
+    fn file_valid(text: &str) -> (Verdict, String) {
+        let eds = cantwin_eds::load(text).eds;
+        let skip = crate::catalogue()
+            .iter()
+            .filter(|c| c.area == Area::Eds && c.id != "eds.file-valid")
+            .map(|c| c.id.to_string())
+            .collect();
+        let options = Options {
+            only: vec![Area::Eds],
+            skip,
+            ..Options::default()
+        };
+        let r = run(
+            &mut Silent(Instant::ZERO),
+            5,
+            &eds,
+            &Profile::from_eds(&eds),
+            &options,
+            &mut |_| {},
+        );
+        let c = r.case("eds.file-valid").unwrap();
+        (c.verdict, c.detail.clone())
+    }
+
+    const COMPLETE: &str = "[FileInfo]\nFileName=x.eds\nEDSVersion=4.0\n\
+        [DeviceInfo]\nVendorName=x\nProductName=y\n\
+        [MandatoryObjects]\nSupportedObjects=2\n1=0x1000\n2=0x1001\n\
+        [1000]\nParameterName=Device type\nObjectType=0x7\nDataType=0x0007\nAccessType=ro\nDefaultValue=0\nPDOMapping=0\n\
+        [1001]\nParameterName=Error register\nObjectType=0x7\nDataType=0x0005\nAccessType=ro\nPDOMapping=0\n";
+
+    #[test]
+    fn cia306_4_an_empty_file_is_not_a_valid_eds() {
+        let (v, why) = file_valid("");
+        assert_eq!(v, Verdict::Fail, "{why}");
+        for part in [
+            "[FileInfo]",
+            "[DeviceInfo]",
+            "[MandatoryObjects]",
+            "no object",
+        ] {
+            assert!(why.contains(part), "{part}: {why}");
+        }
+    }
+
+    #[test]
+    fn cia306_4_a_file_without_its_device_information_is_not_a_valid_eds() {
+        let (v, why) =
+            file_valid(&COMPLETE.replace("[DeviceInfo]\nVendorName=x\nProductName=y\n", ""));
+        assert_eq!(v, Verdict::Fail, "{why}");
+        assert!(why.contains("[DeviceInfo]"), "{why}");
+        assert!(!why.contains("[FileInfo]"), "{why}");
+    }
+
+    #[test]
+    fn cia306_4_a_text_file_is_not_a_valid_eds() {
+        let (v, why) = file_valid("hello, this is not an EDS\n");
+        assert_eq!(v, Verdict::Fail, "{why}");
+    }
+
+    #[test]
+    fn cia306_4_a_complete_file_is_valid() {
+        let (v, why) = file_valid(COMPLETE);
+        assert_eq!(v, Verdict::Pass, "{why}");
     }
 }

@@ -160,11 +160,6 @@ fn emcy_cob(ctx: &mut Ctx<'_>) -> Result<Option<u32>, Finding> {
     Ok((cob & 0x8000_0000 == 0).then_some(cob & 0x7FF))
 }
 
-/// A node-ID other than the device's.
-fn other_node(node: u8) -> u8 {
-    if node >= 127 { 1 } else { node + 1 }
-}
-
 fn is_emcy(f: &Frame, cob: u32, code: u16) -> bool {
     f.id().as_raw() == cob
         && f.len() == 8
@@ -182,7 +177,7 @@ fn heartbeat_consumer(ctx: &mut Ctx<'_>) -> Outcome {
             "the device produces no EMCY to report the timeout".into(),
         ));
     };
-    let other = other_node(ctx.node);
+    let other = ctx.free_node();
     let entry = (u32::from(other) << 16) | 200;
     ctx.write(
         0x1016,
@@ -228,7 +223,7 @@ fn heartbeat_consumer(ctx: &mut Ctx<'_>) -> Outcome {
         ));
     }
     Ok(format!(
-        "EMCY 0x8130 {} ms after the last heartbeat",
+        "EMCY 0x8130 {} ms after the last heartbeat of node {other} (a node-ID not seen on the bus)",
         after.as_millis()
     ))
 }
@@ -242,7 +237,7 @@ fn heartbeat_duplicate(ctx: &mut Ctx<'_>) -> Outcome {
     if ctx.eds.entry(0x1016, 2).is_none() {
         return Err(Finding::NotApplicable("0x1016 has a single entry".into()));
     }
-    let other = other_node(ctx.node);
+    let other = ctx.free_node();
     ctx.write(
         0x1016,
         1,
@@ -252,7 +247,9 @@ fn heartbeat_duplicate(ctx: &mut Ctx<'_>) -> Outcome {
     let second = ctx.download(0x1016, 2, &((u32::from(other) << 16) | 300).to_le_bytes())?;
     ctx.write(0x1016, 1, &0u32.to_le_bytes(), "0x1016 sub 1")?;
     match second {
-        Err(a) if a.code == AbortCode::PARAMETER_INCOMPATIBLE => Ok("0x06040043".into()),
+        Err(a) if a.code == AbortCode::PARAMETER_INCOMPATIBLE => {
+            Ok(format!("0x06040043 for a second entry of node {other}"))
+        }
         Err(a) => Err(fail_abort("expected 0x06040043", a.code)),
         Ok(()) => {
             ctx.write(0x1016, 2, &0u32.to_le_bytes(), "0x1016 sub 2")?;

@@ -17,6 +17,7 @@ mod mapping;
 mod nmt;
 mod od;
 mod pdo;
+mod rpdo;
 mod sdo;
 mod store;
 mod sync_emcy_time;
@@ -77,6 +78,7 @@ pub(crate) fn all() -> &'static [Case] {
         v.extend(sdo::cases());
         v.extend(od::cases());
         v.extend(pdo::cases());
+        v.extend(rpdo::cases());
         v.extend(mapping::cases());
         v.extend(sync_emcy_time::cases());
         v.extend(error_control::cases());
@@ -95,6 +97,19 @@ pub(crate) fn recover(ctx: &mut Ctx<'_>) {
     let _ = ctx.send(cantwin_can::Frame::data_array(id, b));
     let _ = ctx.nmt(cantwin_canopen::wire::NmtCs::EnterPreOperational);
     let _ = ctx.idle(Duration::from_millis(50));
+}
+
+/// Fails a case whose verdict depends on the timing of the SYNCs it sends or the device
+/// produces when another node produces SYNCs (CiA 301 §7.2.5: one producer per network):
+/// the frames it counts would be that producer's as much as its own.
+pub(crate) fn no_foreign_sync(ctx: &Ctx<'_>) -> Result<(), Finding> {
+    if ctx.foreign_sync {
+        Err(Finding::NotApplicable(
+            "skipped: another SYNC producer on the bus".into(),
+        ))
+    } else {
+        Ok(())
+    }
 }
 
 /// The data type of an EDS entry.

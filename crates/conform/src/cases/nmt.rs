@@ -40,6 +40,13 @@ pub(super) fn cases() -> Vec<Case> {
             pre_operational_after_boot_up,
         ),
         m(
+            "nmt.other-node",
+            A,
+            "CiA 301 §7.2.8.3.1",
+            "an NMT stop for another node-ID leaves the device's state and SDO server alone",
+            other_node,
+        ),
+        m(
             "nmt.broadcast",
             A,
             "CiA 301 §7.2.8.3.1",
@@ -238,6 +245,54 @@ fn pre_operational_after_boot_up(ctx: &mut Ctx<'_>) -> Outcome {
                 "no heartbeat or guarding answer within {} ms of the boot-up",
                 within.as_millis()
             ),
+        )),
+    }
+}
+
+/// §7.2.8.3.1: the node-ID of an NMT command selects the node it is for; a command for
+/// another node-ID (one nobody on the bus uses) is not for the device.
+fn other_node(ctx: &mut Ctx<'_>) -> Outcome {
+    let other = ctx.free_node();
+    let orig = state_reporting(ctx)?;
+    let heartbeat = orig.is_some();
+    let reports = heartbeat || ctx.eds.objects.contains_key(&0x100C);
+    let nmt = cantwin_can::Id::standard(0).map_err(|e| fail(e.to_string()))?;
+    ctx.drain()?;
+    ctx.send(Frame::data_array(nmt, [NmtCs::Stop as u8, other]))?;
+    ctx.idle(Duration::from_millis(20))?;
+    let state = if reports {
+        reported_state(ctx, heartbeat)?
+    } else {
+        None
+    };
+    // A device that took the command is STOPPED and answers no SDO (§7.3.2.2.5).
+    let served = ctx.upload(0x1000, 0)?;
+    if served.is_err() {
+        ctx.nmt(NmtCs::EnterPreOperational)?;
+        ctx.idle(Duration::from_millis(20))?;
+    }
+    if let Some(o) = orig {
+        ctx.write(0x1017, 0, &o, "the heartbeat producer time")?;
+    }
+    if let Err(a) = served {
+        return Err(fail_sdo(
+            format!("after an NMT stop for node {other}, reading 0x1000"),
+            a,
+        ));
+    }
+    match state {
+        Some(0x7F) => Ok(format!(
+            "after an NMT stop for node {other} (a node-ID not seen on the bus): still PRE-OPERATIONAL (127), SDO served"
+        )),
+        Some(s) => Err(fail(format!(
+            "after an NMT stop for node {other} the device reports state {s}, not 127 (PRE-OPERATIONAL)"
+        ))),
+        None if reports => Err(fail_kind(
+            FailureKind::Silence,
+            format!("no state report after an NMT stop for node {other}"),
+        )),
+        None => Ok(format!(
+            "after an NMT stop for node {other} (a node-ID not seen on the bus): SDO served"
         )),
     }
 }

@@ -255,6 +255,7 @@ fn is_pdo(f: &Frame, cob: u32) -> bool {
 }
 
 fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
+    super::no_foreign_sync(ctx)?;
     if ctx.profile.features.sync == Some(false) {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
@@ -631,6 +632,7 @@ fn tpdos_on_syncs(ctx: &mut Ctx<'_>, cob: u32, syncs: usize) -> Result<Vec<usize
 }
 
 fn transmission_cyclic(ctx: &mut Ctx<'_>) -> Outcome {
+    super::no_foreign_sync(ctx)?;
     if ctx.profile.features.sync == Some(false) {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }

@@ -60,6 +60,13 @@ pub(super) fn cases() -> Vec<Case> {
             emcy_history_records,
         ),
         m(
+            "emcy.error-register",
+            A,
+            "CiA 301 §7.2.7.1, §7.5.2.2",
+            "while an error stands 0x1001 bit 0 is set and the EMCY's byte 2 equals 0x1001; the error reset EMCY (0x0000) follows its end and 0x1001 bit 0 clears",
+            emcy_error_register,
+        ),
+        m(
             "emcy.inhibit",
             A,
             "CiA 301 §7.2.7.1, §7.5.2.18",
@@ -160,6 +167,7 @@ fn producer_off(ctx: &mut Ctx<'_>, cob: u32, period: &[u8]) -> Result<(), Findin
 }
 
 fn sync_producer(ctx: &mut Ctx<'_>) -> Outcome {
+    super::no_foreign_sync(ctx)?;
     let (cob, period) = producer_on(ctx, 20_000)?;
     let id = cob & 0x7FF;
     let frames = ctx.collect(Duration::from_millis(205), |f| {
@@ -188,6 +196,7 @@ fn sync_producer(ctx: &mut Ctx<'_>) -> Outcome {
 }
 
 fn sync_counter(ctx: &mut Ctx<'_>) -> Outcome {
+    super::no_foreign_sync(ctx)?;
     if !eds_entry(ctx, 0x1019, 0).is_some_and(|e| access(e).writable()) {
         return Err(not_supported(
             "no synchronous counter overflow value (0x1019)",
@@ -362,11 +371,24 @@ struct ConsumerError {
     hb: Id,
 }
 
-/// Makes the device consume the heartbeat of the next node-ID with a time of 100 ms
+/// An EMCY on COB-ID `emcy` (8 bytes, §7.2.7.3.1).
+fn is_emcy_of(f: &Frame, emcy: u32) -> bool {
+    f.id().as_raw() == emcy && f.len() == 8 && !f.is_remote()
+}
+
+fn payload(f: &Frame) -> [u8; 8] {
+    let mut b = [0u8; 8];
+    let d = f.data_bytes();
+    b[..d.len().min(8)].copy_from_slice(&d[..d.len().min(8)]);
+    b
+}
+
+/// Makes the device consume the heartbeat of a node-ID nobody on the bus uses with a time of 100 ms
 /// (0x1016 sub 1, CiA 301 §7.5.2.19) and sends one heartbeat of that node (operational), so
 /// that the consumer runs and times out 100 ms later: the heartbeat's identifier.
 fn monitor_the_next_node(ctx: &mut Ctx<'_>) -> Result<Id, Finding> {
-    let other = if ctx.node >= 127 { 1 } else { ctx.node + 1 };
+    // A live node's heartbeat would keep the consumer from timing out.
+    let other = ctx.free_node();
     let hb = Id::standard(0x700 + u16::from(other)).map_err(|e| fail(e.to_string()))?;
     ctx.write(
         0x1016,
@@ -379,6 +401,33 @@ fn monitor_the_next_node(ctx: &mut Ctx<'_>) -> Result<Id, Finding> {
 }
 
 impl ConsumerError {
+    /// As [`ConsumerError::raise`], with the whole payload of each EMCY.
+    fn raise_frames(
+        ctx: &mut Ctx<'_>,
+        emcy: u32,
+        within: Duration,
+    ) -> Result<(ConsumerError, Vec<[u8; 8]>), Finding> {
+        let entry = ctx
+            .upload(0x1016, 1)?
+            .map_err(|a| fail_sdo("reading 0x1016 sub 1", a))?;
+        let hb = monitor_the_next_node(ctx)?;
+        let frames = ctx
+            .collect(within, |f| is_emcy_of(f, emcy))?
+            .into_iter()
+            .map(|(_, f)| payload(&f))
+            .collect();
+        Ok((ConsumerError { entry, hb }, frames))
+    }
+
+    /// As [`ConsumerError::end`], with the EMCYs the device sent meanwhile.
+    fn end_frames(self, ctx: &mut Ctx<'_>, emcy: u32) -> Result<Vec<[u8; 8]>, Finding> {
+        ctx.send(Frame::data_array(self.hb, [0x05]))?;
+        let mut got = ctx.collect(Duration::from_millis(20), |f| is_emcy_of(f, emcy))?;
+        ctx.write(0x1016, 1, &self.entry, "the heartbeat consumer entry")?;
+        got.extend(ctx.collect(Duration::from_millis(20), |f| is_emcy_of(f, emcy))?);
+        Ok(got.into_iter().map(|(_, f)| payload(&f)).collect())
+    }
+
     /// Monitors the next node-ID for 100 ms and sends one heartbeat of it: the EMCYs the
     /// device sends in the next `within`.
     fn raise(
@@ -465,6 +514,93 @@ fn emcy_history_records(ctx: &mut Ctx<'_>) -> Outcome {
     Ok(format!(
         "EMCY 0x{newest:04X}: 0x1003 sub 0 = {n}, sub 1 = 0x{e:08X}; cleared by 0"
     ))
+}
+
+/// Raises an error by a consumed heartbeat that stops (EMCY 0x8130) and ends it by the
+/// heartbeat's return: the error register and the EMCYs of both.
+fn emcy_error_register(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.emcy == Some(false) {
+        return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
+    }
+    if ctx.profile.features.heartbeat_consumer == Some(false)
+        || !eds_entry(ctx, 0x1016, 1).is_some_and(|e| access(e).writable())
+    {
+        return Err(Finding::NotApplicable(
+            "no writable heartbeat consumer entry to raise an error with".into(),
+        ));
+    }
+    let emcy = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
+    if emcy & 0x8000_0000 != 0 {
+        return Err(Finding::NotApplicable("the EMCY producer is off".into()));
+    }
+    let emcy = emcy & 0x7FF;
+    // An error that stands already (a drive's fault) keeps bit 0 set after this one ends:
+    // then only the EMCYs and the register while it stands are checked.
+    let before = ctx.read_u32(0x1001, 0, "the error register")?;
+    let clean = before & 0x01 == 0;
+    let (error, frames) = ConsumerError::raise_frames(ctx, emcy, Duration::from_millis(400))?;
+    let raised = frames
+        .iter()
+        .rev()
+        .find(|d| u16::from_le_bytes([d[0], d[1]]) != 0)
+        .cloned();
+    // Read while the error stands (§7.5.2.2: bit 0 is set at any error).
+    let standing = match raised {
+        Some(_) => Some(ctx.read_u32(0x1001, 0, "the error register")?),
+        None => None,
+    };
+    let ended = error.end_frames(ctx, emcy)?;
+    ctx.idle(Duration::from_millis(50))?;
+    let after = ctx.read_u32(0x1001, 0, "the error register")?;
+    let (Some(raised), Some(standing)) = (raised, standing) else {
+        return Err(Finding::NotApplicable(
+            "the heartbeat consumer timeout raised no EMCY".into(),
+        ));
+    };
+    let code = u16::from_le_bytes([raised[0], raised[1]]);
+    let mut wrong = Vec::new();
+    if standing & 0x01 == 0 {
+        wrong.push(format!(
+            "while the error of EMCY 0x{code:04X} stands, 0x1001 = 0x{standing:02X} (bit 0, generic error, clear)"
+        ));
+    }
+    if u32::from(raised[2]) != standing {
+        wrong.push(format!(
+            "EMCY 0x{code:04X} carries error register 0x{:02X} in byte 2, 0x1001 reads 0x{standing:02X}",
+            raised[2]
+        ));
+    }
+    let reset = ended
+        .iter()
+        .find(|d| u16::from_le_bytes([d[0], d[1]]) == 0)
+        .cloned();
+    match &reset {
+        None => {
+            wrong.push("no error reset EMCY (error code 0x0000) after the error ended".to_string())
+        }
+        Some(d) if clean && u32::from(d[2]) & 0x01 != 0 => wrong.push(format!(
+            "the error reset EMCY carries error register 0x{:02X} (bit 0 set)",
+            d[2]
+        )),
+        Some(_) => {}
+    }
+    if clean && after & 0x01 != 0 {
+        wrong.push(format!(
+            "after the error reset, 0x1001 = 0x{after:02X} (bit 0 still set)"
+        ));
+    }
+    if wrong.is_empty() {
+        let other = if clean {
+            String::new()
+        } else {
+            format!(" (another error stood before: 0x1001 was 0x{before:02X})")
+        };
+        Ok(format!(
+            "EMCY 0x{code:04X} with 0x1001 = 0x{standing:02X}, then the error reset EMCY and 0x1001 = 0x{after:02X}{other}"
+        ))
+    } else {
+        Err(fail_kind(FailureKind::Value, super::listing(&wrong)))
+    }
 }
 
 fn emcy_after_boot(ctx: &mut Ctx<'_>) -> Outcome {
@@ -627,10 +763,15 @@ fn emcy_inhibit(ctx: &mut Ctx<'_>) -> Outcome {
             "the heartbeat consumer timeout raised no EMCY to space".into(),
         ));
     };
+    // The heartbeat's return ends the error, and §7.2.7.1 has the device signal the end
+    // with an EMCY (error code 0x0000): a missing one is the device's fault.
     let Some((t2, f2)) = second else {
-        return Err(Finding::NotApplicable(format!(
-            "after {f1} the device sent no second EMCY to space"
-        )));
+        return Err(fail_kind(
+            FailureKind::Event,
+            format!(
+                "after {f1} the device sent no second EMCY (the error reset, §7.2.7.1) within 800 ms of the heartbeat's return"
+            ),
+        ));
     };
     let gap = t2.saturating_duration_since(t1);
     if gap + ctx.options.slack < Duration::from_millis(300) {

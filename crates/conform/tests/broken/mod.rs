@@ -151,11 +151,27 @@ pub enum Fault {
     /// communication, where §7.3.2.2.1 has reset communication set only the communication
     /// area to its power-on values (the application area waits for reset node).
     ResetCommunicationResetsApplication,
+    /// Ignores every RPDO in OPERATIONAL, where §7.2.2 and §7.3.2.2.5 have an RPDO
+    /// received in OPERATIONAL write the objects its mapping names.
+    RpdoIgnoredInOperational,
+    /// Obeys an NMT command whatever node-ID it carries, where §7.2.8.3.1 has the
+    /// command's node-ID select the node (0: all nodes).
+    NmtForAnyNodeId,
+    /// Answers an upload of the error register 0x1001 with 0 whatever errors stand, where
+    /// §7.5.2.2 has bit 0 set at any error (and §7.2.7.1 the EMCY carry 0x1001).
+    ErrorRegisterReadsZero,
+    /// Leaves out the EMCY with error code 0x0000 that §7.2.7.1 has the device send when
+    /// an error is reset.
+    NoErrorResetEmcy,
+    /// Sends only the first EMCY after an inhibit time was set (0x1015 ≠ 0) and drops
+    /// every later one, where §7.2.7.1 and §7.5.2.18 have the inhibit time delay an EMCY,
+    /// not suppress it.
+    InhibitedEmcyDropped,
 }
 
 impl Fault {
     /// Every fault.
-    pub const ALL: [Fault; 41] = [
+    pub const ALL: [Fault; 46] = [
         Fault::SdoInStopped,
         Fault::ToggleIgnored,
         Fault::NoBootUpAfterResetCommunication,
@@ -197,6 +213,11 @@ impl Fault {
         Fault::TimeConsumerBitIgnored,
         Fault::RestoreCommunicationIgnored,
         Fault::ResetCommunicationResetsApplication,
+        Fault::RpdoIgnoredInOperational,
+        Fault::NmtForAnyNodeId,
+        Fault::ErrorRegisterReadsZero,
+        Fault::NoErrorResetEmcy,
+        Fault::InhibitedEmcyDropped,
     ];
 }
 
@@ -386,6 +407,9 @@ pub struct Broken {
     sync_tpdo: bool,
     /// A boot-up went out and no state report since ([`Fault::OperationalReportedAfterBootUp`]).
     booted: bool,
+    /// The inhibit time EMCY last seen and the EMCYs sent under it
+    /// ([`Fault::InhibitedEmcyDropped`]).
+    inhibit_emcys: (u64, u32),
 }
 
 /// The most block download data the node keeps to compute a CRC: the DOMAIN and then some
@@ -409,6 +433,7 @@ impl Broken {
             tpdo_due: None,
             booted: false,
             sync_tpdo: false,
+            inhibit_emcys: (0, 0),
         }
     }
 
@@ -452,6 +477,35 @@ impl Broken {
             && data.len() == 2
             && (data[0] == 0x81 || data[0] == 0x82)
             && (data[1] == 0 || data[1] == NODE_ID)
+        {
+            return None;
+        }
+        if self.fault == Some(Fault::ErrorRegisterReadsZero)
+            && id == self.sdo_rx()
+            && data.len() == 8
+            && data[..4] == [0x40, 0x01, 0x10, 0x00]
+        {
+            out.push(Frame::std(self.sdo_tx(), &[0x4F, 0x01, 0x10, 0x00, 0, 0, 0, 0]).unwrap());
+            return None;
+        }
+        if self.fault == Some(Fault::NmtForAnyNodeId)
+            && id == 0x000
+            && data.len() == 2
+            && data[1] != 0
+            && data[1] != NODE_ID
+        {
+            return self.incoming(&Frame::std(0, &[data[0], NODE_ID]).unwrap(), out);
+        }
+        if self.fault == Some(Fault::RpdoIgnoredInOperational)
+            && self.device.state() == State::Operational
+            && (0..4u16).any(|k| {
+                let cob = self
+                    .device
+                    .od()
+                    .get_unsigned(0x1400 + k, 1)
+                    .unwrap_or(0x8000_0000);
+                cob & 0x8000_0000 == 0 && u64::from(id) == cob & 0x7FF
+            })
         {
             return None;
         }
@@ -906,6 +960,26 @@ impl Broken {
                 }
             }
             return Some(frame);
+        }
+        if self.fault == Some(Fault::InhibitedEmcyDropped)
+            && id == 0x080 + u16::from(NODE_ID)
+            && data.len() == 8
+        {
+            let inhibit = self.device.od().get_unsigned(0x1015, 0).unwrap_or(0);
+            if inhibit != self.inhibit_emcys.0 {
+                self.inhibit_emcys = (inhibit, 0);
+            }
+            self.inhibit_emcys.1 += 1;
+            if inhibit != 0 && self.inhibit_emcys.1 > 1 {
+                return None;
+            }
+        }
+        if self.fault == Some(Fault::NoErrorResetEmcy)
+            && id == 0x080 + u16::from(NODE_ID)
+            && data.len() == 8
+            && data[..2] == [0, 0]
+        {
+            return None;
         }
         if self.fault == Some(Fault::OldMappingSent)
             && !frame.is_remote()
