@@ -59,10 +59,11 @@ const NAMES: &[(&str, &str)] = &[
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Benchmarks to run (all when none is named): bus, network, fleet, sdo, memory, python,
-    /// and one per twin: adv200-canopen, adv200-ds402, adv200-devicenet, tm3, tm3-56, opendrive.
-    /// `python` needs python-can and python-canopen (the interop suite's virtualenv, or
-    /// CANTWIN_PYTHON); when it is not named it is skipped without them.
+    /// Benchmarks to run (all when none is named; `--list` says what each measures): silkit,
+    /// bus, network, fleet, sdo, memory, python, cia402, and one per twin: adv200-canopen,
+    /// adv200-ds402, adv200-devicenet, tm3, tm3-56, opendrive. `python` needs python-can and
+    /// python-canopen (the interop suite's virtualenv, or CANTWIN_PYTHON), `silkit` needs SIL
+    /// Kit (`scripts/fetch-silkit.sh`); when not named they are skipped without them.
     names: Vec<String>,
     /// Record the figures in BENCHMARKS.md.
     #[arg(long)]
