@@ -132,6 +132,32 @@ pub(crate) struct Ctx<'a> {
     /// SYNC frames came from another producer before the first case: the cases whose
     /// verdict depends on SYNC timing cannot be judged.
     pub foreign_sync: bool,
+    /// The PDOs whose mapping in the file cannot run on any device made from it (an
+    /// entry names an object the file lacks, is not mappable, or the whole is too long,
+    /// CiA 301 §7.5.2.36, §7.5.2.38), by communication index, with why: the PDO cases
+    /// leave them out, since the device must refuse the file's own mapping for them.
+    pub unrunnable: std::collections::BTreeMap<u16, String>,
+}
+
+/// The PDOs of `eds` whose file mapping cannot run, by communication index, from the
+/// warnings of [`cantwin_eds::pdo_issues`] on the file as the device comes up with it
+/// (a DCF's `ParameterValue`s as defaults).
+fn unrunnable_pdos(eds: &Eds) -> std::collections::BTreeMap<u16, String> {
+    let mut out = std::collections::BTreeMap::new();
+    for issue in cantwin_eds::pdo_issues(&cantwin_eds::configured(eds)) {
+        // The section names the mapping object: `1A00` or `1A00sub1`.
+        let Some(map) = issue
+            .section
+            .get(..4)
+            .and_then(|h| u16::from_str_radix(h, 16).ok())
+        else {
+            continue;
+        };
+        if matches!(map, 0x1600..=0x17FF | 0x1A00..=0x1BFF) {
+            out.entry(map - 0x200).or_insert(issue.message);
+        }
+    }
+    out
 }
 
 /// The node-ID a frame of the pre-defined connection set shows (CiA 301 §7.3.5): EMCY
@@ -173,6 +199,7 @@ impl<'a> Ctx<'a> {
             short_before_cases: std::collections::BTreeSet::new(),
             cases_begun: false,
             foreign_sync: false,
+            unrunnable: unrunnable_pdos(eds),
         }
     }
 

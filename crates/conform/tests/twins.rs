@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use cantwin_conform::{Options, Profile, Report, Verdict, VirtualBus, run};
+use cantwin_conform::{Area, Options, Profile, Report, Verdict, VirtualBus, run};
 use cantwin_scenario::{BuildEnv, Registry, Scenario};
 
 fn scenario(name: &str) -> PathBuf {
@@ -287,4 +287,69 @@ fn cases_that_count_syncs_are_skipped_beside_another_sync_producer() {
         "{}",
         show(&alone)
     );
+}
+
+/// CiA 301 §7.5.2.37 (sub 3): the inhibit time is the minimum interval between two TPDOs.
+/// TPDO 2 of the file has 100 ms: with a 50 ms event timer the TPDO comes every 100 ms,
+/// and the event timer case expects that, not a TPDO every 50 ms.
+#[test]
+fn cia301_7_5_2_37_event_timer_case_keeps_to_a_longer_inhibit_time() {
+    let options = Options {
+        only: vec![Area::Pdo],
+        ..Options::default()
+    };
+    let r = conform_data_file("pdo-unrunnable", &options);
+    let c = r.case("pdo.event-timer").unwrap();
+    assert_eq!(c.verdict, Verdict::Pass, "{}", c.detail);
+    assert!(c.detail.contains("every 100 ms"), "{}", c.detail);
+    assert!(c.detail.contains("inhibit time of 100 ms"), "{}", c.detail);
+}
+
+/// CiA 301 §7.5.2.36, §7.5.2.38: TPDO 1's file mapping names an object the file lacks, so
+/// no device made from it can run TPDO 1. The PDO cases leave it out, say so, and run on
+/// TPDO 2; a case that wrote TPDO 1's own mapping back would be refused by any device.
+#[test]
+fn cia301_7_5_2_38_pdo_cases_leave_out_a_pdo_whose_file_mapping_cannot_run() {
+    let options = Options {
+        only: vec![Area::Pdo],
+        ..Options::default()
+    };
+    let r = conform_data_file("pdo-unrunnable", &options);
+    assert!(r.passed(), "{}", show(&r));
+    let c = r.case("pdo.cob-ids").unwrap();
+    assert!(
+        c.detail.contains("left out") && c.detail.contains("0x1800: TPDO 1 maps 0x6041"),
+        "{}",
+        c.detail
+    );
+    for (id, pdo) in [
+        ("pdo.mapping-procedure", "0x1A01"),
+        ("pdo.mapping-carried", "0x1A01"),
+        ("pdo.cob-id-change-valid", "0x1801"),
+        ("pdo.rtr", "289#"),
+    ] {
+        let c = r.case(id).unwrap();
+        assert_eq!(c.verdict, Verdict::Pass, "{id}: {}", c.detail);
+        assert!(c.detail.contains(pdo), "{id}: {}", c.detail);
+    }
+}
+
+/// CiA 301 §7.2.4.3.17: after each refused request the SDO cases check that the server
+/// serves again. A file without 0x1000 (python-canopen's datatypes.eds has none) fails the
+/// file check only; the others read the first readable entry of the file instead.
+#[test]
+fn cia301_7_2_4_3_17_a_file_without_0x1000_fails_only_the_file_check() {
+    let r = conform_data_file("no-device-type", &Options::default());
+    let failed: Vec<&str> = r
+        .cases
+        .iter()
+        .filter(|c| c.verdict == Verdict::Fail)
+        .map(|c| c.id.as_str())
+        .collect();
+    assert_eq!(failed, ["eds.mandatory-objects"], "{}", show(&r));
+    let c = r.case("sdo.expedited-upload").unwrap();
+    assert!(c.detail.contains("0x1001 sub 0"), "{}", c.detail);
+    for id in ["sdo.abort-toggle", "sdo.abort-timeout", "nmt.sdo-stopped"] {
+        assert_eq!(r.case(id).unwrap().verdict, Verdict::Pass, "{id}");
+    }
 }

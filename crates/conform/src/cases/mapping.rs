@@ -72,7 +72,7 @@ fn find(ctx: &mut Ctx<'_>, tx_only: bool) -> Result<Option<Remap>, Finding> {
             continue;
         }
         for k in 0..512u16 {
-            if ctx.eds.objects.contains_key(&(base + k)) {
+            if ctx.eds.objects.contains_key(&(base + k)) && super::runnable(ctx, base + k) {
                 all.push((tx, base + k, base + 0x200 + k));
             }
         }
@@ -135,13 +135,16 @@ fn restore(ctx: &mut Ctx<'_>, r: &Remap) -> Result<(), Finding> {
     ctx.write(r.comm, 1, &r.cob.to_le_bytes(), "the COB-ID back to valid")
 }
 
-fn none() -> Finding {
-    Finding::NotApplicable("no valid PDO with a writable mapping".into())
+fn none(ctx: &Ctx<'_>) -> Finding {
+    Finding::NotApplicable(format!(
+        "no valid PDO with a writable mapping{}",
+        super::left_out_brief(ctx)
+    ))
 }
 
 fn entry_while_enabled(ctx: &mut Ctx<'_>) -> Outcome {
     let Some(r) = find(ctx, false)? else {
-        return Err(none());
+        return Err(none(ctx));
     };
     // Another value than sub 1's own (a device may take a write of the value an entry
     // holds, which changes nothing): the second entry where it differs, else the first one
@@ -243,7 +246,7 @@ fn refused_with_any(
 
 fn length(ctx: &mut Ctx<'_>) -> Outcome {
     let Some(r) = find(ctx, false)? else {
-        return Err(none());
+        return Err(none(ctx));
     };
     let highest = highest_sub(ctx, r.map);
     // The longest entry the PDO maps, repeated past 64 bits, if the object has room.
@@ -304,7 +307,7 @@ fn length(ctx: &mut Ctx<'_>) -> Outcome {
 /// the refusal must carry `code`.
 fn map_one(ctx: &mut Ctx<'_>, entry: u32, what: &str, code: AbortCode) -> Outcome {
     let Some(r) = find(ctx, false)? else {
-        return Err(none());
+        return Err(none(ctx));
     };
     open(ctx, &r, true)?;
     let got = map_entries(ctx, r.map, &[entry])?;
@@ -360,9 +363,10 @@ enum Trigger {
 
 fn carried(ctx: &mut Ctx<'_>) -> Outcome {
     let Some(r) = find(ctx, true)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a writable mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a writable mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     // The new mapping: the first entry alone, or twice where it is the only one.
     let first = r.entries[0];

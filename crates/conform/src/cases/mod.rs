@@ -112,6 +112,46 @@ pub(crate) fn no_foreign_sync(ctx: &Ctx<'_>) -> Result<(), Finding> {
     }
 }
 
+/// Whether the PDO with communication index `comm` can run with the file's mapping: the
+/// cases choose only such PDOs (the others the device must keep from running, CiA 301
+/// §7.5.2.36, §7.5.2.38, whatever the case writes).
+pub(crate) fn runnable(ctx: &Ctx<'_>, comm: u16) -> bool {
+    !ctx.unrunnable.contains_key(&comm)
+}
+
+/// The PDOs left out of the PDO cases and why, for a case's note; empty if none.
+pub(crate) fn left_out(ctx: &Ctx<'_>) -> String {
+    if ctx.unrunnable.is_empty() {
+        return String::new();
+    }
+    let items: Vec<String> = ctx
+        .unrunnable
+        .iter()
+        .map(|(comm, why)| format!("0x{comm:04X}: {why}"))
+        .collect();
+    format!(
+        "; left out, their file mapping cannot run: {}",
+        listing(&items)
+    )
+}
+
+/// The PDOs left out of the PDO cases, by communication index, for the note of a case
+/// that found no PDO to run with; empty if none.
+pub(crate) fn left_out_brief(ctx: &Ctx<'_>) -> String {
+    if ctx.unrunnable.is_empty() {
+        return String::new();
+    }
+    let items: Vec<String> = ctx
+        .unrunnable
+        .keys()
+        .map(|comm| format!("0x{comm:04X}"))
+        .collect();
+    format!(
+        " (left out, their file mapping cannot run: {})",
+        items.join(", ")
+    )
+}
+
 /// The data type of an EDS entry.
 pub(crate) fn data_type(e: &Entry) -> Option<DataType> {
     e.data_type.and_then(DataType::from_index)
@@ -180,17 +220,43 @@ pub(crate) fn eds_entry<'e>(ctx: &'e Ctx<'_>, index: u16, sub: u8) -> Option<&'e
     ctx.eds.entry(index, sub)
 }
 
-/// Checks that the device still answers an expedited upload of 0x1000 after a refused
+/// The entry the SDO cases read to see that the server serves: 0x1000 (device type,
+/// mandatory, CiA 301 §7.5.2.1) where the file has it, else the first readable entry of 1 to
+/// 4 bytes the file lists (a file without 0x1000 fails `eds.mandatory-objects`, and
+/// every other SDO case would fail with it, naming nothing of its own clause).
+/// (index, sub, size in bytes where the type fixes one).
+pub(crate) fn served_entry(ctx: &Ctx<'_>) -> (u16, u8, Option<usize>) {
+    if let Some(e) = eds_entry(ctx, 0x1000, 0) {
+        return (
+            0x1000,
+            0,
+            data_type(e).and_then(|d| d.fixed_size()).or(Some(4)),
+        );
+    }
+    entries(ctx)
+        .into_iter()
+        .filter(|(_, _, e)| access(e).readable())
+        .find_map(|(i, s, e)| {
+            data_type(&e)
+                .and_then(|d| d.fixed_size())
+                .filter(|n| (1..=4).contains(n))
+                .map(|n| (i, s, Some(n)))
+        })
+        .unwrap_or((0x1000, 0, Some(4)))
+}
+
+/// Checks that the device still answers an upload of [`served_entry`] after a refused
 /// request (CiA 301 §7.2.4.3.17: an abort ends the transfer; the server is free again).
 pub(crate) fn recovered(ctx: &mut Ctx<'_>, after: &str) -> Result<(), Finding> {
-    match ctx.upload(0x1000, 0)? {
-        Ok(d) if d.len() == 4 => Ok(()),
+    let (index, sub, size) = served_entry(ctx);
+    match ctx.upload(index, sub)? {
+        Ok(d) if size.is_none_or(|n| d.len() == n) => Ok(()),
         Ok(d) => Err(fail(format!(
-            "after {after}, reading 0x1000 returned {} bytes",
+            "after {after}, reading 0x{index:04X} sub {sub} returned {} bytes",
             d.len()
         ))),
         Err(a) => Err(fail_sdo(
-            format!("after {after}, the server no longer serves 0x1000"),
+            format!("after {after}, the server no longer serves 0x{index:04X} sub {sub}"),
             a,
         )),
     }

@@ -266,7 +266,8 @@ fn other_node(ctx: &mut Ctx<'_>) -> Outcome {
         None
     };
     // A device that took the command is STOPPED and answers no SDO (§7.3.2.2.5).
-    let served = ctx.upload(0x1000, 0)?;
+    let (index, sub, _) = super::served_entry(ctx);
+    let served = ctx.upload(index, sub)?;
     if served.is_err() {
         ctx.nmt(NmtCs::EnterPreOperational)?;
         ctx.idle(Duration::from_millis(20))?;
@@ -276,7 +277,7 @@ fn other_node(ctx: &mut Ctx<'_>) -> Outcome {
     }
     if let Err(a) = served {
         return Err(fail_sdo(
-            format!("after an NMT stop for node {other}, reading 0x1000"),
+            format!("after an NMT stop for node {other}, reading 0x{index:04X} sub {sub}"),
             a,
         ));
     }
@@ -410,7 +411,10 @@ fn sdo_stopped(ctx: &mut Ctx<'_>) -> Outcome {
 pub(crate) fn first_tpdo(ctx: &mut Ctx<'_>) -> Result<Option<(u16, u32)>, Finding> {
     for k in 0..512u16 {
         let comm = 0x1800 + k;
-        if !ctx.eds.objects.contains_key(&comm) || !ctx.eds.objects.contains_key(&(0x1A00 + k)) {
+        if !ctx.eds.objects.contains_key(&comm)
+            || !ctx.eds.objects.contains_key(&(0x1A00 + k))
+            || !super::runnable(ctx, comm)
+        {
             continue;
         }
         let cob = ctx.read_u32(comm, 1, "the TPDO COB-ID")?;
@@ -459,9 +463,10 @@ fn pdos_during(
 
 fn pdo_operational_only(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, cob)) = first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let tt = ctx
         .upload(comm, 2)?
@@ -521,7 +526,10 @@ type RpdoProbe = (u32, Vec<u8>, (u16, u8, Vec<u8>));
 fn rpdo_probe(ctx: &mut Ctx<'_>) -> Result<Option<RpdoProbe>, Finding> {
     'pdo: for k in 0..512u16 {
         let (comm, map) = (0x1400 + k, 0x1600 + k);
-        if !ctx.eds.objects.contains_key(&comm) || !ctx.eds.objects.contains_key(&map) {
+        if !ctx.eds.objects.contains_key(&comm)
+            || !ctx.eds.objects.contains_key(&map)
+            || !super::runnable(ctx, comm)
+        {
             continue;
         }
         let cob = ctx.read_u32(comm, 1, "an RPDO COB-ID")?;
@@ -580,9 +588,10 @@ fn services_in(ctx: &mut Ctx<'_>, cs: NmtCs, name: &str) -> Outcome {
         first_tpdo(ctx)?
     };
     if rpdo.is_none() && tpdo.is_none() {
-        return Err(Finding::NotApplicable(
-            "no valid RPDO whose mapped objects read back, and no SYNC-driven TPDO".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid RPDO whose mapped objects read back, and no SYNC-driven TPDO{}",
+            super::left_out_brief(ctx)
+        )));
     }
     let emcy = match ctx.upload(0x1014, 0)? {
         Ok(d) if super::u32_of(&d) & 0x8000_0000 == 0 => Some(super::u32_of(&d) & 0x7FF),

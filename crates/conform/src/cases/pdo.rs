@@ -85,8 +85,8 @@ pub(super) fn cases() -> Vec<Case> {
         m(
             "pdo.event-timer",
             A,
-            "CiA 301 §7.5.2.37 (sub 5)",
-            "transmission type 254 (or 255) with a 50 ms event timer sends every 50 ms",
+            "CiA 301 §7.5.2.37 (sub 5, sub 3)",
+            "transmission type 254 (or 255) with a 50 ms event timer sends every 50 ms, or every inhibit time where that is longer",
             event_timer,
         ),
         m(
@@ -111,8 +111,8 @@ fn restricted(id: u32) -> bool {
     matches!(id, 0x000 | 0x001..=0x07F | 0x101..=0x180 | 0x581..=0x5FF | 0x601..=0x67F | 0x6E0..=0x6FF | 0x701..=0x77F | 0x780..=0x7FF)
 }
 
-/// The PDOs of the file: (communication index, mapping index).
-fn pdos(ctx: &Ctx<'_>, tx: bool) -> Vec<(u16, u16)> {
+/// Every PDO of the file: (communication index, mapping index).
+fn all_pdos(ctx: &Ctx<'_>, tx: bool) -> Vec<(u16, u16)> {
     let base = if tx { 0x1800 } else { 0x1400 };
     (0..512u16)
         .map(|k| (base + k, base + 0x200 + k))
@@ -120,12 +120,21 @@ fn pdos(ctx: &Ctx<'_>, tx: bool) -> Vec<(u16, u16)> {
         .collect()
 }
 
+/// The PDOs of the file whose file mapping can run ([`super::runnable`]).
+fn pdos(ctx: &Ctx<'_>, tx: bool) -> Vec<(u16, u16)> {
+    all_pdos(ctx, tx)
+        .into_iter()
+        .filter(|(c, _)| super::runnable(ctx, *c))
+        .collect()
+}
+
 fn cob_ids(ctx: &mut Ctx<'_>) -> Outcome {
     let mut bad = Vec::new();
     let mut valid = 0;
-    let all: Vec<(u16, u16)> = pdos(ctx, false)
+    // The COB-ID rules hold for every PDO, also one whose mapping cannot run.
+    let all: Vec<(u16, u16)> = all_pdos(ctx, false)
         .into_iter()
-        .chain(pdos(ctx, true))
+        .chain(all_pdos(ctx, true))
         .collect();
     for (comm, _) in all {
         let cob = ctx.read_u32(comm, 1, "a PDO COB-ID")?;
@@ -140,7 +149,7 @@ fn cob_ids(ctx: &mut Ctx<'_>) -> Outcome {
             .map_err(|a| fail_sdo(format!("0x{comm:04X} sub 2 (transmission type)"), a))?;
     }
     if bad.is_empty() {
-        Ok(format!("{valid} valid PDOs"))
+        Ok(format!("{valid} valid PDOs{}", super::left_out(ctx)))
     } else {
         Err(fail(format!(
             "restricted or malformed COB-IDs: {}",
@@ -183,9 +192,10 @@ fn dynamic_pdo(ctx: &mut Ctx<'_>) -> Result<Option<DynamicPdo>, Finding> {
 
 fn mapping_procedure(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, map, cob, list)) = dynamic_pdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid PDO with a writable mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid PDO with a writable mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let n = u8::try_from(list.len()).unwrap_or(0);
     if ctx.download(map, 0, &[0])?.is_ok() {
@@ -219,9 +229,10 @@ fn mapping_procedure(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn cob_id_change_valid(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, _, cob, _)) = dynamic_pdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid PDO with a writable COB-ID".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid PDO with a writable COB-ID{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let other = (cob & !0x7FF) | (((cob & 0x7FF) + 1) & 0x7FF);
     match ctx.download(comm, 1, &other.to_le_bytes())? {
@@ -260,9 +271,10 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let tt = ctx
         .upload(comm, 2)?
@@ -313,9 +325,10 @@ fn transmission_sync(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     if !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable()) {
         return Err(not_supported(format!(
@@ -336,9 +349,34 @@ fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     };
     ctx.write(comm, 2, &[ty], "the transmission type")?;
     ctx.write(comm, 5, &50u16.to_le_bytes(), "the event timer")?;
+    // The inhibit time is the minimum interval between two TPDOs (§7.5.2.37, sub 3, in
+    // 100 µs): with one longer than the event timer, the TPDO comes every inhibit time.
+    let inhibit_us = if eds_entry(ctx, comm, 3).is_some() {
+        match ctx.upload(comm, 3)? {
+            Ok(d) => u64::from(super::u32_of(&d) & 0xFFFF) * 100,
+            Err(a) => {
+                ctx.write(comm, 5, &et, "the event timer")?;
+                ctx.write(comm, 2, &tt, "the transmission type")?;
+                return Err(fail_sdo(format!("reading 0x{comm:04X} sub 3"), a));
+            }
+        }
+    } else {
+        0
+    };
+    let period = Duration::from_micros(inhibit_us.max(50_000));
+    let why = if inhibit_us > 50_000 {
+        format!(
+            "a 50 ms event timer and an inhibit time of {} ms",
+            inhibit_us as f64 / 1000.0
+        )
+    } else {
+        "a 50 ms event timer".to_string()
+    };
+    // Ten periods and a half: 9 to 11 TPDOs whatever the phase of the first.
+    let window = Duration::from_micros(period.as_micros() * 21 / 2);
     ctx.nmt(NmtCs::Start)?;
-    ctx.wait_for(Duration::from_millis(100), |f| is_pdo(f, cob))?;
-    let frames = ctx.collect(Duration::from_millis(525), |f| is_pdo(f, cob))?;
+    ctx.wait_for(period + period, |f| is_pdo(f, cob))?;
+    let frames = ctx.collect(window, |f| is_pdo(f, cob))?;
     ctx.nmt(NmtCs::EnterPreOperational)?;
     ctx.idle(Duration::from_millis(10))?;
     ctx.write(comm, 5, &et, "the event timer")?;
@@ -346,29 +384,39 @@ fn event_timer(ctx: &mut Ctx<'_>) -> Outcome {
     if !(9..=11).contains(&frames.len()) {
         return Err(fail_kind(
             FailureKind::Timing,
-            format!("{} TPDOs in 525 ms with a 50 ms event timer", frames.len()),
+            format!(
+                "{} TPDOs in {} ms with {why}, expected 9 to 11",
+                frames.len(),
+                window.as_micros() / 1000
+            ),
         ));
     }
     for w in frames.windows(2) {
         let d = w[1].0.saturating_duration_since(w[0].0);
-        if !within(ctx, d, Duration::from_millis(50)) {
+        if !within(ctx, d, period) {
             return Err(fail_kind(
                 FailureKind::Timing,
-                format!("a TPDO interval of {} µs, event timer 50 ms", d.as_micros()),
+                format!(
+                    "a TPDO interval of {} µs, expected {} µs ({why})",
+                    d.as_micros(),
+                    period.as_micros()
+                ),
             ));
         }
     }
     Ok(format!(
-        "{} TPDOs, intervals within tolerance",
-        frames.len()
+        "{} TPDOs every {} ms ({why}), intervals within tolerance",
+        frames.len(),
+        period.as_micros() / 1000
     ))
 }
 
 fn inhibit_time(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     if !eds_entry(ctx, comm, 3).is_some_and(|e| access(e).writable())
         || !eds_entry(ctx, comm, 5).is_some_and(|e| access(e).writable())
@@ -451,9 +499,10 @@ fn rpdo_length(ctx: &mut Ctx<'_>) -> Outcome {
         }
     }
     let Some((cob, len)) = found else {
-        return Err(Finding::NotApplicable(
-            "no valid RPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid RPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let emcy = match ctx.upload(0x1014, 0)? {
         Ok(d) if super::u32_of(&d) & 0x8000_0000 == 0 => super::u32_of(&d) & 0x7FF,
@@ -531,9 +580,10 @@ fn transmission_acyclic(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     // Type 0 is acyclic synchronous (CiA 301 §7.2.2.2.2): the TPDO goes out with the
     // SYNC after an event of the device. The case makes the event itself by changing a
@@ -637,9 +687,10 @@ fn transmission_cyclic(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let tt = ctx
         .upload(comm, 2)?
@@ -674,9 +725,10 @@ fn transmission_rtr_sync(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     if cob & 0x4000_0000 != 0 {
         return Err(not_supported(format!(
@@ -731,9 +783,10 @@ fn transmission_rtr_sync(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn transmission_reserved(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, _)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let tt = ctx
         .upload(comm, 2)?
@@ -762,9 +815,10 @@ fn transmission_reserved(ctx: &mut Ctx<'_>) -> Outcome {
 
 fn rtr(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     if cob & 0x4000_0000 != 0 {
         if ctx.profile.features.pdo_rtr == Some(true) {
@@ -826,9 +880,10 @@ fn sync_start_value(ctx: &mut Ctx<'_>) -> Outcome {
         return Err(not_supported("no SYNC consumer (0x1005 not in the file)"));
     }
     let Some((comm, cob)) = super::nmt::first_tpdo(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid TPDO with a mapping".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid TPDO with a mapping{}",
+            super::left_out_brief(ctx)
+        )));
     };
     if !eds_entry(ctx, comm, 6).is_some_and(|e| access(e).writable()) {
         return Err(not_supported(format!(

@@ -61,7 +61,7 @@ impl Rpdo {
 fn find(ctx: &mut Ctx<'_>) -> Result<Option<(Rpdo, usize)>, Finding> {
     for k in 0..512u16 {
         let (comm, map) = (0x1400 + k, 0x1600 + k);
-        if !ctx.eds.objects.contains_key(&comm) {
+        if !ctx.eds.objects.contains_key(&comm) || !super::runnable(ctx, comm) {
             continue;
         }
         let cob = ctx.read_u32(comm, 1, "an RPDO COB-ID")?;
@@ -157,9 +157,10 @@ fn deliver(ctx: &mut Ctx<'_>, r: &Rpdo, frame: Frame) -> Result<(), Finding> {
 
 fn rpdo_processed(ctx: &mut Ctx<'_>) -> Outcome {
     let Some((r, pick)) = find(ctx)? else {
-        return Err(Finding::NotApplicable(
-            "no valid RPDO maps a readable and writable object".into(),
-        ));
+        return Err(Finding::NotApplicable(format!(
+            "no valid RPDO maps a readable and writable object{}",
+            super::left_out_brief(ctx)
+        )));
     };
     let (index, sub) = (r.fields[pick].index, r.fields[pick].sub);
     let old = r.fields[pick].now.clone();

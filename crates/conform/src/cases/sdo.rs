@@ -231,35 +231,61 @@ fn block_refused(ctx: &Ctx<'_>, what: &str, a: Aborted) -> Finding {
 }
 
 fn expedited_upload(ctx: &mut Ctx<'_>) -> Outcome {
-    let Some(b) = ctx.sdo_raw(req(0x40, 0x1000, 0, [0; 4]))? else {
+    let (index, sub, size) = super::served_entry(ctx);
+    let what = format!("0x{index:04X} sub {sub}");
+    let Some(b) = ctx.sdo_raw(req(0x40, index, sub, [0; 4]))? else {
         return Err(fail_kind(
             FailureKind::Silence,
-            "no answer to an upload of 0x1000",
+            format!("no answer to an upload of {what}"),
         ));
     };
     if let Some(code) = abort_of(&b) {
-        return Err(fail_abort("upload of 0x1000", code));
+        return Err(fail_abort(format!("upload of {what}"), code));
     }
-    if b[0] & 0xE0 != 0x40 || b[1..4] != mux_bytes(0x1000, 0) {
+    if b[0] & 0xE0 != 0x40 || b[1..4] != mux_bytes(index, sub) {
         return Err(fail(format!(
-            "answer {b:02X?} is not an initiate upload response for 0x1000"
+            "answer {b:02X?} is not an initiate upload response for {what}"
         )));
     }
+    // Data of 1 to 4 bytes goes expedited (§7.2.4.3.6); a larger entry may go segmented.
+    let small = size.is_some_and(|n| (1..=4).contains(&n));
     if b[0] & 0x02 == 0 {
-        return Err(fail(format!("a 4-byte entry not sent expedited: {b:02X?}")));
+        if small {
+            return Err(fail(format!(
+                "a {}-byte entry not sent expedited: {b:02X?}",
+                size.unwrap_or(0)
+            )));
+        }
+        ctx.sdo_raw(req(
+            0x80,
+            index,
+            sub,
+            AbortCode::GENERAL_ERROR.to_u32().to_le_bytes(),
+        ))?;
+        return Err(Finding::NotApplicable(format!(
+            "{what} is not of 1 to 4 bytes and was answered segmented"
+        )));
     }
     let n = if b[0] & 0x01 != 0 {
         4 - usize::from((b[0] >> 2) & 3)
     } else {
         4
     };
-    if n != 4 {
-        return Err(fail(format!("0x1000 (UNSIGNED32) uploaded with {n} bytes")));
+    if size.is_some_and(|want| want != n) {
+        return Err(fail(format!(
+            "{what} ({} bytes) uploaded with {n} bytes",
+            size.unwrap_or(0)
+        )));
     }
-    Ok(format!(
-        "device type 0x{:08X}",
-        u32::from_le_bytes([b[4], b[5], b[6], b[7]])
-    ))
+    let value = u32::from_le_bytes([b[4], b[5], b[6], b[7]]) & (u32::MAX >> (8 * (4 - n.min(4))));
+    if index == 0x1000 {
+        Ok(format!("device type 0x{value:08X}"))
+    } else {
+        Ok(format!(
+            "{what} = 0x{value:0w$X} (the file has no 0x1000)",
+            w = 2 * n
+        ))
+    }
 }
 
 fn expedited_download(ctx: &mut Ctx<'_>) -> Outcome {
@@ -741,11 +767,27 @@ fn abort_no_sub(ctx: &mut Ctx<'_>) -> Outcome {
 }
 
 fn abort_read_only(ctx: &mut Ctx<'_>) -> Outcome {
+    // 0x1000 is read-only on every device (CiA 301 §7.5.2.1); a file without it names
+    // another read-only entry.
+    let (index, sub) = if ctx.eds.entry(0x1000, 0).is_some() {
+        (0x1000, 0)
+    } else {
+        let Some((i, s)) = entries(ctx)
+            .into_iter()
+            .find(|(_, _, e)| !access(e).writable() && access(e).readable())
+            .map(|(i, s, _)| (i, s))
+        else {
+            return Err(Finding::NotApplicable(
+                "the file has no read-only entry".into(),
+            ));
+        };
+        (i, s)
+    };
     expect_abort(
         ctx,
-        req(0x23, 0x1000, 0, [0; 4]),
+        req(0x23, index, sub, [0; 4]),
         &[AbortCode::READ_ONLY],
-        "download to 0x1000",
+        &format!("download to 0x{index:04X} sub {sub}"),
     )
 }
 
@@ -955,9 +997,10 @@ fn abort_invalid_ccs(ctx: &mut Ctx<'_>) -> Outcome {
 }
 
 fn abort_block_size(ctx: &mut Ctx<'_>) -> Outcome {
+    let (index, sub, _) = super::served_entry(ctx);
     let mut notes = Vec::new();
     for blksize in [0u8, 128] {
-        let Some(b) = ctx.sdo_raw(req(0xA0, 0x1000, 0, [blksize, 0, 0, 0]))? else {
+        let Some(b) = ctx.sdo_raw(req(0xA0, index, sub, [blksize, 0, 0, 0]))? else {
             return Err(fail_kind(
                 FailureKind::Silence,
                 format!("no answer to a block upload initiate with block size {blksize}"),
@@ -978,8 +1021,8 @@ fn abort_block_size(ctx: &mut Ctx<'_>) -> Outcome {
             None => {
                 ctx.sdo_raw(req(
                     0x80,
-                    0x1000,
-                    0,
+                    index,
+                    sub,
                     AbortCode::INVALID_BLOCK_SIZE.to_u32().to_le_bytes(),
                 ))?;
                 return Err(fail(format!("block size {blksize} accepted: {b:02X?}")));

@@ -261,12 +261,19 @@ fn sync_counter(ctx: &mut Ctx<'_>) -> Outcome {
 }
 
 fn emcy_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
-    let reg = ctx
-        .upload(0x1001, 0)?
-        .map_err(|a| fail_sdo("reading 0x1001", a))?;
-    if reg.len() != 1 {
-        return Err(fail(format!("0x1001 reads {} bytes, not 1", reg.len())));
-    }
+    // A file without 0x1001 fails `eds.mandatory-objects` (CiA 301 §7.4.1); a device made
+    // from it has no error register to read here.
+    let reg = if ctx.eds.entry(0x1001, 0).is_some() {
+        let reg = ctx
+            .upload(0x1001, 0)?
+            .map_err(|a| fail_sdo("reading 0x1001", a))?;
+        if reg.len() != 1 {
+            return Err(fail(format!("0x1001 reads {} bytes, not 1", reg.len())));
+        }
+        Some(reg[0])
+    } else {
+        None
+    };
     if ctx.profile.features.emcy == Some(false) {
         return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
     }
@@ -276,10 +283,10 @@ fn emcy_cob_id(ctx: &mut Ctx<'_>) -> Outcome {
             "0x1014 = 0x{v:08X}: not an 11-bit identifier"
         )));
     }
-    Ok(format!(
-        "0x1014 = 0x{v:08X}, error register 0x{:02X}",
-        reg[0]
-    ))
+    Ok(match reg {
+        Some(r) => format!("0x1014 = 0x{v:08X}, error register 0x{r:02X}"),
+        None => format!("0x1014 = 0x{v:08X} (the file has no 0x1001)"),
+    })
 }
 
 /// An 11-bit EMCY CAN-ID other than `id` that no table of CiA 301 §7.3.5 restricts (the
