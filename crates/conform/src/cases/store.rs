@@ -14,6 +14,24 @@ const SAVE: u32 = 0x6576_6173;
 /// "load" (§7.5.2.14).
 const LOAD: u32 = 0x6461_6F6C;
 
+/// The two resets, in the order the cases apply them, with their names.
+const RESETS: [(NmtCs, &str); 2] = [
+    (NmtCs::ResetCommunication, "reset communication"),
+    (NmtCs::ResetNode, "reset node"),
+];
+
+/// The NMT `reset` (named `name`), answered by the boot-up message that ends it: a
+/// device that stays silent fails, and silence is never excused.
+fn reset_answered(ctx: &mut Ctx<'_>, reset: NmtCs, name: &str) -> Result<(), Finding> {
+    match ctx.reset(reset)? {
+        Some(_) => Ok(()),
+        None => Err(fail_kind(
+            FailureKind::Silence,
+            format!("no boot-up after {name}"),
+        )),
+    }
+}
+
 pub(super) fn cases() -> Vec<Case> {
     vec![
         m(
@@ -121,16 +139,8 @@ fn store_survives(ctx: &mut Ctx<'_>) -> Outcome {
     )?;
     ctx.write(0x1010, 1, &SAVE.to_le_bytes(), "\"save\" to 0x1010 sub 1")?;
     let mut seen = Vec::new();
-    for (cs, name) in [
-        (NmtCs::ResetCommunication, "reset communication"),
-        (NmtCs::ResetNode, "reset node"),
-    ] {
-        if ctx.reset(cs)?.is_none() {
-            return Err(fail_kind(
-                FailureKind::Silence,
-                format!("no boot-up after {name}"),
-            ));
-        }
+    for (cs, name) in RESETS {
+        reset_answered(ctx, cs, name)?;
         let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
         if after != u32::from(value) {
             return Err(fail(format!(
@@ -213,12 +223,7 @@ fn restore_heartbeat_time(ctx: &mut Ctx<'_>, sub: u8, reset: NmtCs, name: &str) 
         &LOAD.to_le_bytes(),
         &format!("\"load\" to 0x1011 sub {sub}"),
     )?;
-    if ctx.reset(reset)?.is_none() {
-        return Err(fail_kind(
-            FailureKind::Silence,
-            format!("no boot-up after {name}"),
-        ));
-    }
+    reset_answered(ctx, reset, name)?;
     let after = ctx.read_u32(0x1017, 0, "the heartbeat producer time")?;
     if after != default && Some(after) != power_on {
         return Err(fail(format!(
@@ -305,16 +310,8 @@ fn restore_application(ctx: &mut Ctx<'_>) -> Outcome {
     }
     ctx.write(0x1011, 1, &LOAD.to_le_bytes(), "\"load\" to 0x1011 sub 1")?;
     let mut after = Vec::new();
-    for (cs, name) in [
-        (NmtCs::ResetCommunication, "reset communication"),
-        (NmtCs::ResetNode, "reset node"),
-    ] {
-        if ctx.reset(cs)?.is_none() {
-            return Err(fail_kind(
-                FailureKind::Silence,
-                format!("no boot-up after {name}"),
-            ));
-        }
+    for (cs, name) in RESETS {
+        reset_answered(ctx, cs, name)?;
         let d = ctx
             .upload(index, sub)?
             .map_err(|a| crate::ctx::fail_sdo(format!("reading {what} after {name}"), a))?;

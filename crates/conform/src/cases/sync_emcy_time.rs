@@ -469,12 +469,10 @@ impl ConsumerError {
     }
 }
 
-fn emcy_history_records(ctx: &mut Ctx<'_>) -> Outcome {
-    if ctx.profile.features.error_history == Some(false) {
-        return Err(not_supported(
-            "no pre-defined error field (0x1003 not in the file)",
-        ));
-    }
+/// The identifier of the EMCYs a heartbeat consumer timeout raises (0x1014, CiA 301
+/// §7.5.2.17), where the device has a writable consumer entry (0x1016 sub 1) to raise one
+/// with and its EMCY producer is on; not applicable otherwise.
+fn emcy_raised_by_a_consumer(ctx: &mut Ctx<'_>) -> Result<u32, Finding> {
     if ctx.profile.features.heartbeat_consumer == Some(false)
         || !eds_entry(ctx, 0x1016, 1).is_some_and(|e| access(e).writable())
     {
@@ -486,8 +484,18 @@ fn emcy_history_records(ctx: &mut Ctx<'_>) -> Outcome {
     if emcy & 0x8000_0000 != 0 {
         return Err(Finding::NotApplicable("the EMCY producer is off".into()));
     }
+    Ok(emcy & 0x7FF)
+}
+
+fn emcy_history_records(ctx: &mut Ctx<'_>) -> Outcome {
+    if ctx.profile.features.error_history == Some(false) {
+        return Err(not_supported(
+            "no pre-defined error field (0x1003 not in the file)",
+        ));
+    }
+    let emcy = emcy_raised_by_a_consumer(ctx)?;
     ctx.write(0x1003, 0, &[0], "0 to 0x1003 sub 0")?;
-    let (error, codes) = ConsumerError::raise(ctx, emcy & 0x7FF, Duration::from_millis(400))?;
+    let (error, codes) = ConsumerError::raise(ctx, emcy, Duration::from_millis(400))?;
     let newest = codes.iter().rev().find(|c| **c != 0).copied();
     // Read while the error stands: the history is what the device reports of it.
     let read = match newest {
@@ -529,18 +537,7 @@ fn emcy_error_register(ctx: &mut Ctx<'_>) -> Outcome {
     if ctx.profile.features.emcy == Some(false) {
         return Err(not_supported("no EMCY producer (0x1014 not in the file)"));
     }
-    if ctx.profile.features.heartbeat_consumer == Some(false)
-        || !eds_entry(ctx, 0x1016, 1).is_some_and(|e| access(e).writable())
-    {
-        return Err(Finding::NotApplicable(
-            "no writable heartbeat consumer entry to raise an error with".into(),
-        ));
-    }
-    let emcy = ctx.read_u32(0x1014, 0, "the COB-ID EMCY")?;
-    if emcy & 0x8000_0000 != 0 {
-        return Err(Finding::NotApplicable("the EMCY producer is off".into()));
-    }
-    let emcy = emcy & 0x7FF;
+    let emcy = emcy_raised_by_a_consumer(ctx)?;
     // An error that stands already (a drive's fault) keeps bit 0 set after this one ends:
     // then only the EMCYs and the register while it stands are checked.
     let before = ctx.read_u32(0x1001, 0, "the error register")?;
