@@ -216,10 +216,9 @@ fn cia309_3_gateway_answers_every_request_of_a_long_session() {
     assert_eq!(String::from_utf8(out.stdout).unwrap(), expected);
 }
 
-/// Two TCP clients taking turns, 100 requests each: the window is the gateway's, shared by
-/// every client, and stays open for all of them.
-#[test]
-fn cia309_3_gateway_answers_every_request_of_two_tcp_clients() {
+/// `cantwin gateway --listen 0` on the scenario `name`: the process (killed when dropped)
+/// and the address it listens on, as its first line says.
+fn gateway_on_tcp(name: &str) -> (Killed, String) {
     let mut gw = Killed(
         Command::new(env!("CARGO_BIN_EXE_cantwin"))
             .args([
@@ -227,7 +226,7 @@ fn cia309_3_gateway_answers_every_request_of_two_tcp_clients() {
                 "--listen",
                 "0",
                 "--scenario",
-                &scenario_file("cia301-device.toml"),
+                &scenario_file(name),
             ])
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -238,7 +237,15 @@ fn cia309_3_gateway_answers_every_request_of_two_tcp_clients() {
     BufReader::new(gw.stdout.take().unwrap())
         .read_line(&mut first)
         .unwrap();
-    let gw_addr = first.strip_prefix("gateway ").unwrap().trim().to_string();
+    let addr = first.strip_prefix("gateway ").unwrap().trim().to_string();
+    (gw, addr)
+}
+
+/// Two TCP clients taking turns, 100 requests each: the window is the gateway's, shared by
+/// every client, and stays open for all of them.
+#[test]
+fn cia309_3_gateway_answers_every_request_of_two_tcp_clients() {
+    let (_gw, gw_addr) = gateway_on_tcp("cia301-device.toml");
     let connect = || {
         let stream = std::net::TcpStream::connect(&gw_addr).unwrap();
         stream
@@ -259,25 +266,7 @@ fn cia309_3_gateway_answers_every_request_of_two_tcp_clients() {
 /// returns as the whole answer when it holds a CR LF (and an OK only as `] OK` CR LF).
 #[test]
 fn cia309_3_gateway_sends_each_answer_with_its_cr_lf_in_one_piece() {
-    let mut gw = Killed(
-        Command::new(env!("CARGO_BIN_EXE_cantwin"))
-            .args([
-                "gateway",
-                "--listen",
-                "0",
-                "--scenario",
-                &scenario_file("cia301-device.toml"),
-            ])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut first = String::new();
-    BufReader::new(gw.stdout.take().unwrap())
-        .read_line(&mut first)
-        .unwrap();
-    let gw_addr = first.strip_prefix("gateway ").unwrap().trim().to_string();
+    let (_gw, gw_addr) = gateway_on_tcp("cia301-device.toml");
     let mut stream = std::net::TcpStream::connect(&gw_addr).unwrap();
     stream
         .set_read_timeout(Some(std::time::Duration::from_secs(10)))
