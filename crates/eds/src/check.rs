@@ -3,50 +3,12 @@
 //! for that the file leaves out harmlessly (warnings), and what was read with a guess
 //! (notes). The values are judged by the same function [`crate::to_od`] builds from.
 
-pub use crate::error::Severity;
+pub use crate::error::{Issue, Severity};
 use crate::judge::judge;
 use crate::model::{Eds, Entry, ObjectList};
 use crate::value::EdsValue;
 use cantwin_canopen::od::DataType;
 use core::fmt;
-
-/// One finding of [`Eds::check`].
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Issue {
-    /// How serious it is.
-    pub severity: Severity,
-    /// The line (1-based) of the key, or of the section, where the file has one (set by
-    /// [`crate::load`]; [`Eds::check`] of a model alone knows no lines).
-    pub line: Option<usize>,
-    /// The section it concerns (e.g. `1018sub1`, `MandatoryObjects`).
-    pub section: String,
-    /// The key it concerns, if one.
-    pub key: Option<String>,
-    /// What is wrong.
-    pub message: String,
-}
-
-impl fmt::Display for Issue {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let sev = match self.severity {
-            Severity::Note => "note",
-            Severity::Warning => "warning",
-            Severity::Error => "error",
-        };
-        write!(f, "{sev}:")?;
-        if let Some(l) = self.line {
-            write!(f, " line {l}")?;
-        }
-        // A line outside any section has no section to name.
-        if !self.section.is_empty() {
-            write!(f, " [{}]", self.section)?;
-        }
-        if let Some(k) = &self.key {
-            write!(f, " {k}")?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
 
 /// The findings of [`Eds::check`].
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

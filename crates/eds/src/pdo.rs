@@ -3,7 +3,7 @@
 //! PDOs. A PDO whose mapping cannot run stays off (and, while its COB-ID is valid, its
 //! mapping and COB-ID cannot be changed, §7.5.2.36); the rest of the file's PDOs run.
 
-use crate::check::{Issue, Severity};
+use crate::error::{Issue, Severity};
 use crate::model::Eds;
 use cantwin_canopen::AbortCode;
 use cantwin_canopen::od::{ObjectDictionary, OdDescription};
