@@ -37,6 +37,11 @@ const RSS_GROWTH_KIB: u64 = 64 * 1024;
 const FD_GROWTH: usize = 8;
 /// How long after the attack descriptors may take to be given back.
 const FD_SETTLE: Duration = Duration::from_secs(3);
+/// How long after the attack a new good client may have to wait for its first SDO answer.
+/// Frames the attack's connections queued before they closed are still sent (as from a
+/// socket that is closed with frames in its queue) and win arbitration against the good
+/// client's 0x605: at 500 kbit/s sixty connections' queues take about a second to drain.
+const AFTER_ATTACK: Duration = Duration::from_secs(5);
 
 /// The descriptor limit the server runs under (RLIMIT_NOFILE through `prlimit`, when
 /// installed).
@@ -774,10 +779,17 @@ fn attack(
     std::thread::sleep(Duration::from_millis(300));
     times.sort();
     let alive = server.alive();
-    let after_ok = alive
-        && Probe::connect(server.socketcand)
-            .and_then(|mut p| p.upload())
-            .is_ok();
+    let after_ok = alive && {
+        let until = Instant::now() + AFTER_ATTACK;
+        loop {
+            let answered = Probe::connect(server.socketcand)
+                .and_then(|mut p| p.upload())
+                .is_ok();
+            if answered || Instant::now() >= until {
+                break answered;
+            }
+        }
+    };
     let rss_after = rss_kib(pid);
     // A server learns that an event-stream client left only when its next write fails: give
     // descriptors up to FD_SETTLE to come back before counting what is still held.
@@ -803,8 +815,10 @@ fn attack(
     if !alive {
         r.findings.push("the server process died".into());
     } else if !after_ok {
-        r.findings
-            .push("after the attack a new good client got no SDO answer within 1 s".into());
+        r.findings.push(format!(
+            "after the attack a new good client got no SDO answer within {} s",
+            AFTER_ATTACK.as_secs()
+        ));
     }
     if failures > 0 {
         r.findings.push(format!(
