@@ -18,7 +18,7 @@
 //!   answer to a frame is never there before its sender listens for it.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, PoisonError};
+use std::sync::{Arc, MutexGuard, PoisonError};
 
 use cantwin_bus::{
     BusId, PortConfig, PortId, Received, RxClosed, RxQueue, Simulation as BusSim, TxOrder,
@@ -27,7 +27,7 @@ use cantwin_can::{Duration, ExtendedId, Frame, Id, Instant, Node, Outbox, Standa
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use crate::core::{Delivery, Mode, Shared, err, secs};
+use crate::core::{Core, Delivery, Mode, Shared, err, secs};
 
 /// How far past the last frame handed to Python the simulation runs freely: frames that
 /// follow within this much bus time (the segments of an SDO block, a PDO burst) come as
@@ -285,11 +285,13 @@ impl Port {
         }
     }
 
-    /// Note the threads the frame handed to Python before woke (`crate::turns::note_woken`);
-    /// called without the core's lock and without the GIL. A look that Python cannot answer
-    /// (an interpreter shutting down) notes nobody.
-    fn note_woken(&self, thread: u64) {
+    /// Note the threads the frame handed to Python before woke (`crate::turns::note_woken`),
+    /// letting go of the core's lock for the look (called without the GIL): the lock again.
+    /// A look that Python cannot answer (an interpreter shutting down) notes nobody.
+    fn note_woken<'a>(&'a self, core: MutexGuard<'a, Core>, thread: u64) -> MutexGuard<'a, Core> {
+        drop(core);
         let _ = Python::attach(|py| crate::turns::note_woken(py, &self.shared, thread));
+        self.shared.lock()
     }
 
     /// The next buffered frame, if any.
@@ -332,9 +334,7 @@ impl Port {
             // Paced, the next frame may be in the buffer already: look before handing it over.
             if !looked && matches!(core.mode, Mode::Paced(_)) {
                 looked = true;
-                drop(core);
-                self.note_woken(thread);
-                core = self.shared.lock();
+                core = self.note_woken(core, thread);
                 continue;
             }
             if let Some(r) = held.take() {
@@ -397,9 +397,7 @@ impl Port {
                 // for an answer: not past a thread the last frame woke.
                 if !looked {
                     looked = true;
-                    drop(core);
-                    self.note_woken(thread);
-                    core = self.shared.lock();
+                    core = self.note_woken(core, thread);
                     continue;
                 }
             }

@@ -150,6 +150,12 @@ fn condition_wait(frame: &Bound<'_, PyAny>) -> PyResult<Option<Wait>> {
     if name != "wait" || !in_threading(&code)? {
         return Ok(None);
     }
+    waiter_state(frame)
+}
+
+/// Where a frame of `threading`'s `wait` stands by its waiter lock; `None` where it holds
+/// none (`Event.wait` itself, a `Condition.wait` not yet blocking).
+fn waiter_state(frame: &Bound<'_, PyAny>) -> PyResult<Option<Wait>> {
     let locals = frame.getattr("f_locals")?;
     let (Ok(waiter), Ok(condition)) = (locals.get_item("waiter"), locals.get_item("self")) else {
         return Ok(None);
@@ -277,7 +283,12 @@ fn waiting_threads(
         let name: String = code.getattr("co_name")?.extract()?;
         if in_threading(&code)? && THREADING_WAITS.contains(&name.as_str()) {
             // A woken thread is on its way out of the wait, not in it.
-            match condition_wait(&frame)? {
+            let wait = if name == "wait" {
+                waiter_state(&frame)?
+            } else {
+                None
+            };
+            match wait {
                 Some(Wait::Notified) => {}
                 wait => {
                     if wait == Some(Wait::Blocked) {
