@@ -285,20 +285,25 @@ mod tests {
         assert_eq!(to_i32(-2_147_483_647.5), i32::MIN);
     }
 
+    /// `to_i32`, `to_i16` and `to_u32` of `v` are `f64::round` of it, saturated.
+    fn rounds_as_f64_round(v: f64) -> Result<(), proptest::test_runner::TestCaseError> {
+        let r = v.round();
+        proptest::prop_assert_eq!(
+            to_i32(v),
+            r.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
+        );
+        proptest::prop_assert_eq!(
+            to_i16(v),
+            r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
+        );
+        proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+        Ok(())
+    }
+
     proptest::proptest! {
         #[test]
         fn actual_values_round_as_f64_round_for_any_double(bits in proptest::num::u64::ANY) {
-            let v = f64::from_bits(bits);
-            let r = v.round();
-            proptest::prop_assert_eq!(
-                to_i32(v),
-                r.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
-            );
-            proptest::prop_assert_eq!(
-                to_i16(v),
-                r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-            );
-            proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+            rounds_as_f64_round(f64::from_bits(bits))?;
         }
 
         #[test]
@@ -309,17 +314,7 @@ mod tests {
         ) {
             // Halves, quarters … of every magnitude, and their neighbouring doubles.
             let exact = n as f64 * 2f64.powi(-shift);
-            let v = f64::from_bits(exact.to_bits().wrapping_add_signed(step));
-            let r = v.round();
-            proptest::prop_assert_eq!(
-                to_i32(v),
-                r.clamp(f64::from(i32::MIN), f64::from(i32::MAX)) as i32
-            );
-            proptest::prop_assert_eq!(
-                to_i16(v),
-                r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
-            );
-            proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+            rounds_as_f64_round(f64::from_bits(exact.to_bits().wrapping_add_signed(step)))?;
             let small = (n % 100_000) as f64 * 2f64.powi(-shift);
             let v = f64::from_bits(small.to_bits().wrapping_add_signed(step));
             proptest::prop_assert_eq!(to_i32(v), v.round() as i32);

@@ -75,6 +75,16 @@ fn netsim_with_faults(
     })
 }
 
+/// The bus-level `[[at]]` actions of the scenario `text` (named `name` in errors) as the
+/// network simulator's faults on can0, with the scenario's seed.
+fn faults_of(text: &str, name: &str) -> NetsimFaults {
+    let scenario = Scenario::parse(text, name).expect("scenario");
+    NetsimFaults {
+        seed: scenario.seed,
+        faults: faults_from_scenario(&scenario, &["can0".to_string()]).expect("faults"),
+    }
+}
+
 /// A network simulator applying `faults` to participant A (sending as `a_args` say) and
 /// participant B (listening), each in its own process: what A and B printed, and the
 /// simulator's outcome, once the simulation has shut down.
@@ -304,17 +314,12 @@ impl Node for Sender {
 #[test]
 fn scenario_at_actions_corrupt_the_frame_of_their_step_and_send_the_scripts_frame() {
     let Some(dir) = silkit_dir() else { return };
-    let scenario = Scenario::parse(
+    let faults = faults_of(
         "name = \"corrupt at 6 ms\"\nseed = 7\n\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
          [[at]]\ntime_ms = 6\naction = \"corrupt\"\nbus = \"can0\"\nfraction = 1.0\ncount = 1\n\n\
          [[at]]\ntime_ms = 10\naction = \"send\"\nbus = \"can0\"\nframe = \"300#AA\"\n",
         "corrupt.toml",
-    )
-    .expect("scenario");
-    let faults = NetsimFaults {
-        seed: scenario.seed,
-        faults: faults_from_scenario(&scenario, &["can0".to_string()]).expect("faults"),
-    };
+    );
     // cantwin's bus model with two controllers: the frame on the bus at 2 ms goes out as it
     // is; the one at 6 ms is corrupted once (error frame, ISO 11898-1 §10.11) and sent again.
     let frame = Frame::std(0x200, &[0x11]).expect("frame");
@@ -444,17 +449,12 @@ fn error_counters(bus: &cantwin_bus::Bus) -> (Vec<u16>, Vec<u16>) {
 #[test]
 fn repeated_corruption_takes_a_participant_bus_off_and_it_recovers_after_128_x_11_bits() {
     let Some(dir) = silkit_dir() else { return };
-    let scenario = Scenario::parse(
+    let faults = faults_of(
         "name = \"bus-off\"\nseed = 3\n\n[[bus]]\nname = \"can0\"\nbit_rate = \"500k\"\n\n\
          [[at]]\ntime_ms = 6\naction = \"corrupt\"\nbus = \"can0\"\nfraction = 1.0\n\n\
          [[at]]\ntime_ms = 12\naction = \"clear_faults\"\nbus = \"can0\"\n",
         "bus-off.toml",
-    )
-    .expect("scenario");
-    let faults = NetsimFaults {
-        seed: scenario.seed,
-        faults: faults_from_scenario(&scenario, &["can0".to_string()]).expect("faults"),
-    };
+    );
     // cantwin's bus model with A and B. A's requests sent at 5 ms and 11 ms reach the bus at
     // the simulator's steps of 6 ms and 12 ms.
     let f200 = Frame::std(0x200, &[0x11]).expect("frame");
