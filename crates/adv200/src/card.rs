@@ -116,11 +116,14 @@ struct Card {
     personality: Personality,
     pdc: Pdc,
     last_sync: Option<Instant>,
-    /// Where the dictionary keeps 0x1006 (communication cycle period), located once: the
-    /// bus-loss deadline reads it at every call.
+    /// Where the dictionary keeps 0x1006 (communication cycle period), located once.
     cycle_period: Option<EntryId>,
     /// Where the dictionary keeps 0x100D (life time factor), for the same deadline.
     life_time_factor: Option<EntryId>,
+    /// The bus-loss threshold with SYNC, 0x1006 × 0x100D (`None`: no SYNC watch), as of the
+    /// last frame or device event: only a frame (an SDO write) or a reset communication
+    /// changes those objects, and the deadline is asked for after every call of the bus.
+    sync_timeout: Option<Duration>,
     /// The objects served by the drive that event-driven TPDOs (transmission type 0, 254,
     /// 255: §1.1.7 "254...255 if asynchronous") map, with the bytes they had at the last
     /// evaluation: a change is the application event that sends the TPDO.
@@ -307,7 +310,7 @@ impl Adv200 {
 
     /// Completes a store the card's device was asked for; Param error if it fails.
     fn flush_memory(&mut self) {
-        let Some(m) = self.memory.clone() else {
+        let Some(m) = &self.memory else {
             return;
         };
         if let Err(e) = m.flush(&self.st().params) {
@@ -631,9 +634,11 @@ impl Adv200 {
             last_sync: None,
             cycle_period,
             life_time_factor,
+            sync_timeout: None,
             watched: Vec::new(),
             booting: true,
         });
+        self.refresh_sync_timeout();
         if let Some(code) = fault {
             self.sticky = Some(Alarm::OptBusFault(code));
             self.st_mut().drive.raise(Alarm::OptBusFault(code));
@@ -882,9 +887,7 @@ impl Adv200 {
                 && bytes != w.2
             {
                 w.2 = bytes;
-                if let Some(p) = c.dev.pdo_mut() {
-                    p.mark_changed(w.0, w.1);
-                }
+                c.dev.mark_changed(w.0, w.1);
             }
         }
     }
@@ -967,9 +970,20 @@ impl Adv200 {
     /// of 0 is taken as not indicated (0 would trip at every SYNC).
     fn sync_deadline(&self) -> Option<Instant> {
         let c = self.card.as_ref()?;
+        let timeout = c.sync_timeout?;
+        if c.dev.state() == State::Stopped {
+            return None;
+        }
+        c.last_sync?.checked_add(timeout)
+    }
+
+    /// Reads the bus-loss threshold of [`Adv200::sync_deadline`] from the dictionary.
+    fn refresh_sync_timeout(&mut self) {
+        let Some(c) = &mut self.card else { return };
+        let od = c.dev.od();
         let read = |id: Option<EntryId>| {
             id.map_or(0, |id| {
-                let raw = c.dev.od().raw(id);
+                let raw = od.raw(id);
                 let mut b = [0u8; 4];
                 let n = raw.len().min(4);
                 b[..n].copy_from_slice(&raw[..n]);
@@ -977,15 +991,11 @@ impl Adv200 {
             })
         };
         let period = read(c.cycle_period);
-        if period == 0 || c.dev.state() == State::Stopped {
-            return None;
-        }
         let factor = match read(c.life_time_factor) {
             0 => 3,
             f => f,
         };
-        let last = c.last_sync?;
-        last.checked_add(Duration::from_micros(period * factor))
+        c.sync_timeout = (period != 0).then(|| Duration::from_micros(period * factor));
     }
 
     /// Takes the device's events; returns whether there were any.
@@ -1016,6 +1026,8 @@ impl Adv200 {
                 }
             }
         }
+        // A frame (an SDO write of 0x1006 or 0x100D) or a reset communication came before.
+        self.refresh_sync_timeout();
         for f in faults {
             self.bus_fault(f);
         }
@@ -1117,15 +1129,12 @@ impl Adv200 {
 
     /// The next deadline of the drive, its card and the bus-loss watch, as of now.
     fn compute_deadline(&self) -> Option<Instant> {
-        [
-            self.st().drive.next_deadline(),
-            self.card.as_ref().and_then(|c| c.dev.next_deadline()),
-            self.dnet.as_ref().and_then(|s| s.next_deadline()),
-            self.sync_deadline(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
+        // Folded one by one: the bus asks after every call (an array through an iterator
+        // does not always fold away).
+        let mut next = self.st().drive.next_deadline();
+        next = earliest(next, self.card.as_ref().and_then(|c| c.dev.next_deadline()));
+        next = earliest(next, self.dnet.as_ref().and_then(|s| s.next_deadline()));
+        earliest(next, self.sync_deadline())
     }
 
     /// The boot-up message has been sent: every alarm active now is signalled, one EMCY
@@ -1233,5 +1242,13 @@ impl Node for Adv200 {
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
         self.controller_event(event, now, out);
         self.deadline = self.compute_deadline();
+    }
+}
+
+/// The earlier of two optional instants; `None` is no deadline.
+fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
     }
 }

@@ -22,6 +22,7 @@
 use cantwin_can::{Duration, Instant};
 
 use crate::alarms::Alarm;
+use cantwin_cia402::units::to_i64;
 use std::sync::LazyLock;
 
 use crate::params::{ParamDb, Slot, par};
@@ -360,18 +361,14 @@ impl Drive {
         let s: &Slots = &SLOTS;
         // Inputs.
         db.force_at(s.digital_input_mon, i64::from(self.inputs));
-        for (k, slot) in s.digital_inputs.iter().enumerate() {
-            db.force_at(*slot, i64::from(self.inputs >> k & 1));
-        }
+        db.force_bits_at(&s.digital_inputs, i64::from(self.inputs));
         db.force_at(s.analog_inputs[0], self.analog[0]);
         db.force_at(s.analog_inputs[1], self.analog[1]);
         // WordDecomp.
         let src = db.at(s.word_decomp_src) as u16;
         let word = if src == 0 { 0 } else { db.value(src) & 0xFFFF };
         db.force_at(s.word_decomp_mon, word);
-        for (k, slot) in s.word_decomp_bits.iter().enumerate() {
-            db.force_at(*slot, word >> k & 1);
-        }
+        db.force_bits_at(&s.word_decomp_bits, word);
         // Commands.
         if db.at(s.alarm_reset) != 0 {
             db.force_at(s.alarm_reset, 0);
@@ -435,11 +432,11 @@ impl Drive {
             }
         }
         // Monitors.
-        let speed = self.speed.round() as i64;
+        let speed = to_i64(self.speed);
         db.force_at(s.ramp_output, speed);
         db.force_at(s.motor_speed, speed);
-        db.force_at(s.output_current, (self.current * 10.0).round() as i64);
-        db.force_at(s.motor_thermal, (self.thermal * 100.0).round() as i64);
+        db.force_at(s.output_current, to_i64(self.current * 10.0));
+        db.force_at(s.motor_thermal, to_i64(self.thermal * 100.0));
         let zero = speed.abs() <= db.at(s.speed_zero_thr);
         db.force_at(s.speed_is_zero, i64::from(zero));
         let enabled = enable && self.alarms.is_empty();
@@ -477,6 +474,27 @@ mod tests {
 
     fn at_ms(ms: u64) -> Instant {
         Instant::from_nanos(ms * 1_000_000)
+    }
+
+    #[test]
+    fn bit_monitors_hold_0_and_1_so_the_control_task_sets_them_unclamped() {
+        let bits = (1..=8)
+            .map(par::digital_input)
+            .chain((0..16).map(par::word_decomp_bit));
+        for p in bits {
+            let d = crate::params::def(p).expect("a bit monitor of the catalogue");
+            let (lo, hi) = d.ty.range();
+            assert!(lo <= 0 && hi >= 1, "parameter {p}: {lo}..={hi}");
+        }
+        // And they read back what the task set.
+        let mut db = ParamDb::new();
+        let mut d = Drive::new();
+        d.set_digital_input(1, true);
+        d.set_digital_input(8, true);
+        d.advance(&mut db, at_ms(0));
+        assert_eq!(db.value(par::digital_input(1)), 1);
+        assert_eq!(db.value(par::digital_input(2)), 0);
+        assert_eq!(db.value(par::digital_input(8)), 1);
     }
 
     #[test]

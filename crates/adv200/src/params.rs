@@ -713,6 +713,18 @@ impl ParamDb {
         }
     }
 
+    /// Sets bit k of `word` into slot k of `slots`: the one-bit monitors of a word (the
+    /// digital inputs, WordDecomp), each ranging over 0..=1, so nothing is clamped. The
+    /// control task sets two dozen of them every millisecond.
+    #[inline]
+    pub fn force_bits_at(&mut self, slots: &[Slot], word: i64) {
+        for (k, s) in slots.iter().enumerate() {
+            if let Some(v) = self.values.get_mut(usize::from(s.0)) {
+                *v = word >> k & 1;
+            }
+        }
+    }
+
     /// Checks a write as the keypad or the bus would make it: access, limits, and for a
     /// source selector that the source exists.
     pub fn check(&self, par: u16, value: i64) -> Result<(), ParamError> {

@@ -44,7 +44,8 @@
 //!   not filter only runs the timers already due). While a receive overrun waits for the
 //!   next frame to clear 0x8110 every identifier passes. [`DeviceConfig::acceptance_filter`]
 //!   turns the filter off. The next deadline is kept from the end of each call and computed
-//!   afresh only after a change through a `&mut` accessor.
+//!   afresh only after a change through a `&mut` accessor that can move a timer (the hooks
+//!   cannot: they serve objects).
 //!
 //! ```
 //! use std::sync::Arc;
@@ -439,15 +440,29 @@ impl<H: OdHooks> Device<H> {
         &self.core.hooks
     }
 
-    /// The device hooks, mutably.
+    /// The device hooks, mutably. The hooks take no part in the device's timers (they serve
+    /// objects; the services keep their own deadlines), so the next deadline the device keeps
+    /// stays valid: a device model that runs its application through its hooks every
+    /// millisecond pays no recomputation of the services' timers for it. A value the hooks
+    /// serve that changed is told with [`Device::mark_changed`].
     pub fn hooks_mut(&mut self) -> &mut H {
-        self.deadline = None;
         &mut self.core.hooks
     }
 
     /// The PDO engine, if the dictionary has PDOs.
     pub fn pdo(&self) -> Option<&PdoEngine> {
         self.core.pdo.as_ref()
+    }
+
+    /// An application value changed outside [`ObjectAccess::write`] (served by the hooks, or
+    /// set through [`Device::od_mut`]): an application event for every TPDO of type 0, 254
+    /// or 255 that maps it ([`PdoEngine::mark_changed`], CiA 301 §7.2.2.4). Unlike
+    /// [`Device::pdo_mut`] it leaves the acceptance filter as it is: no COB-ID changes.
+    pub fn mark_changed(&mut self, index: u16, sub: u8) {
+        if let Some(p) = &mut self.core.pdo {
+            self.deadline = None;
+            p.mark_changed(index, sub);
+        }
     }
 
     /// The PDO engine, mutably (to trigger event-driven TPDOs).

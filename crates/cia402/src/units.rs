@@ -200,6 +200,11 @@ pub fn to_i32(v: f64) -> i32 {
     nearest(v) as i32
 }
 
+/// Rounds to the nearest integer and saturates to `i64` (a drive's monitor value).
+pub fn to_i64(v: f64) -> i64 {
+    nearest(v) as i64
+}
+
 /// Rounds to the nearest integer and saturates to `i16`.
 pub fn to_i16(v: f64) -> i16 {
     nearest(v) as i16
@@ -271,10 +276,13 @@ mod tests {
             assert_eq!(to_i16(v), want, "{v}");
             let want = v.round().clamp(0.0, f64::from(u32::MAX)) as u32;
             assert_eq!(to_u32(v), want, "{v}");
+            // `as` saturates i64 as it saturates the others.
+            assert_eq!(to_i64(v), v.round() as i64, "{v}");
         }
         assert_eq!(to_i32(f64::NAN), 0);
         assert_eq!(to_i16(f64::NAN), 0);
         assert_eq!(to_u32(f64::NAN), 0);
+        assert_eq!(to_i64(f64::NAN), 0);
         // Every quarter from -3 to 3 and the edges of i32.
         for k in -12..=12 {
             let v = f64::from(k) * 0.25;
@@ -285,7 +293,7 @@ mod tests {
         assert_eq!(to_i32(-2_147_483_647.5), i32::MIN);
     }
 
-    /// `to_i32`, `to_i16` and `to_u32` of `v` are `f64::round` of it, saturated.
+    /// `to_i32`, `to_i16`, `to_u32` and `to_i64` of `v` are `f64::round` of it, saturated.
     fn rounds_as_f64_round(v: f64) -> Result<(), proptest::test_runner::TestCaseError> {
         let r = v.round();
         proptest::prop_assert_eq!(
@@ -297,6 +305,7 @@ mod tests {
             r.clamp(f64::from(i16::MIN), f64::from(i16::MAX)) as i16
         );
         proptest::prop_assert_eq!(to_u32(v), r.clamp(0.0, f64::from(u32::MAX)) as u32);
+        proptest::prop_assert_eq!(to_i64(v), r as i64);
         Ok(())
     }
 

@@ -316,10 +316,8 @@ impl Servo {
         if sw != self.statusword || mode != self.mode_display {
             self.statusword = sw;
             self.mode_display = mode;
-            if let Some(p) = self.device.pdo_mut() {
-                p.mark_changed(STATUSWORD, 0);
-                p.mark_changed(MODES_OF_OPERATION_DISPLAY, 0);
-            }
+            self.device.mark_changed(STATUSWORD, 0);
+            self.device.mark_changed(MODES_OF_OPERATION_DISPLAY, 0);
         }
     }
 

@@ -516,10 +516,8 @@ impl Tm3Coupler {
         for b in 0..m.spec.input_bytes() {
             let sub = o.input_byte + b + 1;
             let byte = (self.di[i] >> (8 * b)) as u8;
-            if inputs::set_digital_input_byte(self.device.od_mut(), sub, byte)
-                && let Some(p) = self.device.pdo_mut()
-            {
-                p.mark_changed(cia401::READ_INPUT_8, sub);
+            if inputs::set_digital_input_byte(self.device.od_mut(), sub, byte) {
+                self.device.mark_changed(cia401::READ_INPUT_8, sub);
             }
         }
     }
@@ -563,10 +561,8 @@ impl Tm3Coupler {
         if !self.working(i) {
             return Ok(());
         }
-        if self.triggers.set_input(self.device.od_mut(), sub, value) != 0
-            && let Some(p) = self.device.pdo_mut()
-        {
-            p.mark_changed(cia401::READ_ANALOG_INPUT_16, sub);
+        if self.triggers.set_input(self.device.od_mut(), sub, value) != 0 {
+            self.device.mark_changed(cia401::READ_ANALOG_INPUT_16, sub);
         }
         Ok(())
     }
