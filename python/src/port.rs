@@ -109,9 +109,17 @@ pub struct Port {
     port: PortId,
     bus: String,
     next_key: AtomicU64,
+    /// The thread that attached the port (`threading.get_ident()`): it answers what it
+    /// receives itself, so its receives do not wait for answers.
+    owner: u64,
 }
 
-pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyResult<Port> {
+pub(crate) fn attach(
+    shared: &Arc<Shared>,
+    bus: &str,
+    rx_capacity: usize,
+    owner: u64,
+) -> PyResult<Port> {
     if rx_capacity == 0 {
         return Err(PyValueError::new_err("rx_capacity must be at least 1"));
     }
@@ -140,6 +148,7 @@ pub(crate) fn attach(shared: &Arc<Shared>, bus: &str, rx_capacity: usize) -> PyR
         port,
         bus: bus.to_string(),
         next_key: AtomicU64::new(1),
+        owner,
     })
 }
 
@@ -471,15 +480,18 @@ impl Port {
     ///
     /// `wait_for_answers` applies the reaction rule (let other threads answer a frame before
     /// the simulation runs past it); a thread that both receives and answers passes `False`.
-    #[pyo3(signature = (timeout=None, *, wait_for_answers=true))]
+    /// By default (`None`) every thread but the one that attached the port waits for answers:
+    /// python-can's Notifier receives, and the thread that opened the bus answers.
+    #[pyo3(signature = (timeout=None, *, wait_for_answers=None))]
     fn recv(
         &self,
         py: Python<'_>,
         timeout: Option<f64>,
-        wait_for_answers: bool,
+        wait_for_answers: Option<bool>,
     ) -> PyResult<Option<PyFrame>> {
         let timeout = timeout.map(secs).transpose()?;
         let thread = crate::turns::thread_ident(py)?;
+        let wait_for_answers = wait_for_answers.unwrap_or(thread != self.owner);
         py.detach(|| self.receive(timeout, wait_for_answers, thread))
             .map(|r| r.map(to_py))
     }

@@ -526,10 +526,12 @@ impl Simulation {
     /// Attach a new node to `bus` for Python: frames it sends arbitrate and take bus time
     /// like any node's; it receives every other frame on the bus (at most `rx_capacity`
     /// buffered, further ones are lost and counted). :py:class:`cantwin.can_interface.CantwinBus`
-    /// is the python-can interface built on it.
+    /// is the python-can interface built on it. The calling thread is the port's owner: it
+    /// answers what it receives itself (``Port.recv``'s `wait_for_answers`).
     #[pyo3(signature = (bus, *, rx_capacity=4096))]
-    fn attach(&self, bus: &str, rx_capacity: usize) -> PyResult<Port> {
-        crate::port::attach(&self.shared, bus, rx_capacity)
+    fn attach(&self, py: Python<'_>, bus: &str, rx_capacity: usize) -> PyResult<Port> {
+        let owner = crate::turns::thread_ident(py)?;
+        crate::port::attach(&self.shared, bus, rx_capacity, owner)
     }
 
     fn __repr__(&self) -> String {

@@ -56,6 +56,12 @@ const STILL_LOOKS: u32 = 3;
 /// Longest pause between two looks at threads that have not reached their wait yet.
 const POLL: Duration = Duration::from_micros(50);
 
+/// How many looks in a row may follow one another without the pause of [`POLL`], while a
+/// thread is found running Python somewhere new at each: the next look waits for the GIL,
+/// which such a thread gives up at its wait. Bounded, because a thread that keeps releasing
+/// the GIL in short calls into C would otherwise be looked at without end.
+const EAGER_LOOKS: u32 = 4;
+
 /// The `threading` functions a thread blocks in. Every python-canopen wait
 /// (`wait_for_reception`, `wait_for_heartbeat`, `emcy.wait`, the SDO client's response
 /// queue) is a `Condition.wait`.
@@ -145,12 +151,54 @@ enum Wait {
 /// Whether `frame` is `Condition.wait` holding a waiter lock, and where it stands; `None`
 /// for any other frame (or one that cannot be read).
 fn condition_wait(frame: &Bound<'_, PyAny>) -> PyResult<Option<Wait>> {
-    let code = frame.getattr("f_code")?;
-    let name: String = code.getattr("co_name")?.extract()?;
-    if name != "wait" || !in_threading(&code)? {
+    if code_kind(frame)? != CodeKind::Wait {
         return Ok(None);
     }
     waiter_state(frame)
+}
+
+/// What the code of a frame is to the looks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CodeKind {
+    /// A `wait` of `threading` (`Condition.wait`, `Event.wait`, …).
+    Wait,
+    /// Another of [`THREADING_WAITS`] (`Thread.join` and what it blocks in).
+    Join,
+    /// Anything else.
+    Other,
+}
+
+/// How many code objects [`code_kind`] remembers: a thread that is looked at waits in a
+/// handful of functions; further ones are told by name each time.
+const KNOWN_CODES: usize = 64;
+
+/// The code objects told apart so far, found again by identity: a look takes the GIL from
+/// the thread it looks at, and reading two strings out of a code object at every look cost
+/// more than the rest of it. Holding them keeps them alive, so no other object can take
+/// their place.
+static CODES: std::sync::Mutex<Vec<(Py<PyAny>, CodeKind)>> = std::sync::Mutex::new(Vec::new());
+
+/// What the code of `frame` is (its function's name and file, remembered by identity).
+fn code_kind(frame: &Bound<'_, PyAny>) -> PyResult<CodeKind> {
+    let code = frame.getattr("f_code")?;
+    let mut known = CODES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some((_, kind)) = known.iter().find(|(c, _)| c.bind(frame.py()).is(&code)) {
+        return Ok(*kind);
+    }
+    let name: String = code.getattr("co_name")?.extract()?;
+    let kind = if !in_threading(&code)? || !THREADING_WAITS.contains(&name.as_str()) {
+        CodeKind::Other
+    } else if name == "wait" {
+        CodeKind::Wait
+    } else {
+        CodeKind::Join
+    };
+    if known.len() < KNOWN_CODES {
+        known.push((code.unbind(), kind));
+    }
+    Ok(kind)
 }
 
 /// Where a frame of `threading`'s `wait` stands by its waiter lock; `None` where it holds
@@ -217,6 +265,7 @@ struct Spot {
 /// queued.
 pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
     let mut spots: Vec<Spot> = Vec::new();
+    let mut eager = 0;
     loop {
         let acting = shared.lock().acting_threads();
         if acting.is_empty() {
@@ -226,11 +275,19 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
         let threads: Vec<u64> = acting.iter().filter(|a| a.1).map(|a| a.0).collect();
         // If Python cannot be asked (an interpreter shutting down), nobody is waited for:
         // a receiver must never hang on it.
-        let (waiting, blocked) = if threads.is_empty() {
-            (Vec::new(), Vec::new())
+        let Look {
+            waiting,
+            blocked,
+            moved,
+        } = if threads.is_empty() {
+            Look::default()
         } else {
-            Python::attach(|py| waiting_threads(py, &threads, &mut spots))
-                .unwrap_or_else(|_| (threads.clone(), Vec::new()))
+            Python::attach(|py| waiting_threads(py, &threads, &mut spots)).unwrap_or_else(|_| {
+                Look {
+                    waiting: threads.clone(),
+                    ..Look::default()
+                }
+            })
         };
         let mut core = shared.lock();
         for &thread in &threads {
@@ -253,8 +310,16 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
         if left && Instant::now() >= deadline {
             return false;
         }
+        if moved && eager < EAGER_LOOKS {
+            // On its way to its wait, holding the GIL: the next look gets the GIL when the
+            // thread lets go of it there (or at the interpreter's switch interval), at once
+            // rather than up to a pause later.
+            eager += 1;
+            continue;
+        }
+        eager = 0;
         // Until the next look: a thread that acts again (its next request) wakes this at
-        // once, one on its way to a wait is looked at again after the pause.
+        // once, one still at the same place is looked at again after the pause.
         drop(
             shared
                 .changed
@@ -264,26 +329,33 @@ pub(crate) fn settle(shared: &Shared, deadline: Instant) -> bool {
     }
 }
 
-/// Which of `threads` wait now (module documentation; a thread that ended waits), and which
-/// of those are blocked in a `Condition.wait`.
-fn waiting_threads(
-    py: Python<'_>,
-    threads: &[u64],
-    spots: &mut Vec<Spot>,
-) -> PyResult<(Vec<u64>, Vec<u64>)> {
+/// What a look at the threads that acted found.
+#[derive(Debug, Default)]
+struct Look {
+    /// Those that wait (module documentation; a thread that ended waits).
+    waiting: Vec<u64>,
+    /// Those of them blocked in a `Condition.wait`.
+    blocked: Vec<u64>,
+    /// Whether one that does not wait was found somewhere other than at the look before:
+    /// running Python.
+    moved: bool,
+}
+
+/// Looks at `threads` (module documentation).
+fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> PyResult<Look> {
     let frames = current_frames(py)?;
     let mut waiting = Vec::new();
     let mut blocked = Vec::new();
+    let mut moved = false;
     for &thread in threads {
         let Some(frame) = frames.get_item(thread)? else {
             waiting.push(thread);
             continue;
         };
-        let code = frame.getattr("f_code")?;
-        let name: String = code.getattr("co_name")?.extract()?;
-        if in_threading(&code)? && THREADING_WAITS.contains(&name.as_str()) {
+        let kind = code_kind(&frame)?;
+        if kind != CodeKind::Other {
             // A woken thread is on its way out of the wait, not in it.
-            let wait = if name == "wait" {
+            let wait = if kind == CodeKind::Wait {
                 waiter_state(&frame)?
             } else {
                 None
@@ -312,15 +384,23 @@ fn waiting_threads(
                 s.lasti = lasti;
                 s.since = Instant::now();
                 s.looks = 1;
+                moved = true;
             }
-            None => spots.push(Spot {
-                thread,
-                frame: frame.unbind(),
-                lasti,
-                since: Instant::now(),
-                looks: 1,
-            }),
+            None => {
+                spots.push(Spot {
+                    thread,
+                    frame: frame.unbind(),
+                    lasti,
+                    since: Instant::now(),
+                    looks: 1,
+                });
+                moved = true;
+            }
         }
     }
-    Ok((waiting, blocked))
+    Ok(Look {
+        waiting,
+        blocked,
+        moved,
+    })
 }

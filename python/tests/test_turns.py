@@ -145,3 +145,34 @@ def test_recv_timeout_is_bus_time_in_virtual_time():
         at = sim.now
         assert bus.recv(0.25) is None
         assert 0.25 <= sim.now - at < 0.25 + 1e-3
+
+
+def test_a_ports_owner_runs_on_at_once_and_another_thread_gives_it_its_reaction_time():
+    # The thread that attached a port answers what it receives itself: its next receive runs
+    # the simulation on at once. A receive on another thread (python-can's Notifier) gives
+    # the owner its reaction time to answer the frame first (module documentation of
+    # cantwin.can_interface). The reaction time is far above what the first receive may
+    # take, and far below the timeout of the second one.
+    sim = cantwin.Simulation.from_toml(QUIET, reaction_time=0.4)
+    port = sim.attach("can0")
+    boot_up = port.recv(0.1)
+    assert boot_up is not None and boot_up[0] == 0x700 + NODE_ID
+    start = time.monotonic()
+    assert port.recv(0.5) is None
+    assert time.monotonic() - start < 0.2, "the owner waited for an answer from itself"
+
+    port.send(0x600 + NODE_ID, bytes([0x40, 0x00, 0x10, 0, 0, 0, 0, 0]))
+    answer = port.recv(0.1)
+    assert answer is not None and answer[0] == 0x580 + NODE_ID
+    got = []
+
+    def other():
+        start = time.monotonic()
+        got.append((port.recv(0.5), time.monotonic() - start))
+
+    t = threading.Thread(target=other)
+    t.start()
+    t.join(timeout=5)
+    frame, took = got[0]
+    assert frame is None
+    assert took >= 0.3, "another thread's receive did not wait for the owner's answer"

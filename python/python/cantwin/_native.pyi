@@ -89,7 +89,7 @@ class Port:
         timeout: Optional[float] = None,
     ) -> None: ...
     def recv(
-        self, timeout: Optional[float] = None, *, wait_for_answers: bool = True
+        self, timeout: Optional[float] = None, *, wait_for_answers: Optional[bool] = None
     ) -> Optional[tuple[int, bool, bool, int, bytes, float]]: ...
     def start_periodic(
         self,

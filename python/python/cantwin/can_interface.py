@@ -38,7 +38,6 @@ Python code for every frame, falls back to python-can's thread on the wall clock
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Sequence
 from typing import Any, Callable, Optional, Union
 
@@ -149,10 +148,9 @@ class CantwinBus(can.BusABC):
             self._port = self._sim.attach(str(channel), rx_capacity=rx_capacity)
         except (KeyError, CantwinError) as e:
             raise can.CanInitializationError(str(e)) from e
-        # The thread that opened the bus answers what it receives itself; frames received on
-        # other threads (python-can's Notifier) are answered by this one, which gets its
-        # reaction time.
-        self._owner = threading.get_ident()
+        # The thread that opened the bus (which attached the port) answers what it receives
+        # itself; frames received on other threads (python-can's Notifier) are answered by
+        # this one, which gets its reaction time.
         self.channel = str(channel)
         self.channel_info = f"cantwin {self.channel}"
         super().__init__(channel=channel, can_filters=can_filters, **kwargs)
@@ -190,6 +188,11 @@ class CantwinBus(can.BusABC):
         """The next frame that passes the filters, or ``None`` after `timeout` seconds: of bus
         time in virtual time (python-can's own loop counts the wall clock, and would run the
         simulation for as much bus time as it can in that wall time), of wall time paced."""
+        if self.filters is None:
+            # Every frame passes: one receive, which keeps the timeout itself (bus time in
+            # virtual time, wall time paced). The path python-canopen's Notifier takes for
+            # every frame.
+            return self._recv_internal(timeout)[0]
         if self._sim.paced:
             return super().recv(timeout)
         end = None if timeout is None else self._sim.now + timeout
@@ -202,10 +205,10 @@ class CantwinBus(can.BusABC):
                 return None
 
     def _recv_internal(self, timeout: Optional[float]) -> tuple[Optional[can.Message], bool]:
+        # Frames received on a thread other than the one that opened the bus wait for
+        # answers (the port's owner, the module documentation).
         try:
-            got = self._port.recv(
-                timeout, wait_for_answers=threading.get_ident() != self._owner
-            )
+            got = self._port.recv(timeout)
         except CantwinError as e:
             raise can.CanOperationError(str(e)) from e
         if got is None:
