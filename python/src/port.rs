@@ -243,34 +243,42 @@ fn closed() -> PyErr {
 }
 
 impl Port {
-    /// Queue `frame`, waiting up to `timeout` for room in the queue.
-    /// `thread` is the sending Python thread: bus time waits for it to wait (`crate::turns`).
-    fn transmit(&self, frame: Frame, timeout: Duration, thread: u64) -> PyResult<()> {
+    /// Queue `frame` if the port's queue has room (`Ok(false)`: it is full). `thread` is the
+    /// sending Python thread: bus time waits for it to wait (`crate::turns`).
+    fn try_queue(&self, core: &mut Core, frame: Frame, thread: u64) -> PyResult<bool> {
         let port = self.port;
+        let queued = core.with_sim(|sim| {
+            sim.bus(port.bus())
+                .and_then(|b| b.port_status(port).ok())
+                .map(|s| s.queued)
+        })?;
+        let Some(queued) = queued else {
+            return Err(closed());
+        };
+        if queued >= QUEUE_DEPTH {
+            return Ok(false);
+        }
+        let r = core
+            .with_sim(|sim| sim.transmit(port, frame))?
+            .map_err(|e| err(e.to_string()));
+        if r.is_ok() {
+            core.acted(thread, false);
+        }
+        self.shared.delivery.pending.store(false, Ordering::Release);
+        r.map(|()| true)
+    }
+
+    /// Queue `frame`, waiting up to `timeout` for room in the queue (called without the GIL).
+    fn transmit(&self, frame: Frame, timeout: Duration, thread: u64) -> PyResult<()> {
         let wall_deadline = std::time::Instant::now() + std::time::Duration::from(timeout);
         let mut bus_deadline = None;
         loop {
             let mut core = self.shared.lock();
-            let queued = core.with_sim(|sim| {
-                sim.bus(port.bus())
-                    .and_then(|b| b.port_status(port).ok())
-                    .map(|s| s.queued)
-            })?;
-            let Some(queued) = queued else {
-                return Err(closed());
-            };
-            if queued < QUEUE_DEPTH {
-                let r = core
-                    .with_sim(|sim| sim.transmit(port, frame))?
-                    .map_err(|e| err(e.to_string()));
-                if r.is_ok() {
-                    core.acted(thread, false);
-                }
-                self.shared.delivery.pending.store(false, Ordering::Release);
+            if self.try_queue(&mut core, frame, thread)? {
                 // Receivers are woken by `send` once this thread holds the GIL again: the
                 // first look they take at it (`crate::turns`) then finds it on its way to
                 // its wait, not still inside this call.
-                return r;
+                return Ok(());
             }
             match &mut core.mode {
                 Mode::Virtual(sim) => {
@@ -481,8 +489,25 @@ impl Port {
         let frame = make_frame(arbitration_id, data, extended, remote, dlc)?;
         let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
         let thread = crate::turns::thread_ident(py)?;
-        let r = py.detach(|| self.transmit(frame, timeout, thread));
-        self.shared.lock().returned(thread);
+        // With room in the queue (nearly always) the frame is queued holding the GIL, a lock
+        // and a push: the sender keeps the GIL until its wait, where a receiver that waits
+        // to look at it (`crate::turns`) gets it, instead of handing it over and back here.
+        // A full queue is waited on without the GIL.
+        let queued = {
+            let mut core = self.shared.lock();
+            let queued = self.try_queue(&mut core, frame, thread);
+            core.returned(thread);
+            queued
+        };
+        let r = match queued {
+            Ok(true) => Ok(()),
+            Ok(false) => {
+                let r = py.detach(|| self.transmit(frame, timeout, thread));
+                self.shared.lock().returned(thread);
+                r
+            }
+            Err(e) => Err(e),
+        };
         self.shared.changed.notify_all();
         r
     }
