@@ -993,11 +993,14 @@ impl Bus {
     /// entry and its deadline.
     #[inline(always)]
     fn after_call(&mut self, i: usize) {
-        self.note_acceptance(i);
         if !self.outbox.is_empty() {
             self.queue_outbox(i);
         }
-        self.update_deadline(i);
+        // Both questions in one call (`Node::after_call`), asked once the frames are queued:
+        // a node told that one was dropped has been called again.
+        let answers = self.ports[i].node.as_ref().map(|n| n.after_call());
+        self.note_acceptance(i, answers.and_then(|a| a.acceptance_version));
+        self.set_deadline(i, answers.and_then(|a| a.next_deadline));
     }
 
     /// The queueing part of [`Bus::after_call`], when the node queued something.
@@ -1035,9 +1038,8 @@ impl Bus {
     /// After port `i`'s node was called: its acceptance verdicts are asked again unless it
     /// says they cannot have changed (an unchanged [`Node::acceptance_version`]).
     #[inline(always)]
-    fn note_acceptance(&mut self, i: usize) {
+    fn note_acceptance(&mut self, i: usize, version: Option<u64>) {
         let p = &mut self.ports[i];
-        let version = p.node.as_ref().and_then(|n| n.acceptance_version());
         if version.is_none() || version != p.accept_version {
             p.accept_version = version;
             self.mark_called(i);
@@ -1050,14 +1052,17 @@ impl Bus {
         self.accept_changed = self.epoch;
     }
 
-    #[inline(always)]
     fn update_deadline(&mut self, i: usize) {
+        let d = self.ports[i].node.as_ref().and_then(|n| n.next_deadline());
+        self.set_deadline(i, d);
+    }
+
+    /// Port `i`'s deadline from its node's answer `d` (none while unpowered).
+    #[inline(always)]
+    fn set_deadline(&mut self, i: usize, d: Option<Instant>) {
         let now = self.now;
         let p = &mut self.ports[i];
-        let d = match (&p.node, p.powered) {
-            (Some(node), true) => node.next_deadline(),
-            _ => None,
-        };
+        let d = if p.powered { d } else { None };
         let d = match d {
             // The usual answer of a node that was called without being due (a receiver):
             // still nothing to do.

@@ -43,6 +43,6 @@ pub use fault::{ErrorCounters, ErrorState};
 pub use filter::{Filter, FilterSet};
 pub use frame::{Frame, FrameError};
 pub use id::{ExtendedId, Id, IdError, StandardId};
-pub use node::{ControllerEvent, ListenOnly, Node, Outbox};
+pub use node::{AfterCall, ControllerEvent, ListenOnly, Node, Outbox};
 pub use rng::SplitMix64;
 pub use time::{Duration, Instant};
