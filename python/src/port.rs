@@ -394,9 +394,6 @@ impl Port {
             // The reaction rule (module documentation).
             let horizon = target.or(deadline);
             let delivery = &self.shared.delivery;
-            // Whether to stop at the next event rather than run on to the end of the frame it
-            // may start (`run_to`): see below.
-            let mut stop_at_target = false;
             if let Some(h) = horizon
                 && wait_for_answers
                 && delivery.pending.load(Ordering::Acquire)
@@ -414,25 +411,14 @@ impl Port {
                     continue;
                 }
                 // Within the gap the simulation runs on to the next frame without waiting
-                // for an answer: not past a thread the last frame woke. No frame reaches
-                // Python before one is on the wire, so while the bus is idle (its next event
-                // is the end of the intermission, three bit times after the frame handed
-                // over) the simulation goes to that event alone, and the threads are looked
-                // at once a frame is on its way.
-                let on_wire = sim
-                    .bus(self.port.bus())
-                    .and_then(|b| b.transmitting())
-                    .is_some();
-                if !on_wire {
-                    stop_at_target = true;
-                } else if !looked {
+                // for an answer: not past a thread the last frame woke.
+                if !looked {
                     looked = true;
                     core = self.note_woken(core, thread);
                     continue;
                 }
             }
             match (target, deadline) {
-                (Some(n), _) if stop_at_target => sim.run_until(n),
                 (Some(n), _) => run_to(sim, self.port.bus(), n),
                 (None, Some(d)) => {
                     sim.run_until(d);

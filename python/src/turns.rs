@@ -361,7 +361,10 @@ fn waiting_threads(py: Python<'_>, threads: &[u64], spots: &mut Vec<Spot>) -> Py
                 None
             };
             match wait {
-                Some(Wait::Notified) => {}
+                // Woken, not yet running: neither waiting nor on its way anywhere, so not
+                // looked at again before the pause (the next look would only take the GIL
+                // it needs to run).
+                Some(Wait::Notified) => continue,
                 wait => {
                     if wait == Some(Wait::Blocked) {
                         blocked.push(thread);
