@@ -475,15 +475,20 @@ impl Port {
         let frame = make_frame(arbitration_id, data, extended, remote, dlc)?;
         let timeout = timeout.map(secs).transpose()?.unwrap_or(SEND_TIMEOUT);
         let thread = crate::turns::thread_ident(py)?;
-        // With room in the queue (nearly always) the frame is queued holding the GIL, a lock
-        // and a push: the sender keeps the GIL until its wait, where a receiver that waits
-        // to look at it (`crate::turns`) gets it, instead of handing it over and back here.
-        // A full queue is waited on without the GIL.
-        let queued = {
-            let mut core = self.shared.lock();
-            let queued = self.try_queue(&mut core, frame, thread);
-            core.returned(thread);
-            queued
+        // With room in the queue and the core free (nearly always) the frame is queued
+        // holding the GIL, a lock and a push: the sender keeps the GIL until its wait, where a
+        // receiver that waits to look at it (`crate::turns`) gets it, instead of handing it
+        // over and back here. A full queue, or a core another thread holds while it runs the
+        // simulation, is waited for without the GIL, so other Python threads run meanwhile.
+        let queued = match self.shared.try_lock() {
+            Some(mut core) => {
+                let queued = self.try_queue(&mut core, frame, thread);
+                if matches!(queued, Ok(true)) {
+                    core.returned(thread);
+                }
+                queued
+            }
+            None => Ok(false),
         };
         let r = match queued {
             Ok(true) => Ok(()),
