@@ -1132,9 +1132,9 @@ impl Adv200 {
         // Folded one by one: the bus asks after every call (an array through an iterator
         // does not always fold away).
         let mut next = self.st().drive.next_deadline();
-        next = earliest(next, self.card.as_ref().and_then(|c| c.dev.next_deadline()));
-        next = earliest(next, self.dnet.as_ref().and_then(|s| s.next_deadline()));
-        earliest(next, self.sync_deadline())
+        next = Instant::earliest(next, self.card.as_ref().and_then(|c| c.dev.next_deadline()));
+        next = Instant::earliest(next, self.dnet.as_ref().and_then(|s| s.next_deadline()));
+        Instant::earliest(next, self.sync_deadline())
     }
 
     /// The boot-up message has been sent: every alarm active now is signalled, one EMCY
@@ -1242,13 +1242,5 @@ impl Node for Adv200 {
     fn on_controller_event(&mut self, event: ControllerEvent, now: Instant, out: &mut Outbox) {
         self.controller_event(event, now, out);
         self.deadline = self.compute_deadline();
-    }
-}
-
-/// The earlier of two optional instants; `None` is no deadline.
-fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
-    match (a, b) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, b) => a.or(b),
     }
 }

@@ -173,6 +173,15 @@ impl Instant {
     pub const fn saturating_duration_since(self, earlier: Instant) -> Duration {
         Duration(self.0.saturating_sub(earlier.0))
     }
+    /// The earlier of two optional instants, `None` being no deadline: how a node that
+    /// holds several timers folds them into its [`crate::Node::next_deadline`].
+    #[inline]
+    pub fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
+        match (a, b) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
     /// `self + d`, or `None` on overflow.
     pub const fn checked_add(self, d: Duration) -> Option<Instant> {
         match self.0.checked_add(d.0) {

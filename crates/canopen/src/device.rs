@@ -654,10 +654,7 @@ impl<H: OdHooks> Device<H> {
         } else {
             None
         };
-        match (self.core.next_deadline(), sdo) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(self.core.next_deadline(), sdo)
     }
 
     /// Whether a frame on `id` can change the device: always while the filter is off or
@@ -1090,14 +1087,15 @@ impl<H: OdHooks> Core<H> {
         // The earliest of the services' deadlines, folded one by one: asked after every call
         // the bus makes (the Node contract), so it stays a handful of compares whatever the
         // hooks' layout (an array of options through an iterator did not always fold away).
-        let mut next = earliest(self.consumer.next_deadline(), self.guarding.next_deadline());
-        next = earliest(next, self.heartbeat.next_deadline());
+        let mut next =
+            Instant::earliest(self.consumer.next_deadline(), self.guarding.next_deadline());
+        next = Instant::earliest(next, self.heartbeat.next_deadline());
         if self.state.allows(Service::Sync) {
-            next = earliest(next, self.sync.next_deadline());
+            next = Instant::earliest(next, self.sync.next_deadline());
         }
-        next = earliest(next, self.pdo.as_ref().and_then(PdoEngine::next_deadline));
+        next = Instant::earliest(next, self.pdo.as_ref().and_then(PdoEngine::next_deadline));
         if self.emcy_may_send() {
-            next = earliest(next, self.emcy.next_deadline().map(|t| t.max(self.now)));
+            next = Instant::earliest(next, self.emcy.next_deadline().map(|t| t.max(self.now)));
         }
         next
     }
@@ -1633,15 +1631,5 @@ impl<H: OdHooks> Node for Device<H> {
                 | u64::from(core.overrun) << 1
                 | u64::from(core.config.acceptance_filter),
         )
-    }
-}
-
-/// The earlier of two optional instants; `None` is no deadline.
-#[inline]
-fn earliest(a: Option<Instant>, b: Option<Instant>) -> Option<Instant> {
-    match (a, b) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, None) => a,
-        (None, b) => b,
     }
 }

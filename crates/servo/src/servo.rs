@@ -391,10 +391,7 @@ impl Node for Servo {
 
     fn next_deadline(&self) -> Option<Instant> {
         // Asked after every frame and timer: no iterator over the two.
-        match (self.device.next_deadline(), self.drive_deadline()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(self.device.next_deadline(), self.drive_deadline())
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

@@ -926,10 +926,7 @@ impl Node for Tm3Coupler {
     }
 
     fn next_deadline(&self) -> Option<Instant> {
-        match (self.device.next_deadline(), self.sync_deadline()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(self.device.next_deadline(), self.sync_deadline())
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

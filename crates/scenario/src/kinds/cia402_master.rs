@@ -422,10 +422,7 @@ impl Node for Cia402MasterNode {
     }
 
     fn next_deadline(&self) -> Option<Instant> {
-        match (self.drives.next_deadline(), self.wait_until) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(self.drives.next_deadline(), self.wait_until)
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

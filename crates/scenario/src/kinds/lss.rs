@@ -240,10 +240,7 @@ impl<D: Commissionable> Node for LssNode<D> {
 
     fn next_deadline(&self) -> Option<Instant> {
         let d = self.device.as_ref().and_then(Node::next_deadline);
-        match (d, self.slave.next_deadline()) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(d, self.slave.next_deadline())
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {

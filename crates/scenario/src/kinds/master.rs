@@ -202,10 +202,7 @@ impl Node for MasterNode {
             .filter(|t| !t.started)
             .map(|t| t.at)
             .min();
-        match (self.master.next_deadline(), next) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        }
+        Instant::earliest(self.master.next_deadline(), next)
     }
 
     fn on_sent(&mut self, frame: &Frame, now: Instant, out: &mut Outbox) {
